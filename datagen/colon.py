@@ -1,0 +1,281 @@
+"""Procedural colons: an anatomical centerline, a lumen with haustral folds, taeniae and polyps.
+
+The frame of a procedural colon is the patient's: ``x`` towards the patient's
+left, ``y`` anterior, ``z`` superior, millimetres. The colon runs from the
+caecum (lower right) up the ascending colon, across the sagging transverse colon
+between the hepatic and splenic flexures, down the descending colon, through the
+sigmoid loop to the rectum.
+
+Algorithm (all random draws from one seeded generator):
+
+1. jitter a template of anatomical control points, bend the transverse colon
+   down by the drawn sag and lift the sigmoid loop;
+2. interpolate a cubic spline and scale it to the drawn length;
+3. limit the curvature where a bend would be tighter than the local radius
+   (local Gaussian smoothing, repeated), rescale to the drawn length;
+4. check, exactly, that no two cross-sections of the tube intersect (with the
+   configured clearance); if they do, redraw (up to ``max_attempts``);
+5. sweep rings along rotation-minimising frames with a radius field
+   ``rho(s, theta)``: base radius by region, three taeniae coli, haustral folds
+   between the taeniae, sessile polyps and smooth roughness.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import trimesh
+from scipy.interpolate import CubicSpline, PchipInterpolator
+from scipy.ndimage import gaussian_filter, gaussian_filter1d
+
+from colonbench import seeding
+from colonbench.datagen.centerline import Centerline
+from colonbench.datagen.config import ColonConfig, draw, validate
+from colonbench.datagen.tube import ring_angles, self_intersections, sweep
+from colonbench.errors import ColonbenchError
+
+#: Anatomical template (mm, patient frame), before jitter and scaling. Each row
+#: is ``(x, y, z, region)``; region codes index :data:`REGIONS`.
+_TEMPLATE = np.array([
+    (-100, 0, -80, 0), (-105, -10, -30, 1), (-102, -15, 30, 1), (-92, -5, 90, 2), (-60, 20, 110, 2),
+    (-25, 45, 75, 3), (20, 50, 65, 3), (60, 35, 95, 3), (100, 5, 135, 4), (118, -20, 110, 4),
+    (120, -30, 50, 5), (116, -30, -10, 5), (105, -20, -70, 5), (72, 8, -98, 6), (38, 48, -72, 6),
+    (8, 62, -42, 6), (-28, 42, -52, 6), (-24, 8, -92, 6), (0, -24, -112, 7), (4, -44, -150, 7),
+    (0, -36, -192, 7),
+], dtype=float)
+REGIONS = ("caecum", "ascending", "hepatic_flexure", "transverse", "splenic_flexure", "descending",
+           "sigmoid", "rectum")
+#: Haustral fold strength per region (the rectum has few folds).
+_FOLD_WEIGHT = np.array([0.7, 1.0, 1.0, 1.0, 1.0, 0.85, 0.7, 0.25])
+
+
+@dataclass
+class Colon:
+    """A colon surface with its ground-truth centerline.
+
+    Attributes
+    ----------
+    mesh : trimesh.Trimesh
+        Lumen surface, mm, normals out of the lumen.
+    centerline : Centerline
+        GT centerline, 0.5 mm spacing for procedural colons.
+    radius : (n,) float
+        Largest wall distance from the centerline at each centerline sample, mm.
+    rings : int or None
+        For procedural colons: ring ``k`` of the mesh holds vertices
+        ``k * n_around ... (k + 1) * n_around - 1`` and lies at arc length
+        ``ring_arclength[k]``.
+    info : dict
+        What was drawn (region boundaries, polyps, ...), JSON-friendly.
+    """
+
+    mesh: trimesh.Trimesh
+    centerline: Centerline
+    radius: np.ndarray
+    ring_arclength: np.ndarray | None = None
+    n_around: int | None = None
+    info: dict = field(default_factory=dict)
+
+
+def generate_colon(config: ColonConfig | None = None, seed: int = 0, colon_id: int = 0) -> Colon:
+    """Generate one procedural colon.
+
+    Parameters
+    ----------
+    config : ColonConfig, optional
+        Shape parameters (defaults: :class:`ColonConfig`).
+    seed : int
+        Root seed of the dataset.
+    colon_id : int
+        Index of the colon under the root seed; colon ``i`` is the same whatever
+        else is generated.
+
+    Returns
+    -------
+    Colon
+
+    Raises
+    ------
+    ColonbenchError
+        When no layout free of self-intersection was found in ``max_attempts``.
+    """
+    config = validate(config or ColonConfig())
+    last = None
+    for attempt in range(config.max_attempts):
+        rng = seeding.rng(seed, "colon", colon_id, attempt)
+        centerline, params = _centerline(config, rng)
+        base = _base_radius(config, params, centerline.arclength)
+        max_radius = base + 3.0 * params["roughness_mm"]
+        clash = self_intersections(centerline, max_radius, config.clearance_mm)
+        if len(clash) == 0:
+            params["attempt"] = attempt
+            return _build(config, rng, centerline, base, params)
+        last = clash
+    raise ColonbenchError(
+        f"no self-intersection-free colon in {config.max_attempts} attempts (colon {colon_id}, seed {seed}); "
+        f"last clash between arc lengths {last[0].round(1).tolist()} mm. Lower the radii or the jitter, "
+        "or raise max_attempts.")
+
+
+# --------------------------------------------------------------------------- centerline
+def _centerline(config: ColonConfig, rng: np.random.Generator) -> tuple[Centerline, dict]:
+    params = {
+        "length_mm": draw(rng, config.length_mm),
+        "sag_mm": draw(rng, config.transverse_sag_mm),
+        "loop_mm": draw(rng, config.sigmoid_loop_mm),
+    }
+    for name in ("caecum", "transverse", "sigmoid", "rectum"):
+        params[f"radius_{name}_mm"] = draw(rng, getattr(config, f"radius_{name}_mm"))
+    params["roughness_mm"] = draw(rng, config.roughness_mm)
+
+    pts = _TEMPLATE[:, :3].copy()
+    region = _TEMPLATE[:, 3].astype(int)
+    pts += rng.normal(0.0, config.layout_jitter_mm, pts.shape) * np.array([1.0, 1.0, 0.6])
+    # transverse colon hangs down, most in its middle
+    tr = np.flatnonzero(region == 3)
+    pts[tr, 2] -= params["sag_mm"] * np.sin(np.linspace(0.35, np.pi - 0.35, len(tr)))
+    # the sigmoid loop reaches forward and up
+    sg = np.flatnonzero(region == 6)
+    lift = np.sin(np.linspace(0.0, np.pi, len(sg)))
+    pts[sg, 1] += 0.6 * params["loop_mm"] * lift - 20.0 * lift
+    pts[sg, 2] += params["loop_mm"] * lift - 40.0 * lift
+
+    chord = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))])
+    spline = CubicSpline(chord, pts, axis=0, bc_type="natural")
+    raw = Centerline.from_function(spline, 0.0, chord[-1], spacing=1.0)
+    # region of each template point, carried as arc-length fractions
+    t = np.linspace(0.0, chord[-1], 20001)
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(spline(t), axis=0), axis=1))])
+    knot_frac = np.interp(chord, t, arc) / arc[-1]
+    params["region_knots"] = [(float(knot_frac[i]), int(region[i])) for i in range(len(region))]
+
+    target = params["length_mm"]
+    points = raw.points * (target / raw.length)
+    for _ in range(4):
+        cl = Centerline.from_points(points)
+        r = _base_radius(config, params, cl.arclength, length=cl.length)
+        points = _limit_curvature(cl, r + 3.0 * params["roughness_mm"] + config.clearance_mm, max_iter=60)
+        cl = Centerline.from_points(points)
+        points = cl.points * (target / cl.length)
+    centerline = Centerline.from_points(points).resample(0.5)
+    return centerline, params
+
+
+def _limit_curvature(cl: Centerline, radius: np.ndarray, safety: float = 1.25, max_iter: int = 60):
+    """Smooth the polyline locally until every bend radius exceeds ``safety * radius``."""
+    pts = cl.points.copy()
+    spacing = cl.length / (len(pts) - 1)
+    for _ in range(max_iter):
+        kappa = Centerline.from_points(pts).curvature()
+        bad = kappa * radius * safety > 1.0
+        if not bad.any():
+            break
+        weight = gaussian_filter1d(bad.astype(float), 8.0 / spacing, mode="nearest")
+        weight = np.clip(weight / max(weight.max(), 1e-12) * 1.5, 0.0, 1.0)[:, None]
+        smooth = gaussian_filter1d(pts, 4.0 / spacing, axis=0, mode="nearest")
+        pts = (1.0 - weight) * pts + weight * smooth
+    return pts
+
+
+def _region_of(params: dict, frac: np.ndarray) -> np.ndarray:
+    knots = np.array(params["region_knots"])
+    idx = np.clip(np.searchsorted(knots[:, 0], frac, side="right") - 1, 0, len(knots) - 1)
+    return knots[idx, 1].astype(int)
+
+
+def _base_radius(config, params, s, length=None) -> np.ndarray:
+    """Base lumen radius (mm) at arc lengths ``s`` by anatomical region."""
+    length = length if length is not None else s[-1]
+    r_c, r_t = params["radius_caecum_mm"], params["radius_transverse_mm"]
+    r_s, r_r = params["radius_sigmoid_mm"], params["radius_rectum_mm"]
+    # anchor fractions along the colon and their radii
+    frac = np.array([0.0, 0.06, 0.16, 0.3, 0.5, 0.62, 0.72, 0.86, 0.93, 1.0])
+    rad = np.array([r_c, r_c, 0.5 * (r_c + r_t), r_t, r_t, 0.5 * (r_t + r_s), r_s, r_s, r_r, 0.8 * r_r])
+    return PchipInterpolator(frac, rad)(np.clip(np.asarray(s) / length, 0.0, 1.0))
+
+
+# --------------------------------------------------------------------------- surface
+def _build(config: ColonConfig, rng, centerline: Centerline, base: np.ndarray, params: dict) -> Colon:
+    L = centerline.length
+    n_rings = int(np.ceil(L / config.ring_spacing_mm)) + 1
+    s = np.linspace(0.0, L, n_rings)
+    rings = Centerline(centerline.point_at(s), s)
+    r0 = np.interp(s, centerline.arclength, base)
+    n_around = int(np.ceil(2.0 * np.pi * r0.max() / config.edge_mm))
+    n_around += n_around % 2
+    theta = ring_angles(n_around)
+    region = _region_of(params, s / L)
+
+    # three taeniae coli, slowly twisting along the colon
+    theta0 = rng.uniform(0, 2 * np.pi)
+    twist = rng.uniform(-1.0, 1.0) * 2 * np.pi / 1000.0  # rad / mm
+    taenia_angle = theta0 + twist * s                     # (K,) angle of taenia 0
+    rel = np.mod(theta[None, :] - taenia_angle[:, None], 2 * np.pi)  # (K, n)
+    sector = np.minimum((rel // (2 * np.pi / 3)).astype(int), 2)
+    phase = (rel - sector * (2 * np.pi / 3)) / (2 * np.pi / 3)        # 0..1 inside the sector
+    dist_taenia = np.minimum(phase, 1 - phase) * (2 * np.pi / 3)      # rad to nearest taenia
+
+    depth_t = np.where(region == 3, draw(rng, config.taenia_depth_transverse), draw(rng, config.taenia_depth))
+    depth_t = gaussian_filter1d(depth_t.astype(float), 30.0 / config.ring_spacing_mm, mode="nearest")
+    rho = r0[:, None] * (1.0 - depth_t[:, None] * np.exp(-0.5 * (dist_taenia / 0.3) ** 2))
+
+    # haustral folds: each sector has its own series of crescent folds
+    fold_weight = gaussian_filter1d(_FOLD_WEIGHT[region], 15.0 / config.ring_spacing_mm, mode="nearest")
+    fold_profile = np.zeros((3, n_rings))
+    n_folds = 0
+    for m in range(3):
+        pos = rng.uniform(0.0, config.fold_spacing_mm[1])
+        while pos < L:
+            depth = draw(rng, config.fold_depth)
+            width = draw(rng, config.fold_width_mm)
+            lo, hi = np.searchsorted(s, [pos - 5 * width, pos + 5 * width])
+            fold_profile[m, lo:hi] = np.maximum(
+                fold_profile[m, lo:hi], depth * np.exp(-0.5 * ((s[lo:hi] - pos) / width) ** 2))
+            n_folds += 1
+            pos += draw(rng, config.fold_spacing_mm)
+    crescent = np.sin(np.pi * phase) ** 0.6
+    fold = np.take_along_axis(fold_profile.T, sector, axis=1) * crescent * fold_weight[:, None]
+    rho -= r0[:, None] * fold
+
+    # sessile polyps bulging into the lumen
+    polyps = []
+    margin = min(30.0, 0.1 * L)
+    for _ in range(draw(rng, config.polyps, integer=True)):
+        s_p = rng.uniform(margin, L - margin)
+        th_p = rng.uniform(0, 2 * np.pi)
+        size = draw(rng, config.polyp_size_mm)
+        height = size * rng.uniform(0.35, 0.6)
+        k = int(np.argmin(np.abs(s - s_p)))
+        d_arc = np.mod(theta - th_p + np.pi, 2 * np.pi) - np.pi
+        dist2 = (s[:, None] - s_p) ** 2 + (rho[k][None, :] * d_arc[None, :]) ** 2
+        rho -= height * np.exp(-0.5 * dist2 / (size / 2.5) ** 2)
+        polyps.append({"arclength_mm": float(s_p), "angle_rad": float(th_p), "diameter_mm": float(size),
+                       "height_mm": float(height)})
+
+    # smooth roughness
+    if params["roughness_mm"] > 0:
+        noise = rng.standard_normal(rho.shape)
+        sigma = (2.5 / config.ring_spacing_mm, 2.5 / (2 * np.pi * r0.mean() / n_around))
+        noise = gaussian_filter(noise, sigma, mode=("nearest", "wrap"))
+        rho += params["roughness_mm"] * noise / max(noise.std(), 1e-12)
+    rho = np.maximum(rho, 0.3 * r0[:, None])
+
+    frames = rings.frames()
+    mesh = sweep(rings, rho, frames)
+    for p in polyps:
+        k = int(np.argmin(np.abs(s - p["arclength_mm"])))
+        j = int(np.round(p["angle_rad"] / (2 * np.pi) * n_around)) % n_around
+        p["position_mm"] = mesh.vertices[k * n_around + j].tolist()
+    max_radius = np.interp(centerline.arclength, s, rho.max(axis=1))
+
+    region_bounds = {}
+    for code, name in enumerate(REGIONS):
+        where = s[region == code]
+        if len(where):
+            region_bounds[name] = [float(where.min()), float(where.max())]
+    info = {k: v for k, v in params.items() if k != "region_knots"}
+    info.update(n_folds=n_folds, polyps=polyps, regions=region_bounds, n_around=n_around,
+                ring_spacing_mm=float(s[1] - s[0]))
+    return Colon(mesh=mesh, centerline=centerline, radius=max_radius, ring_arclength=s,
+                 n_around=n_around, info=info)

@@ -1,0 +1,169 @@
+"""Typed configuration of the data generator, with documented defaults and ranges.
+
+Every parameter is a field of a frozen dataclass. A field whose value is a
+``(low, high)`` pair is a *range*: each colon (or segment, or pose) draws its
+own value uniformly from it. Each field carries in its metadata the unit, a
+one-line description and the hard limits that :func:`validate` enforces; the
+docs table (``docs/datagen.md``) is written from the same metadata by
+:func:`describe`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any
+
+from colonbench.errors import InputError
+
+
+def _p(default, lo, hi, unit, doc):
+    """A config field with its hard limits ``[lo, hi]``, unit and description."""
+    return field(default=default, metadata={"limits": (lo, hi), "unit": unit, "doc": doc})
+
+
+@dataclass(frozen=True)
+class ColonConfig:
+    """Shape of a procedural colon."""
+
+    length_mm: tuple = _p((1200.0, 1900.0), 200.0, 5000.0, "mm", "centerline length, caecum to anus")
+    radius_caecum_mm: tuple = _p((25.0, 35.0), 5.0, 60.0, "mm", "lumen radius at the caecum")
+    radius_transverse_mm: tuple = _p((20.0, 28.0), 5.0, 60.0, "mm", "lumen radius of the transverse colon")
+    radius_sigmoid_mm: tuple = _p((12.0, 20.0), 5.0, 60.0, "mm", "lumen radius of the sigmoid")
+    radius_rectum_mm: tuple = _p((18.0, 26.0), 5.0, 60.0, "mm", "lumen radius of the rectal ampulla")
+    transverse_sag_mm: tuple = _p((20.0, 90.0), 0.0, 200.0, "mm", "how far the transverse colon hangs down")
+    sigmoid_loop_mm: tuple = _p((30.0, 80.0), 0.0, 150.0, "mm", "how far the sigmoid loop reaches up and forward")
+    layout_jitter_mm: float = _p(10.0, 0.0, 40.0, "mm", "random displacement of each anatomical control point")
+    fold_spacing_mm: tuple = _p((10.0, 40.0), 2.0, 200.0, "mm", "distance between successive haustral folds")
+    fold_depth: tuple = _p((0.08, 0.35), 0.0, 0.6, "fraction of radius", "how far a fold reaches into the lumen")
+    fold_width_mm: tuple = _p((1.5, 5.0), 0.5, 20.0, "mm", "half-width of a fold (small = sharp)")
+    taenia_depth: tuple = _p((0.04, 0.10), 0.0, 0.4, "fraction of radius", "indentation along the three taeniae coli")
+    taenia_depth_transverse: tuple = _p((0.12, 0.22), 0.0, 0.4, "fraction of radius",
+                                        "taenia indentation in the transverse colon (triangular section)")
+    polyps: tuple = _p((0, 4), 0, 50, "count", "number of polyps per colon")
+    polyp_size_mm: tuple = _p((2.0, 15.0), 0.5, 40.0, "mm", "polyp diameter")
+    roughness_mm: tuple = _p((0.0, 0.4), 0.0, 3.0, "mm", "standard deviation of smooth surface roughness")
+    ring_spacing_mm: float = _p(0.75, 0.1, 5.0, "mm", "mesh resolution along the centerline")
+    edge_mm: float = _p(1.0, 0.1, 5.0, "mm", "mesh edge length around the lumen at the widest point")
+    clearance_mm: float = _p(3.0, 0.0, 30.0, "mm", "smallest gap allowed between two loops of the tube")
+    max_attempts: int = _p(25, 1, 1000, "count", "redraws allowed before giving up on a self-intersecting layout")
+
+
+@dataclass(frozen=True)
+class CameraConfig:
+    """Virtual colonoscope poses and what they see."""
+
+    poses: tuple = _p((3, 12), 1, 1000, "count", "camera poses per hole permutation")
+    fov_deg: float = _p(140.0, 10.0, 179.0, "degree", "full field of view (a cone)")
+    reach_mm: tuple = _p((50.0, 100.0), 5.0, 1000.0, "mm", "farthest distance the camera sees, drawn per pose")
+    near_mm: float = _p(2.0, 0.0, 50.0, "mm", "closest distance the camera sees")
+    lateral_offset: tuple = _p((0.0, 0.6), 0.0, 0.95, "fraction of radius", "distance of the camera from the centerline")
+    cone_deg: float = _p(45.0, 0.0, 180.0, "degree", "spread of the view direction around the tangent")
+    backward_fraction: float = _p(0.3, 0.0, 1.0, "fraction", "share of poses looking backwards along the centerline")
+    spread_mm: float = _p(40.0, 0.0, 500.0, "mm", "poses lie within this arc length beyond the segment ends")
+
+
+@dataclass(frozen=True)
+class SphereConfig:
+    """Sphere cropping, the paper's hole model for CT colons."""
+
+    spheres: tuple = _p((1, 6), 0, 1000, "count", "spheres removed per hole permutation")
+    radius_mm: tuple = _p((4.0, 18.0), 0.1, 200.0, "mm", "sphere radius")
+
+
+@dataclass(frozen=True)
+class SegmentConfig:
+    """Splitting a colon into segments and sampling them."""
+
+    lengths_mm: tuple = field(default=(50.0, 60.0, 70.0), metadata={
+        "limits": (10.0, 500.0), "unit": "mm", "doc": "segment arc lengths to cut (one colon is cut once per length)",
+        "kind": "list"})
+    end_margin_mm: float = _p(10.0, 0.0, 500.0, "mm", "arc length left out at each end of the colon")
+    point_density: float = _p(2.0, 0.01, 100.0, "points/mm^2", "density of the partial point cloud")
+    hole_point_density: float = _p(4.0, 0.01, 100.0, "points/mm^2", "density of the GT hole points")
+    centerline_spacing_mm: float = _p(0.5, 0.05, 0.5, "mm", "spacing of GT centerline points")
+    noise_mm: float = _p(0.0, 0.0, 10.0, "mm", "Gaussian noise on partial points (0.5 = the paper's noisy condition)")
+
+
+CONFIG_CLASSES = {"colon": ColonConfig, "camera": CameraConfig, "spheres": SphereConfig, "segments": SegmentConfig}
+
+
+def _check_value(cls, f, value):
+    meta = f.metadata
+    lo, hi = meta["limits"]
+    name = f"{cls.__name__}.{f.name}"
+    is_int = isinstance(f.default, int) or (isinstance(f.default, tuple) and isinstance(f.default[0], int))
+    if isinstance(f.default, tuple):
+        if not isinstance(value, (tuple, list)):
+            raise InputError(f"{name} must be a list of numbers, got {value!r}")
+        values = tuple(value)
+        if meta.get("kind") != "list":
+            if len(values) != 2:
+                raise InputError(f"{name} must be a [low, high] range, got {value!r}")
+            if values[0] > values[1]:
+                raise InputError(f"{name} range has low > high: {value!r}")
+        elif not values:
+            raise InputError(f"{name} must not be empty")
+    else:
+        values = (value,)
+    for v in values:
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise InputError(f"{name} must be numeric, got {v!r}")
+        if is_int and int(v) != v:
+            raise InputError(f"{name} must be an integer, got {v!r}")
+        if not (lo <= v <= hi):
+            raise InputError(f"{name} = {v!r} is out of range [{lo}, {hi}] {meta['unit']}")
+    if isinstance(f.default, tuple):
+        return tuple(int(v) if is_int else float(v) for v in values)
+    return int(value) if is_int else float(value)
+
+
+def validate(cfg):
+    """Check every field of a config dataclass; returns ``cfg`` normalised (tuples, floats).
+
+    Raises
+    ------
+    InputError
+        Naming the field and the allowed range.
+    """
+    cls = type(cfg)
+    values = {f.name: _check_value(cls, f, getattr(cfg, f.name)) for f in dataclasses.fields(cfg)}
+    return cls(**values)
+
+
+def from_dict(cls, data: dict[str, Any] | None):
+    """Build and validate a config of class ``cls`` from a plain dict (e.g. YAML).
+
+    Unknown keys are an error, naming the key and the known ones.
+    """
+    data = dict(data or {})
+    known = {f.name for f in dataclasses.fields(cls)}
+    unknown = sorted(set(data) - known)
+    if unknown:
+        raise InputError(f"unknown {cls.__name__} field(s) {unknown}; known fields: {sorted(known)}")
+    return validate(cls(**data))
+
+
+def to_dict(cfg) -> dict[str, Any]:
+    """A plain, YAML/JSON-friendly dict of a config (ranges as lists)."""
+    return {k: list(v) if isinstance(v, tuple) else v for k, v in dataclasses.asdict(cfg).items()}
+
+
+def describe(cls) -> list[tuple[str, str, str, str, str]]:
+    """Rows ``(field, default, limits, unit, description)`` for the docs."""
+    rows = []
+    for f in dataclasses.fields(cls):
+        m = f.metadata
+        rows.append((f.name, str(list(f.default) if isinstance(f.default, tuple) else f.default),
+                     f"[{m['limits'][0]}, {m['limits'][1]}]", m["unit"], m["doc"]))
+    return rows
+
+
+def draw(rng, value, integer: bool = False):
+    """Draw from a ``(low, high)`` range (uniform), or return a scalar as is."""
+    if isinstance(value, tuple):
+        lo, hi = value
+        if integer:
+            return int(rng.integers(lo, hi + 1))
+        return float(rng.uniform(lo, hi))
+    return value
