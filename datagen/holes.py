@@ -1,0 +1,99 @@
+"""Hole models: what part of a segment's surface a reconstruction misses.
+
+Two models, which can be combined (a face is observed only if every model in
+use keeps it):
+
+- ``camera``: the virtual colonoscope of :mod:`colonbench.datagen.camera`; the
+  observed surface is what a few random poses see, occlusion included.
+- ``spheres``: the paper's recipe for CT colons; random spheres centred on the
+  segment surface are cut out. A face is removed when its centroid lies inside
+  a sphere: faces are at most about 1 mm across, so the decision is exact to
+  the mesh resolution and the area that remains is summed exactly.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from colonbench.datagen.config import SphereConfig, draw
+from colonbench.errors import InputError
+
+HOLE_MODELS = ("camera", "spheres", "camera+spheres")
+
+
+def check_hole_model(name: str) -> tuple[str, ...]:
+    """The parts of a hole-model name (``"camera+spheres"`` -> ``("camera", "spheres")``)."""
+    if name not in HOLE_MODELS:
+        raise InputError(f"unknown hole model {name!r}; choose one of {list(HOLE_MODELS)}")
+    return tuple(name.split("+"))
+
+
+def sample_spheres(rng: np.random.Generator, vertices, faces, config: SphereConfig, areas=None):
+    """Draw crop spheres centred on random surface points (area-weighted).
+
+    Returns
+    -------
+    centers : (k, 3) float, mm
+    radii : (k,) float, mm
+    """
+    n = draw(rng, config.spheres, integer=True)
+    if n == 0 or len(faces) == 0:
+        return np.zeros((0, 3)), np.zeros(0)
+    centers = sample_surface(rng, vertices, faces, count=n, areas=areas)
+    radii = rng.uniform(config.radius_mm[0], config.radius_mm[1], n)
+    return centers, radii
+
+
+def inside_spheres(points, centers, radii) -> np.ndarray:
+    """Whether each of (n, 3) points lies inside any sphere; (n,) bool."""
+    points = np.asarray(points, float)
+    out = np.zeros(len(points), dtype=bool)
+    if len(centers) == 0:
+        return out
+    tree = cKDTree(points)
+    for c, r in zip(centers, radii):
+        idx = tree.query_ball_point(c, r)
+        out[idx] = True
+    return out
+
+
+def sample_surface(rng: np.random.Generator, vertices, faces, density: float | None = None,
+                   count: int | None = None, areas=None) -> np.ndarray:
+    """Points drawn uniformly on a triangle surface.
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+    vertices : (n, 3) float, mm
+    faces : (m, 3) int
+    density : float, optional
+        Points per mm^2; the count is ``round(density * area)``.
+    count : int, optional
+        Number of points (instead of ``density``).
+
+    Returns
+    -------
+    (k, 3) float
+    """
+    vertices = np.asarray(vertices, float)
+    faces = np.asarray(faces, np.int64)
+    if len(faces) == 0:
+        return np.zeros((0, 3))
+    tri = vertices[faces]
+    if areas is None:
+        areas = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    total = areas.sum()
+    if count is None:
+        if density is None:
+            raise InputError("sample_surface needs a density or a count")
+        count = int(round(density * total))
+    if count == 0 or total <= 0:
+        return np.zeros((0, 3))
+    cdf = np.cumsum(areas) / total
+    pick = np.minimum(np.searchsorted(cdf, rng.random(count), side="right"), len(faces) - 1)
+    u, v = rng.random(count), rng.random(count)
+    flip = u + v > 1
+    u[flip], v[flip] = 1 - u[flip], 1 - v[flip]
+    t = tri[pick]
+    return t[:, 0] + u[:, None] * (t[:, 1] - t[:, 0]) + v[:, None] * (t[:, 2] - t[:, 0])
