@@ -14,8 +14,8 @@ import numpy as np
 from colonbench.errors import InputError
 
 #: Spacing of the dense table used to measure the arc length of a parametric
-#: curve (mm). The chord error of a polyline is about h^2 kappa^2 / 24 of its
-#: length, so 0.02 mm is exact to better than 1e-8 for any colon curvature.
+#: curve (mm). With one Richardson step on the chord lengths the relative
+#: error is O(h^4 kappa^4), far below 1e-10 for any colon curvature.
 _DENSE_SPACING_MM = 0.02
 
 
@@ -88,16 +88,22 @@ class Centerline:
         -------
         Centerline
             Samples whose ``arclength`` is the arc length of the curve itself
-            (measured on a dense table, relative error below 1e-8), not the
+            (measured on a dense table with a Richardson step, relative error
+            below 1e-10), not the
             chord length of the returned polyline.
         """
         coarse = np.asarray(curve(np.linspace(t0, t1, 1025)), dtype=np.float64)
         approx = np.linalg.norm(np.diff(coarse, axis=0), axis=1).sum()
         n_dense = int(np.clip(approx / _DENSE_SPACING_MM, 2048, 5_000_000))
+        n_dense += n_dense % 2
         t = np.linspace(t0, t1, n_dense + 1)
         dense = np.asarray(curve(t), dtype=np.float64)
-        s_dense = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(dense, axis=0), axis=1))])
-        return cls._resample_table(dense, s_dense, t, curve, spacing)
+        # chord length has an O(h^2) error; one Richardson step with the table
+        # at twice the spacing removes it (O(h^4) remains)
+        s_h = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(dense, axis=0), axis=1))])[::2]
+        s_2h = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(dense[::2], axis=0), axis=1))])
+        s_dense = s_h + (s_h - s_2h) / 3.0
+        return cls._resample_table(dense[::2], s_dense, t[::2], curve, spacing)
 
     @classmethod
     def _resample_table(cls, dense, s_dense, t_dense, curve, spacing):

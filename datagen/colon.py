@@ -279,3 +279,36 @@ def _build(config: ColonConfig, rng, centerline: Centerline, base: np.ndarray, p
                 ring_spacing_mm=float(s[1] - s[0]))
     return Colon(mesh=mesh, centerline=centerline, radius=max_radius, ring_arclength=s,
                  n_around=n_around, info=info)
+
+
+def tube_colon(centerline: Centerline, radius, ring_spacing_mm: float = 0.5, n_around: int = 256) -> Colon:
+    """A simple tube around any centerline, for shapes with known answers.
+
+    Parameters
+    ----------
+    centerline : Centerline
+    radius : float or callable
+        Constant radius (mm), or ``radius(s, theta)`` taking (K, 1) arc lengths
+        and (1, n) angles and returning (K, n) radii in mm.
+    ring_spacing_mm : float
+        Distance between rings along the centerline.
+    n_around : int
+        Vertices per ring.
+
+    Returns
+    -------
+    Colon
+        Vertex ``k * n_around + j`` lies at arc length ``ring_arclength[k]`` and
+        angle ``2 pi j / n_around`` from the rotation-minimising normal.
+    """
+    n_rings = int(np.ceil(centerline.length / ring_spacing_mm)) + 1
+    s = np.linspace(0.0, centerline.length, n_rings)
+    rings = Centerline(centerline.point_at(s), s)
+    theta = ring_angles(n_around)
+    if callable(radius):
+        rho = np.broadcast_to(np.asarray(radius(s[:, None], theta[None, :]), float), (n_rings, n_around))
+    else:
+        rho = np.full((n_rings, n_around), float(radius))
+    mesh = sweep(rings, rho)
+    return Colon(mesh=mesh, centerline=centerline, radius=np.interp(centerline.arclength, s, rho.max(axis=1)),
+                 ring_arclength=s, n_around=n_around, info={"kind": "tube"})

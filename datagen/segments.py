@@ -4,7 +4,7 @@ A segment ``[s0, s1]`` (arc length, mm) is bounded by the plane through
 ``c(s0)`` normal to the tangent ``t(s0)`` and the plane through ``c(s1)`` normal
 to ``t(s1)``. Its surface is found in three steps:
 
-1. *candidates*: faces with a vertex between the two planes;
+1. *candidates*: faces that reach between the two planes;
 2. *no leaks*: the candidates fall into connected pieces (through shared
    vertices). A neighbouring loop of the colon that crosses the region between
    the planes is a piece of its own, because it enters and leaves through the
@@ -27,6 +27,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from colonbench.datagen.centerline import Centerline
+from colonbench.errors import ColonbenchError
 
 
 @dataclass
@@ -170,8 +171,9 @@ def segment_surface(scene, centerline: Centerline, s0: float, s1: float,
     V, F = scene.vertices, scene.faces
     d0 = (V - c0) @ t0
     d1 = (c1 - V) @ t1
-    between = (d0 >= 0) & (d1 >= 0)
-    cand = np.flatnonzero(between[F].any(axis=1))
+    # faces that reach past both planes into the region between them (a long
+    # triangle may span the whole segment without a vertex inside it)
+    cand = np.flatnonzero((d0[F] >= 0).any(axis=1) & (d1[F] >= 0).any(axis=1))
     label = _components(F[cand], len(V))
 
     # rays from the segment's own centerline, perpendicular to it
@@ -194,6 +196,10 @@ def segment_surface(scene, centerline: Centerline, s0: float, s1: float,
     keep_labels = np.flatnonzero(counts >= max(1, min_hit_share * len(dirs)))
     kept = cand[np.isin(label, keep_labels)]
 
+    if len(kept) == 0:
+        raise ColonbenchError(
+            f"segment [{s0:.1f}, {s1:.1f}] mm has no surface: no ray from the centerline meets the wall there "
+            "(is the centerline inside the mesh?)")
     verts, faces, parent = clip_faces(V, F[kept], kept, c0, t0)
     verts, faces, parent = clip_faces(verts, faces, parent, c1, -t1)
     # drop vertices no face uses

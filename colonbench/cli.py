@@ -1,0 +1,200 @@
+"""The ``colonbench`` command line.
+
+Errors in user input are printed as one line naming the problem
+(``colonbench: error: ...``) with exit status 2; a traceback means a bug.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+from colonbench import __version__
+from colonbench.errors import ColonbenchError
+
+
+def _generator_config(args):
+    from colonbench.datagen.generate import GeneratorConfig
+
+    return GeneratorConfig.from_yaml(args.config) if args.config else GeneratorConfig()
+
+
+def _colon_from_args(args, config):
+    """A Colon: imported from ``--mesh`` or procedural from ``--seed/--colon-id``."""
+    if args.mesh:
+        from colonbench.datagen.realmesh import import_colon
+
+        return import_colon(args.mesh, args.centerline)
+    if args.centerline:
+        raise ColonbenchError("--centerline goes with --mesh")
+    from colonbench.datagen.generate import procedural_colon
+
+    return procedural_colon(config, args.seed, args.colon_id)
+
+
+def _add_colon_source(p):
+    p.add_argument("--seed", type=int, default=0, help="root seed (default 0)")
+    p.add_argument("--colon-id", type=int, default=0, help="which colon under the seed (default 0)")
+    p.add_argument("--mesh", help="use a real colon surface (PLY/STL/OBJ/OFF, mm) instead of a procedural one")
+    p.add_argument("--centerline", help="centerline of --mesh (.npy or text, (n, 3) mm); computed if omitted")
+    p.add_argument("--config", help="generator config YAML (sections colon, camera, spheres, segments)")
+
+
+def cmd_colon(args):
+    """Write a procedural (or imported) colon: mesh, centerline and what was drawn."""
+    config = _generator_config(args)
+    t = time.perf_counter()
+    colon = _colon_from_args(args, config)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    stem = f"colon_{args.colon_id:04d}" if not args.mesh else Path(args.mesh).stem
+    colon.mesh.export(out / f"{stem}.ply")
+    import numpy as np
+
+    np.save(out / f"{stem}_centerline.npy", colon.centerline.points)
+    (out / f"{stem}.json").write_text(json.dumps(
+        {"seed": args.seed, "colon_id": args.colon_id, "length_mm": colon.centerline.length,
+         "faces": int(len(colon.mesh.faces)), "area_mm2": float(colon.mesh.area), **colon.info}, indent=1))
+    if args.picture:
+        from colonbench.datagen.render import colon_picture
+
+        colon_picture(colon, out / f"{stem}.png", title=f"{stem}: {colon.centerline.length:.0f} mm")
+    print(f"{stem}: {colon.centerline.length:.0f} mm, {len(colon.mesh.faces)} faces, "
+          f"{time.perf_counter() - t:.1f} s -> {out}")
+
+
+def cmd_segments(args):
+    """Cut a colon into segments, draw hole permutations and write one folder per sample."""
+    from colonbench.datagen.generate import colon_samples, write_sample_folder
+
+    config = _generator_config(args)
+    colon = _colon_from_args(args, config)
+    segments = None if args.segment is None else [args.segment]
+    out = Path(args.out)
+    name = f"colon{args.colon_id:04d}" if not args.mesh else Path(args.mesh).stem
+    rows = []
+    for k, p, sample in colon_samples(colon, config, args.seed, args.colon_id, args.length, args.permutations,
+                                      args.hole_model, segments):
+        folder = out / f"{name}_l{args.length:g}_s{k:03d}_p{p:02d}"
+        write_sample_folder(sample, folder, {"seed": args.seed, "colon_id": args.colon_id, "segment_id": k,
+                                             "permutation": p, "length_mm": args.length})
+        if args.picture:
+            from colonbench.datagen.render import segment_picture
+
+            segment_picture(sample, folder / "picture.png")
+        rows.append((folder.name, sample.coverage, len(sample.hole_areas)))
+        print(f"{folder.name}: coverage {sample.coverage:.3f}, {len(sample.hole_areas)} holes")
+    if not rows:
+        raise ColonbenchError(f"the colon is too short for one segment of {args.length} mm")
+
+
+def cmd_picture(args):
+    """Write a picture of a colon, or of one of its segments (holes in red)."""
+    config = _generator_config(args)
+    colon = _colon_from_args(args, config)
+    if args.segment is None:
+        from colonbench.datagen.render import colon_picture
+        from colonbench.datagen.segments import windows
+
+        wins = windows(colon.centerline.length, args.length, config.segments.end_margin_mm)
+        colon_picture(colon, args.out, segments=wins)
+    else:
+        from colonbench.datagen.generate import colon_samples
+        from colonbench.datagen.render import segment_picture
+
+        _, _, sample = next(colon_samples(colon, config, args.seed, args.colon_id, args.length, 1,
+                                          args.hole_model, [args.segment]))
+        segment_picture(sample, args.out)
+    print(f"wrote {args.out}")
+
+
+def cmd_demo(args):
+    """The data-generation part of the main job: one colon, its segments with holes, pictures, a summary."""
+    import numpy as np
+
+    from colonbench.datagen.generate import GeneratorConfig, colon_samples, procedural_colon, write_sample_folder
+    from colonbench.datagen.render import colon_picture, segment_picture
+
+    out = Path(args.out)
+    config = GeneratorConfig()
+    t = time.perf_counter()
+    colon = procedural_colon(config, args.seed, 0)
+    print(f"colon: {colon.centerline.length:.0f} mm, {len(colon.mesh.faces)} faces")
+    covs = []
+    for k, p, sample in colon_samples(colon, config, args.seed, 0, 60.0, 1, "camera"):
+        folder = write_sample_folder(sample, out / "segments" / f"s{k:03d}",
+                                     {"seed": args.seed, "colon_id": 0, "segment_id": k, "permutation": p})
+        if k % 5 == 0:
+            segment_picture(sample, folder / "picture.png")
+        covs.append(sample.coverage)
+    from colonbench.datagen.segments import windows
+
+    colon_picture(colon, out / "colon.png",
+                  segments=windows(colon.centerline.length, 60.0, config.segments.end_margin_mm))
+    c = np.array(covs)
+    print(f"{len(c)} segments of 60 mm, camera holes: coverage mean {c.mean():.3f}, "
+          f"min {c.min():.3f}, max {c.max():.3f}")
+    print(f"wrote {out}/colon.png and {out}/segments/ in {time.perf_counter() - t:.0f} s")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="colonbench",
+        description="Synthetic colonoscopy coverage data and a benchmark of coverage-estimation methods. "
+                    "All geometry is in millimetres.")
+    parser.add_argument("--version", action="version", version=f"colonbench {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+
+    p = sub.add_parser("colon", help="write one colon (mesh PLY, centerline NPY, parameters JSON)")
+    _add_colon_source(p)
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--picture", action="store_true", help="also write a PNG preview")
+    p.set_defaults(func=cmd_colon)
+
+    p = sub.add_parser("segments", help="cut a colon into segments with holes; one folder per sample")
+    _add_colon_source(p)
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--length", type=float, default=60.0, help="segment arc length, mm (default 60)")
+    p.add_argument("--segment", type=int, help="only this segment index")
+    p.add_argument("--permutations", type=int, default=1, help="hole permutations per segment (default 1)")
+    p.add_argument("--hole-model", default="camera", choices=["camera", "spheres", "camera+spheres"])
+    p.add_argument("--picture", action="store_true", help="also write a PNG per sample")
+    p.set_defaults(func=cmd_segments)
+
+    p = sub.add_parser("picture", help="write a picture of a colon or of one segment")
+    _add_colon_source(p)
+    p.add_argument("--out", required=True, help="PNG file to write")
+    p.add_argument("--length", type=float, default=60.0, help="segment arc length, mm (default 60)")
+    p.add_argument("--segment", type=int, help="show this segment with its holes instead of the whole colon")
+    p.add_argument("--hole-model", default="camera", choices=["camera", "spheres", "camera+spheres"])
+    p.set_defaults(func=cmd_picture)
+
+    p = sub.add_parser("demo", help="run the main job on a small default dataset")
+    p.add_argument("--out", default="out/demo", help="output folder (default out/demo)")
+    p.add_argument("--seed", type=int, default=0, help="root seed (default 0)")
+    p.set_defaults(func=cmd_demo)
+    return parser
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 0
+    try:
+        args.func(args)
+    except ColonbenchError as exc:
+        print(f"colonbench: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("colonbench: interrupted", file=sys.stderr)
+        return 130
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
