@@ -1,0 +1,30 @@
+# colonbench: `make demo` runs the main job, `make test` the test suite.
+# Both build the virtual environment .venv from nothing on first use.
+
+PYTHON ?= python3
+VENV   := .venv
+BIN    := $(VENV)/bin
+STAMP  := $(VENV)/.installed
+
+.PHONY: install test demo bench clean
+
+$(STAMP): pyproject.toml scripts/system-deps.sh
+	./scripts/system-deps.sh
+	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install -q --upgrade pip
+	$(BIN)/python -m pip install -q -e '.[test]'
+	touch $(STAMP)
+
+install: $(STAMP)
+
+test: $(STAMP)
+	$(BIN)/python -m pytest -q
+
+demo: $(STAMP)
+	$(BIN)/colonbench demo --out out/demo
+
+bench: $(STAMP)
+	$(BIN)/python scripts/bench_datagen.py
+
+clean:
+	rm -rf $(VENV) out .pytest_cache *.egg-info

@@ -1,0 +1,15 @@
+#!/usr/bin/env bash
+# System libraries the Python stack needs and pip cannot install:
+#   libusb-1.0-0  open3d loads it at import
+#   libgl1, libgomp1  open3d's renderer and OpenMP (present on most images)
+set -euo pipefail
+need=()
+for pkg in libusb-1.0-0 libgl1 libgomp1; do
+    dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || need+=("$pkg")
+done
+[ ${#need[@]} -eq 0 ] && exit 0
+echo "installing system packages: ${need[*]}"
+if [ "$(id -u)" -eq 0 ]; then SUDO=""; elif command -v sudo >/dev/null; then SUDO="sudo"; else
+    echo "please install as root: apt-get install ${need[*]}" >&2; exit 1; fi
+$SUDO apt-get update -qq
+DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq "${need[@]}" >/dev/null
