@@ -119,3 +119,20 @@ def test_open_tube(tmp_path):
     np.save(tmp_path / "out.npy", colon.centerline.points + [30.0, 0, 0])
     with pytest.raises(InputError, match="leaves the mesh"):
         import_colon(tmp_path / "open.ply", tmp_path / "out.npy")
+
+
+def test_computed_centerline_of_a_closed_helical_tube(tmp_path):
+    from scipy.spatial import cKDTree
+    from shapes import capped, helix
+
+    cl, exact = helix(radius=40.0, pitch=60.0, turns=1.5)
+    mesh = capped(tube_colon(cl, 8.0, ring_spacing_mm=0.5, n_around=96))
+    assert mesh.is_watertight
+    mesh.export(tmp_path / "helix.ply")
+    computed = import_colon(tmp_path / "helix.ply").centerline
+    d, _ = cKDTree(cl.points).query(computed.points)
+    s = computed.arclength
+    middle = (s > 0.1 * s[-1]) & (s < 0.9 * s[-1])
+    assert np.median(d) < 0.5 and d[middle].max() < 1.0   # within a voxel of the true helix
+    assert d.max() < 8.0 / 2 + 1.0                          # the ends stop half a radius off the wall
+    assert computed.length == pytest.approx(exact, abs=2 * 8.0 + 2.0)  # less at most the trimmed ends

@@ -105,3 +105,18 @@ def test_clipped_mesh_stays_welded():
     _, counts = np.unique(edges, axis=0, return_counts=True)
     boundary_edges = (counts == 1).sum()
     assert boundary_edges == 2 * 64 * 2  # each cut crosses 2 triangles per quad column
+
+
+def test_helical_tube_length_and_segments():
+    from shapes import helix
+
+    cl, exact = helix()
+    colon = tube_colon(cl, 8.0, ring_spacing_mm=0.5, n_around=128)
+    assert colon.centerline.length == pytest.approx(exact, rel=1e-9)
+    assert len(self_intersections(cl, colon.radius, clearance_mm=3.0)) == 0
+    scene = SurfaceScene(colon.mesh.vertices, colon.mesh.faces)
+    seg = segment_surface(scene, cl, 100.0, 160.0)
+    # Pappus again: a constant-radius tube around any curve (curvature < 1/r)
+    # has area 2 pi r l between two normal planes
+    assert seg.area == pytest.approx(polygon_area(8.0, 60.0, 128), rel=2e-3)
+    assert np.linalg.norm(np.diff(seg.centerline, axis=0), axis=1).sum() == pytest.approx(60.0, rel=1e-4)
