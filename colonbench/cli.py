@@ -43,6 +43,14 @@ def _add_colon_source(p):
     p.add_argument("--config", help="generator config YAML (sections colon, camera, spheres, segments)")
 
 
+def _add_segment_args(p, segment_help):
+    from colonbench.datagen.holes import HOLE_MODELS
+
+    p.add_argument("--length", type=float, default=60.0, help="segment arc length, mm (default 60)")
+    p.add_argument("--segment", type=int, help=segment_help)
+    p.add_argument("--hole-model", default="camera", choices=HOLE_MODELS, help="how holes are made (default camera)")
+
+
 def cmd_colon(args):
     """Write a procedural (or imported) colon: mesh, centerline and what was drawn."""
     config = _generator_config(args)
@@ -157,19 +165,15 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("segments", help="cut a colon into segments with holes; one folder per sample")
     _add_colon_source(p)
     p.add_argument("--out", required=True, help="output folder")
-    p.add_argument("--length", type=float, default=60.0, help="segment arc length, mm (default 60)")
-    p.add_argument("--segment", type=int, help="only this segment index")
+    _add_segment_args(p, "only this segment index")
     p.add_argument("--permutations", type=int, default=1, help="hole permutations per segment (default 1)")
-    p.add_argument("--hole-model", default="camera", choices=["camera", "spheres", "camera+spheres"])
     p.add_argument("--picture", action="store_true", help="also write a PNG per sample")
     p.set_defaults(func=cmd_segments)
 
     p = sub.add_parser("picture", help="write a picture of a colon or of one segment")
     _add_colon_source(p)
     p.add_argument("--out", required=True, help="PNG file to write")
-    p.add_argument("--length", type=float, default=60.0, help="segment arc length, mm (default 60)")
-    p.add_argument("--segment", type=int, help="show this segment with its holes instead of the whole colon")
-    p.add_argument("--hole-model", default="camera", choices=["camera", "spheres", "camera+spheres"])
+    _add_segment_args(p, "show this segment with its holes instead of the whole colon")
     p.set_defaults(func=cmd_picture)
 
     p = sub.add_parser("demo", help="run the main job on a small default dataset")

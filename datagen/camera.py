@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from colonbench.datagen.centerline import perpendicular_basis
 from colonbench.datagen.config import CameraConfig, draw
 
 
@@ -106,13 +107,6 @@ class Poses:
         return len(self.positions)
 
 
-def _perpendicular_basis(t):
-    a = np.where(np.abs(t[:, :1]) < 0.9, np.array([[1.0, 0, 0]]), np.array([[0, 1.0, 0]]))
-    u = np.cross(t, a)
-    u /= np.linalg.norm(u, axis=1, keepdims=True)
-    return u, np.cross(t, u)
-
-
 def sample_poses(rng: np.random.Generator, scene: SurfaceScene, centerline, s_range, config: CameraConfig,
                  n_poses: int | None = None) -> Poses:
     """Draw camera poses near a stretch of the centerline.
@@ -144,7 +138,7 @@ def sample_poses(rng: np.random.Generator, scene: SurfaceScene, centerline, s_ra
     s = rng.uniform(lo, hi, n)
     center = centerline.point_at(s)
     tangent = centerline.tangent_at(s)
-    u, v = _perpendicular_basis(tangent)
+    u, v = perpendicular_basis(tangent)
     phi = rng.uniform(0, 2 * np.pi, n)
     side = np.cos(phi)[:, None] * u + np.sin(phi)[:, None] * v
     frac = rng.uniform(config.lateral_offset[0], config.lateral_offset[1], n)
@@ -159,7 +153,7 @@ def sample_poses(rng: np.random.Generator, scene: SurfaceScene, centerline, s_ra
     cos_a = rng.uniform(cos_max, 1.0, n)
     sin_a = np.sqrt(1 - cos_a**2)
     psi = rng.uniform(0, 2 * np.pi, n)
-    au, av = _perpendicular_basis(axis)
+    au, av = perpendicular_basis(axis)
     direction = cos_a[:, None] * axis + sin_a[:, None] * (np.cos(psi)[:, None] * au + np.sin(psi)[:, None] * av)
     reach = rng.uniform(config.reach_mm[0], config.reach_mm[1], n)
     return Poses(position, direction, reach, s)

@@ -202,3 +202,18 @@ class Centerline:
 
         d, idx = cKDTree(self.points).query(np.asarray(points, dtype=np.float64))
         return d, self.arclength[idx]
+
+
+def perpendicular_basis(tangents) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit vectors perpendicular to each of (n, 3) unit ``tangents`` and to each other.
+
+    Returns
+    -------
+    u, v : (n, 3) float
+        ``(u, v, tangent)`` is right-handed.
+    """
+    t = np.atleast_2d(np.asarray(tangents, dtype=np.float64))
+    a = np.where(np.abs(t[:, :1]) < 0.9, np.array([[1.0, 0, 0]]), np.array([[0, 1.0, 0]]))
+    u = np.cross(t, a)
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    return u, np.cross(t, u)

@@ -83,6 +83,8 @@ class SegmentConfig:
     hole_point_density: float = _p(4.0, 0.01, 100.0, "points/mm^2", "density of the GT hole points")
     centerline_spacing_mm: float = _p(0.5, 0.05, 0.5, "mm", "spacing of GT centerline points")
     noise_mm: float = _p(0.0, 0.0, 10.0, "mm", "Gaussian noise on partial points (0.5 = the paper's noisy condition)")
+    min_coverage: float = _p(0.2, 0.0, 0.99, "fraction",
+                             "holes are redrawn (up to 20 times) until a segment is at least this much covered")
 
 
 CONFIG_CLASSES = {"colon": ColonConfig, "camera": CameraConfig, "spheres": SphereConfig, "segments": SegmentConfig}

@@ -123,6 +123,18 @@ def procedural_colon(config: GeneratorConfig, seed: int, colon_id: int) -> Colon
     return generate_colon(config.colon, seed=seed, colon_id=colon_id)
 
 
+def write_points_ply(path, points) -> Path:
+    """Write (n, 3) points (mm) as a binary little-endian PLY of float64 x, y, z; n may be 0."""
+    pts = np.ascontiguousarray(np.asarray(points, dtype="<f8").reshape(-1, 3))
+    header = (f"ply\nformat binary_little_endian 1.0\ncomment colonbench point cloud, mm\n"
+              f"element vertex {len(pts)}\nproperty double x\nproperty double y\nproperty double z\nend_header\n")
+    path = Path(path)
+    with open(path, "wb") as fh:
+        fh.write(header.encode("ascii"))
+        fh.write(pts.tobytes())
+    return path
+
+
 def write_sample_folder(sample: Sample, folder, meta: dict | None = None) -> Path:
     """Write one sample as a folder of plain files, mm, the colon's frame.
 
@@ -139,11 +151,9 @@ def write_sample_folder(sample: Sample, folder, meta: dict | None = None) -> Pat
     ``gt.json``
         Coverage, arc-length window, hole areas, hole model, noise, ``meta``.
     """
-    import trimesh
-
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
-    trimesh.PointCloud(sample.partial_points).export(folder / "partial.ply")
+    write_points_ply(folder / "partial.ply", sample.partial_points)
     sample.complete.export(folder / "complete.ply")
     np.save(folder / "observed_faces.npy", sample.observed_faces)
     np.save(folder / "hole_points.npy", sample.hole_points)

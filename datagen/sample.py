@@ -18,6 +18,10 @@ from colonbench.datagen.holes import check_hole_model, inside_spheres, sample_sp
 from colonbench.datagen.segments import SegmentSurface, _components
 
 
+#: How many times holes are drawn at most to reach ``SegmentConfig.min_coverage``.
+MAX_HOLE_DRAWS = 20
+
+
 @dataclass
 class Sample:
     """A partial colon segment and its exact ground truth.
@@ -89,6 +93,32 @@ def observe(rng, scene: cam.SurfaceScene, centerline, surface: SegmentSurface, h
     return observed, info
 
 
+def observe_covered(rng, scene, centerline, surface: SegmentSurface, hole_model: str, camera: CameraConfig,
+                    spheres: SphereConfig, min_coverage: float):
+    """:func:`observe`, redrawn until the coverage reaches ``min_coverage`` (at most ``MAX_HOLE_DRAWS`` draws).
+
+    A segment nobody looked at has no reconstruction to estimate from. The
+    redraws continue the same stream, so the result stays deterministic.
+
+    Returns
+    -------
+    observed : (f,) bool
+    coverage : float
+        Observed area / complete area.
+    info : dict
+        As :func:`observe`, plus ``hole_draws``.
+    """
+    areas = surface.mesh.area_faces
+    total = areas.sum()
+    for attempt in range(MAX_HOLE_DRAWS):
+        observed, info = observe(rng, scene, centerline, surface, hole_model, camera, spheres)
+        coverage = float(areas[observed].sum() / total) if total > 0 else float("nan")
+        if coverage >= min_coverage:
+            break
+    info["hole_draws"] = attempt + 1
+    return observed, coverage, info
+
+
 def hole_areas(mesh: trimesh.Trimesh, observed: np.ndarray) -> np.ndarray:
     """Areas (mm^2) of the connected pieces of unobserved faces, largest first."""
     holes = np.flatnonzero(~observed)
@@ -124,10 +154,9 @@ def make_sample(rng, scene, centerline, surface: SegmentSurface, hole_model: str
     segments = segments or SegmentConfig()
     noise = segments.noise_mm if noise_mm is None else float(noise_mm)
     mesh = surface.mesh
-    observed, info = observe(rng, scene, centerline, surface, hole_model, camera, spheres)
     areas = mesh.area_faces
-    total = areas.sum()
-    coverage = float(areas[observed].sum() / total) if total > 0 else float("nan")
+    observed, coverage, info = observe_covered(rng, scene, centerline, surface, hole_model, camera, spheres,
+                                               segments.min_coverage)
     partial = sample_surface(rng, mesh.vertices, mesh.faces[observed], segments.point_density,
                              areas=areas[observed])
     holes = sample_surface(rng, mesh.vertices, mesh.faces[~observed], segments.hole_point_density,

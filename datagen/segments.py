@@ -26,7 +26,7 @@ import trimesh
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from colonbench.datagen.centerline import Centerline
+from colonbench.datagen.centerline import Centerline, perpendicular_basis
 from colonbench.errors import ColonbenchError
 
 
@@ -180,10 +180,7 @@ def segment_surface(scene, centerline: Centerline, s0: float, s1: float,
     s = np.linspace(s0, s1, n_ray_rings + 2)[1:-1]
     origin = centerline.point_at(s)
     tangent = centerline.tangent_at(s)
-    a = np.where(np.abs(tangent[:, :1]) < 0.9, np.array([[1.0, 0, 0]]), np.array([[0, 1.0, 0]]))
-    u = np.cross(tangent, a)
-    u /= np.linalg.norm(u, axis=1, keepdims=True)
-    v = np.cross(tangent, u)
+    u, v = perpendicular_basis(tangent)
     ang = 2 * np.pi * (np.arange(n_ray_dirs) + 0.5) / n_ray_dirs
     dirs = (np.cos(ang)[None, :, None] * u[:, None, :] + np.sin(ang)[None, :, None] * v[:, None, :]).reshape(-1, 3)
     orig = np.repeat(origin, n_ray_dirs, axis=0)

@@ -23,7 +23,7 @@ import numpy as np
 from colonbench import seeding
 from colonbench.datagen.camera import SurfaceScene
 from colonbench.datagen.generate import GeneratorConfig, procedural_colon
-from colonbench.datagen.sample import hole_areas, observe
+from colonbench.datagen.sample import hole_areas, observe_covered
 from colonbench.datagen.holes import sample_surface
 from colonbench.datagen.segments import segment_surface, windows
 
@@ -61,10 +61,11 @@ def main():
                 for model in ("camera", "spheres"):
                     rng = seeding.rng(args.seed, "sample", i, k, p, model)
                     t = time.perf_counter()
-                    obs, _ = observe(rng, scene, colon.centerline, surf, model, config.camera, config.spheres)
+                    obs, coverage, _ = observe_covered(rng, scene, colon.centerline, surf, model, config.camera,
+                                                       config.spheres, config.segments.min_coverage)
                     stage[f"holes:{model}"] += time.perf_counter() - t
                     area = surf.mesh.area_faces
-                    cover[model].append(area[obs].sum() / area.sum())
+                    cover[model].append(coverage)
                     n_holes[model].append(len(hole_areas(surf.mesh, obs)))
                     t = time.perf_counter()
                     sample_surface(rng, surf.mesh.vertices, surf.mesh.faces[obs], config.segments.point_density,

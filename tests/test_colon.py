@@ -115,3 +115,21 @@ def test_config_errors_name_the_field():
         GeneratorConfig.from_dict({"camera": {"poses": [2.5, 4]}})
     with pytest.raises(InputError, match="must be numeric"):
         GeneratorConfig.from_dict({"camera": {"fov_deg": "wide"}})
+
+
+def test_every_sample_reaches_the_minimum_coverage(small_colon, small_config):
+    covs = [s.coverage for _, _, s in colon_samples(small_colon, small_config, 0, 0, 70.0, 1, "camera")]
+    assert len(covs) >= 15
+    assert min(covs) >= small_config.segments.min_coverage
+    assert max(covs) > 0.9
+
+
+def test_empty_point_cloud_is_written(tmp_path):
+    import trimesh
+    from colonbench.datagen.generate import write_points_ply
+
+    pts = np.random.default_rng(0).normal(size=(20, 3)) * 40
+    assert np.array_equal(trimesh.load(write_points_ply(tmp_path / "a.ply", pts)).vertices, pts)
+    empty = (tmp_path / "e.ply")
+    write_points_ply(empty, np.zeros((0, 3)))
+    assert b"element vertex 0" in empty.read_bytes()
