@@ -24,6 +24,7 @@ PURPOSE = {
     "retry": 6,
     "split": 7,
     "augment": 8,
+    "sample": 9,
 }
 
 

@@ -61,11 +61,13 @@ class Colon:
     centerline : Centerline
         GT centerline, 0.5 mm spacing for procedural colons.
     radius : (n,) float
-        Largest wall distance from the centerline at each centerline sample, mm.
-    rings : int or None
-        For procedural colons: ring ``k`` of the mesh holds vertices
-        ``k * n_around ... (k + 1) * n_around - 1`` and lies at arc length
-        ``ring_arclength[k]``.
+        Largest wall distance from the centerline at each centerline sample, mm
+        (NaN for imported colons).
+    ring_arclength : (K,) float or None
+        For swept tubes: ring ``k`` of the mesh holds vertices
+        ``k * n_around ... (k + 1) * n_around - 1`` and lies at this arc length, mm.
+    n_around : int or None
+        For swept tubes: vertices per ring.
     info : dict
         What was drawn (region boundaries, polyps, ...), JSON-friendly.
     """

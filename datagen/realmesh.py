@@ -194,17 +194,17 @@ def import_colon(mesh_path, centerline_path=None, voxel_mm: float = 1.0, check: 
         an open mesh up to a quarter of the points may read as outside).
     """
     mesh = load_mesh(mesh_path)
+    scene = SurfaceScene(mesh.vertices, mesh.faces)
     if centerline_path is not None:
         centerline = load_centerline(centerline_path).resample(0.5)
         if check:
             # rays may leave an open mesh through its ends: a looser tolerance there
-            check_centerline_inside(SurfaceScene(mesh.vertices, mesh.faces), centerline,
-                                    tolerance=0.01 if mesh.is_watertight else 0.25)
+            check_centerline_inside(scene, centerline, tolerance=0.01 if mesh.is_watertight else 0.25)
         source = "given"
     else:
         centerline = compute_centerline(mesh, voxel_mm)
         source = "computed"
-    d = SurfaceScene(mesh.vertices, mesh.faces).distance(centerline.points)
+    d = scene.distance(centerline.points)
     return Colon(mesh=mesh, centerline=centerline, radius=np.full(len(centerline.points), np.nan),
                  info={"source": str(mesh_path), "centerline": source,
                        "median_wall_distance_mm": float(np.median(d))})

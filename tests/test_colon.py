@@ -19,8 +19,7 @@ def test_same_seed_same_geometry(small_config):
     assert a.mesh.vertices.tobytes() == b.mesh.vertices.tobytes()
     assert a.mesh.faces.tobytes() == b.mesh.faces.tobytes()
     assert a.centerline.points.tobytes() == b.centerline.points.tobytes()
-    assert not np.array_equal(a.centerline.points.shape, c.centerline.points.shape) or \
-        not np.allclose(a.centerline.points, c.centerline.points)
+    assert a.centerline.length != c.centerline.length   # another colon id is another colon
 
 
 def test_anatomy_within_configured_ranges(small_colon, small_config):
