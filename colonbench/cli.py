@@ -43,10 +43,22 @@ def _add_colon_source(p):
     p.add_argument("--config", help="generator config YAML (sections colon, camera, spheres, segments)")
 
 
+def _positive(kind):
+    def parse(text):
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+        if value <= 0:
+            raise argparse.ArgumentTypeError(f"must be positive, got {text}")
+        return value
+    return parse
+
+
 def _add_segment_args(p, segment_help):
     from colonbench.datagen.holes import HOLE_MODELS
 
-    p.add_argument("--length", type=float, default=60.0, help="segment arc length, mm (default 60)")
+    p.add_argument("--length", type=_positive(float), default=60.0, help="segment arc length, mm (default 60)")
     p.add_argument("--segment", type=int, help=segment_help)
     p.add_argument("--hole-model", default="camera", choices=HOLE_MODELS, help="how holes are made (default camera)")
 
@@ -166,7 +178,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_colon_source(p)
     p.add_argument("--out", required=True, help="output folder")
     _add_segment_args(p, "only this segment index")
-    p.add_argument("--permutations", type=int, default=1, help="hole permutations per segment (default 1)")
+    p.add_argument("--permutations", type=_positive(int), default=1, help="hole permutations per segment (default 1)")
     p.add_argument("--picture", action="store_true", help="also write a PNG per sample")
     p.set_defaults(func=cmd_segments)
 

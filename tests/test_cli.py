@@ -48,6 +48,10 @@ def test_bad_input_gives_a_message_not_a_traceback(tmp_path):
     assert "Traceback" not in r.stderr
     r = run("colon", "--mesh", tmp_path / "none.ply", "--out", tmp_path)
     assert r.returncode == 2 and "no such file" in r.stderr and "Traceback" not in r.stderr
+    r = run("segments", "--length", "-5", "--out", tmp_path)
+    assert r.returncode == 2 and "must be positive" in r.stderr
+    r = run("segments", "--segment", "999", "--out", tmp_path)
+    assert r.returncode == 2 and "segment 999 does not exist" in r.stderr
 
 
 def test_picture(tmp_path):
