@@ -91,6 +91,13 @@ def cmd_segments(args):
     from colonbench.datagen.generate import colon_samples, write_sample_folder
 
     config = _generator_config(args)
+    if args.noise is not None:
+        import dataclasses
+
+        from colonbench.datagen.config import validate
+
+        config = dataclasses.replace(config, segments=validate(
+            dataclasses.replace(config.segments, noise_mm=args.noise)))
     colon = _colon_from_args(args, config)
     segments = None if args.segment is None else [args.segment]
     out = Path(args.out)
@@ -179,6 +186,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="output folder")
     _add_segment_args(p, "only this segment index")
     p.add_argument("--permutations", type=_positive(int), default=1, help="hole permutations per segment (default 1)")
+    p.add_argument("--noise", type=float, help="Gaussian noise sigma on the partial points, mm "
+                   "(0.5 = the paper's noisy condition; default from the config, 0)")
     p.add_argument("--picture", action="store_true", help="also write a PNG per sample")
     p.set_defaults(func=cmd_segments)
 

@@ -37,6 +37,18 @@ def test_segments_writes_sample_folders(tmp_path):
     partial = trimesh.load(folders[0] / "partial.ply")
     assert len(partial.vertices) > 1000
     assert np.load(folders[0] / "centerline.npy").shape[1] == 3
+    assert gt["noise_mm"] == 0.0
+    # the same sample with noise: same coverage, points off the surface by about sigma
+    r = run("segments", "--seed", 2, "--config", cfg, "--segment", 3, "--hole-model", "spheres",
+            "--noise", 0.5, "--out", tmp_path / "noisy")
+    assert r.returncode == 0, r.stderr
+    noisy = sorted((tmp_path / "noisy").iterdir())[0]
+    gt_noisy = json.loads((noisy / "gt.json").read_text())
+    assert gt_noisy["noise_mm"] == 0.5 and gt_noisy["coverage"] == gt["coverage"]
+    d = np.abs(trimesh.proximity.signed_distance(complete, trimesh.load(noisy / "partial.ply").vertices[:2000]))
+    assert 0.3 < np.sqrt(np.mean(d**2)) < 0.7
+    r = run("segments", "--noise", -1, "--out", tmp_path / "bad")
+    assert r.returncode == 2 and "noise_mm" in r.stderr
 
 
 def test_bad_input_gives_a_message_not_a_traceback(tmp_path):
