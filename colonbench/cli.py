@@ -102,7 +102,7 @@ def cmd_segments(args):
     segments = None if args.segment is None else [args.segment]
     out = Path(args.out)
     name = f"colon{args.colon_id:04d}" if not args.mesh else Path(args.mesh).stem
-    rows = []
+    written = 0
     for k, p, sample in colon_samples(colon, config, args.seed, args.colon_id, args.length, args.permutations,
                                       args.hole_model, segments):
         folder = out / f"{name}_l{args.length:g}_s{k:03d}_p{p:02d}"
@@ -112,9 +112,9 @@ def cmd_segments(args):
             from colonbench.datagen.render import segment_picture
 
             segment_picture(sample, folder / "picture.png")
-        rows.append((folder.name, sample.coverage, len(sample.hole_areas)))
+        written += 1
         print(f"{folder.name}: coverage {sample.coverage:.3f}, {len(sample.hole_areas)} holes")
-    if not rows:
+    if not written:
         raise ColonbenchError(f"the colon is too short for one segment of {args.length} mm")
 
 
