@@ -1,0 +1,206 @@
+"""The paper's input and target heatmaps, defined once for data generation, training and inference.
+
+For a voxel ``v`` of a :class:`~colonbench.grid.Grid`, with distances in voxels::
+
+    H_input[v]  = tanh(0.2 d(v, S0))
+    H_target[v] = tanh(0.2 d(v, S1)) / (tanh(0.2 d(v, S1)) + tanh(0.2 d(v, C)))
+
+``S0`` is the voxelized partial surface (the voxels holding a partial point),
+``S1`` the voxelized complete surface (every voxel the mesh passes through) and
+``C`` the voxelized centerline. Distances are exact Euclidean distance
+transforms (the ``edt`` package). The target is 0 on the surface, 1 on the
+centerline and about 0.5 elsewhere; where both distances are 0 (a centerline
+voxel on the surface, which only a degenerate segment has) it is set to 0.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import edt as _edt
+import numpy as np
+
+from colonbench.errors import InputError
+from colonbench.grid import Grid
+
+#: The 0.2 in tanh(0.2 d).
+HEATMAP_SCALE = 0.2
+#: Spacing of the points that voxelize meshes and polylines, voxels.
+VOXELIZE_SPACING = 0.5
+
+
+def distance_to(occupied: np.ndarray) -> np.ndarray:
+    """Euclidean distance (voxels) from every voxel to the nearest occupied voxel.
+
+    Parameters
+    ----------
+    occupied : (s, s, s) bool
+
+    Returns
+    -------
+    (s, s, s) float32
+        0 on occupied voxels.
+    """
+    if not occupied.any():
+        raise InputError("nothing to measure distances to: no occupied voxel in the grid")
+    return _edt.edt(np.ascontiguousarray(~occupied), black_border=False, parallel=1).astype(np.float32, copy=False)
+
+
+def voxel_indices(grid: Grid, ijk: np.ndarray) -> tuple[np.ndarray, int]:
+    """Round continuous voxel indices to voxels of the grid.
+
+    Returns
+    -------
+    idx : (m, 3) int
+        The voxels inside the grid (with repeats).
+    outside : float
+        Fraction of the inputs that fell outside (0 when there are none).
+    """
+    idx = np.rint(ijk).astype(np.int64)
+    keep = np.all((idx >= 0) & (idx < grid.size), axis=1)
+    return idx[keep], float(1.0 - keep.mean()) if len(idx) else 0.0
+
+
+def occupancy(grid: Grid, idx: np.ndarray) -> np.ndarray:
+    """(s, s, s) bool grid with the voxels ``idx`` (m, 3) set."""
+    occ = np.zeros((grid.size,) * 3, dtype=bool)
+    occ[idx[:, 0], idx[:, 1], idx[:, 2]] = True
+    return occ
+
+
+def voxelize_points(grid: Grid, points) -> tuple[np.ndarray, int]:
+    """The voxels holding at least one point (mm); returns (occupancy, fraction of points outside the grid)."""
+    idx, outside = voxel_indices(grid, grid.to_voxel(points))
+    return occupancy(grid, idx), outside
+
+
+def triangle_lattice(a: np.ndarray, b: np.ndarray, c: np.ndarray, spacing: float) -> np.ndarray:
+    """Points on triangles no farther than ``spacing`` apart along every edge direction.
+
+    Each triangle is cut into ``n^2`` similar triangles, ``n`` the smallest
+    integer making its longest edge / n <= ``spacing``; the lattice vertices
+    are returned. Deterministic, so the voxelization of a mesh is too.
+
+    Parameters
+    ----------
+    a, b, c : (f, 3) float
+        Triangle corners.
+    spacing : float
+        Same unit as the corners.
+
+    Returns
+    -------
+    (m, 3) float
+    """
+    edges = np.stack([np.linalg.norm(b - a, axis=1), np.linalg.norm(c - b, axis=1),
+                      np.linalg.norm(a - c, axis=1)], axis=1)
+    n_sub = np.maximum(np.ceil(edges.max(axis=1) / spacing), 1).astype(np.int64)
+    out = []
+    for n in np.unique(n_sub):
+        sel = n_sub == n
+        i, j = np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij")
+        ok = (i + j) <= n
+        u = (i[ok] / n)[:, None]
+        v = (j[ok] / n)[:, None]
+        w = 1.0 - u - v
+        # (k, 1) weights against (f, 3) corners -> (f, k, 3)
+        pts = (w[None] * a[sel][:, None] + u[None] * b[sel][:, None] + v[None] * c[sel][:, None])
+        out.append(pts.reshape(-1, 3))
+    return np.concatenate(out) if out else np.zeros((0, 3))
+
+
+def voxelize_mesh(grid: Grid, vertices, faces) -> tuple[np.ndarray, int]:
+    """The voxels a triangle mesh (mm) passes through; returns (occupancy, fraction of its area outside the grid)."""
+    verts = grid.to_voxel(vertices)
+    faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    pts = triangle_lattice(verts[faces[:, 0]], verts[faces[:, 1]], verts[faces[:, 2]], VOXELIZE_SPACING)
+    idx, outside = voxel_indices(grid, pts)
+    return occupancy(grid, idx), outside
+
+
+def densify_polyline(points: np.ndarray, spacing: float) -> np.ndarray:
+    """(m, 3) polyline resampled so that consecutive points are at most ``spacing`` apart (vertices kept)."""
+    pts = np.asarray(points, dtype=float).reshape(-1, 3)
+    if len(pts) < 2:
+        return pts
+    seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+    n = np.maximum(np.ceil(seg / spacing), 1).astype(np.int64)
+    t = np.concatenate([np.arange(k) / k for k in n])
+    start = np.repeat(np.arange(len(seg)), n)
+    dense = pts[start] + t[:, None] * (pts[start + 1] - pts[start])
+    return np.vstack([dense, pts[-1:]])
+
+
+def voxelize_polyline(grid: Grid, points) -> tuple[np.ndarray, int]:
+    """The voxels a polyline (mm) passes through; returns (occupancy, fraction of its length outside the grid)."""
+    dense = densify_polyline(grid.to_voxel(points), VOXELIZE_SPACING)
+    idx, outside = voxel_indices(grid, dense)
+    return occupancy(grid, idx), outside
+
+
+def input_heatmap(d_partial: np.ndarray) -> np.ndarray:
+    """``tanh(0.2 d(v, S0))`` from the distance (voxels) to the partial surface."""
+    return np.tanh(np.float32(HEATMAP_SCALE) * d_partial)
+
+
+def target_heatmap(d_surface: np.ndarray, d_centerline: np.ndarray) -> np.ndarray:
+    """``t_S / (t_S + t_C)`` with ``t = tanh(0.2 d)``, from distances (voxels) to the complete surface and centerline."""
+    ts = np.tanh(np.float32(HEATMAP_SCALE) * d_surface)
+    tc = np.tanh(np.float32(HEATMAP_SCALE) * d_centerline)
+    den = ts + tc
+    out = np.zeros_like(ts)
+    np.divide(ts, den, out=out, where=den > 0)
+    return out
+
+
+@dataclass
+class Heatmaps:
+    """Input and target heatmaps of one sample, and how much geometry fell outside the grid.
+
+    Attributes
+    ----------
+    input, target : (s, s, s) float32
+    outside : dict
+        Fraction of each geometry that fell outside the grid (and is missing
+        from the heatmaps): ``partial`` (of the points), ``complete`` (of the
+        surface, by lattice points), ``centerline`` (of its length).
+    """
+
+    input: np.ndarray
+    target: np.ndarray
+    outside: dict
+
+
+def input_from_points(grid: Grid, partial) -> tuple[np.ndarray, int]:
+    """The input heatmap of a partial cloud (mm): what a method computes at inference.
+
+    Returns
+    -------
+    heatmap : (s, s, s) float32
+    outside : float
+        Fraction of the points that fell outside the grid.
+    """
+    occ, outside = voxelize_points(grid, partial)
+    return input_heatmap(distance_to(occ)), outside
+
+
+def sample_heatmaps(grid: Grid, partial, vertices, faces, centerline) -> Heatmaps:
+    """Input and target heatmaps of one sample.
+
+    Parameters
+    ----------
+    grid : Grid
+        From :func:`colonbench.grid.fit_grid` on ``partial``.
+    partial : (n, 3) float
+        Partial points, mm.
+    vertices : (v, 3) float
+    faces : (f, 3) int
+        The complete segment surface, mm.
+    centerline : (m, 3) float
+        GT centerline polyline inside the segment, mm.
+    """
+    h_in, out_p = input_from_points(grid, partial)
+    occ_s, out_s = voxelize_mesh(grid, vertices, faces)
+    occ_c, out_c = voxelize_polyline(grid, centerline)
+    h_t = target_heatmap(distance_to(occ_s), distance_to(occ_c))
+    return Heatmaps(h_in, h_t, {"partial": out_p, "complete": out_s, "centerline": out_c})
