@@ -138,6 +138,37 @@ def cmd_picture(args):
     print(f"wrote {args.out}")
 
 
+def cmd_generate(args):
+    """Generate (or finish) the HDF5 shards of a manifest, then write the lock and statistics."""
+    from colonbench.shards.dataset import LOCK_NAME, generate
+
+    t = time.perf_counter()
+    splits = None if args.splits is None else [s.strip() for s in args.splits.split(",") if s.strip()]
+    lock = generate(args.manifest, args.out, workers=args.workers, scheduler=args.scheduler, splits=splits,
+                    progress=not args.quiet, allow_version_mismatch=args.allow_version_mismatch)
+    for split, info in lock["splits"].items():
+        cov = info["statistics"]["coverage"]
+        print(f"{split}: {info['samples']} samples of {info['segments']} segments from {info['colons']} colons, "
+              f"{info['bytes'] / 2**20:.1f} MiB, coverage mean {cov['mean']:.3f}")
+    if lock["missing"]:
+        print(f"{len(lock['missing'])} shard(s) of the manifest not generated (splits left out)")
+    print(f"wrote {Path(args.out) / LOCK_NAME} in {time.perf_counter() - t:.1f} s")
+
+
+def cmd_verify(args):
+    """Check a dataset folder or shard: files present, checksums, schema; exit 1 naming each fault."""
+    from colonbench.shards.verify import verify
+
+    faults = verify(args.path, deep=not args.quick)
+    if faults:
+        for f in faults:
+            print(f"FAULT {f}")
+        print(f"{len(faults)} fault(s) in {args.path}")
+        return 1
+    print(f"{args.path}: OK")
+    return 0
+
+
 def cmd_demo(args):
     """The data-generation part of the main job: one colon, its segments with holes, pictures, a summary."""
     import numpy as np
@@ -197,6 +228,23 @@ def build_parser() -> argparse.ArgumentParser:
     _add_segment_args(p, "show this segment with its holes instead of the whole colon")
     p.set_defaults(func=cmd_picture)
 
+    p = sub.add_parser("generate", help="generate a dataset of HDF5 shards from a manifest (resumable)")
+    p.add_argument("manifest", help="manifest YAML (see data_manifests/)")
+    p.add_argument("--out", required=True, help="dataset folder (created; a rerun finishes what is missing)")
+    p.add_argument("--workers", type=_positive(int), default=1, help="local processes (default 1)")
+    p.add_argument("--scheduler", help="Dask scheduler address (tcp://host:8786): make the shards on its workers, "
+                   "which must see --out at the same path")
+    p.add_argument("--splits", help="only these splits, comma-separated (e.g. test)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--allow-version-mismatch", action="store_true",
+                   help="generate even if the manifest names another colonbench version")
+    p.set_defaults(func=cmd_generate)
+
+    p = sub.add_parser("verify", help="check a dataset folder (or one shard): checksums, schema, completeness")
+    p.add_argument("path", help="dataset folder or .h5 shard")
+    p.add_argument("--quick", action="store_true", help="checksums and counts only, skip reading every heatmap")
+    p.set_defaults(func=cmd_verify)
+
     p = sub.add_parser("demo", help="run the main job on a small default dataset")
     p.add_argument("--out", default="out/demo", help="output folder (default out/demo)")
     p.add_argument("--seed", type=int, default=0, help="root seed (default 0)")
@@ -211,14 +259,14 @@ def main(argv=None) -> int:
         parser.print_help()
         return 0
     try:
-        args.func(args)
+        status = args.func(args)
     except ColonbenchError as exc:
         print(f"colonbench: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("colonbench: interrupted", file=sys.stderr)
         return 130
-    return 0
+    return int(status or 0)
 
 
 if __name__ == "__main__":

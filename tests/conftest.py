@@ -27,3 +27,16 @@ def real_dir():
     if not (REAL / "gca00090_large_intestine_mm.ply").is_file():
         pytest.skip("../shared/real is not beside this checkout")
     return REAL
+
+
+MANIFESTS = Path(__file__).resolve().parents[1] / "data_manifests"
+
+
+@pytest.fixture(scope="session")
+def smoke_dataset(tmp_path_factory):
+    """``data_manifests/smoke.yaml`` generated in one process: (folder, lock)."""
+    from colonbench.shards.dataset import generate
+
+    out = tmp_path_factory.mktemp("smoke") / "data"
+    lock = generate(MANIFESTS / "smoke.yaml", out, workers=1, progress=False)
+    return out, lock

@@ -1,0 +1,1 @@
+"""Training shards: the HDF5 schema, manifests, generation in parallel, reading and verification."""

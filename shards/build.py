@@ -1,0 +1,123 @@
+"""Making one shard: a colon at one segment length, all its selected segments and hole permutations.
+
+:func:`build_shard` is the unit of work that every executor (one process, a
+process pool, a Dask cluster) runs. It depends only on the resolved manifest
+and the unit, draws every random number from streams addressed by
+``(colon, length, segment, permutation)``, and writes the file in a fixed
+order without timestamps, so the bytes of a shard do not depend on which
+worker made it, when, or next to what.
+
+The file is written by :class:`~colonbench.shards.writer.ShardWriter`: under a
+temporary name, renamed into place only once complete and flushed, so a
+killed run never leaves a partial file under a shard's name.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+from colonbench import seeding
+from colonbench._version import __version__
+from colonbench.datagen.generate import GeneratorConfig, PreparedColon, procedural_colon
+from colonbench.datagen.sample import make_sample
+from colonbench.errors import ColonbenchError
+from colonbench.grid import fit_grid
+from colonbench.heatmaps import HEATMAP_SCALE, sample_heatmaps
+from colonbench.shards import schema
+from colonbench.shards.manifest import Unit, config_hash, draw_mix, manifest_hash, pick_segments
+from colonbench.shards.writer import ShardWriter
+
+_COLON_CACHE: dict = {}
+
+
+def _prepared_colon(config: GeneratorConfig, seed: int, colon_id: int, key: str) -> PreparedColon:
+    """The colon of a unit, kept for the next unit of the same colon in this process (one at a time)."""
+    ck = (key, seed, colon_id)
+    if ck not in _COLON_CACHE:
+        _COLON_CACHE.clear()
+        _COLON_CACHE[ck] = PreparedColon(procedural_colon(config, seed, colon_id))
+    return _COLON_CACHE[ck]
+
+
+class _Stages:
+    """Wall time per stage, seconds."""
+
+    def __init__(self):
+        self.t = {}
+
+    def add(self, name, since):
+        now = time.perf_counter()
+        self.t[name] = self.t.get(name, 0.0) + now - since
+        return now
+
+
+def build_shard(resolved: dict, unit: Unit, out_dir) -> dict:
+    """Generate and write one shard; returns what was done.
+
+    Parameters
+    ----------
+    resolved : dict
+        A resolved manifest (:func:`colonbench.shards.manifest.resolve`).
+    unit : Unit
+    out_dir : path
+        Dataset folder; the shard goes to ``out_dir / unit.name``.
+
+    Returns
+    -------
+    dict
+        ``name``, ``samples``, ``segments``, ``seconds`` (per stage).
+    """
+    stages = _Stages()
+    t = time.perf_counter()
+    seed = resolved["seed"]
+    split = resolved["splits"][unit.split]
+    size, margin = resolved["grid"]["size"], resolved["grid"]["margin"]
+    config = GeneratorConfig.from_dict(resolved["config"])
+    prepared = _prepared_colon(config, seed, unit.colon_id, config_hash(resolved))
+    t = stages.add("colon", t)
+    wins = prepared.windows(unit.length_mm, config.segments.end_margin_mm)
+    picks = pick_segments(len(wins), split["segments_per_length"])
+    if not picks:
+        raise ColonbenchError(f"{unit.name}: colon {unit.colon_id} is too short for one {unit.length_mm:g} mm segment")
+    perms = split["permutations"]
+    n = len(picks) * perms
+    lmm = int(round(unit.length_mm * 1000))
+
+    attrs = {"format": schema.FORMAT, "format_version": schema.FORMAT_VERSION, "generator_version": __version__,
+             "manifest_name": resolved["name"], "manifest_sha256": manifest_hash(resolved),
+             "config_sha256": config_hash(resolved), "seed": seed, "split": unit.split, "colon_id": unit.colon_id,
+             "length_mm": unit.length_mm, "grid_size": size, "grid_margin": margin, "heatmap_scale": HEATMAP_SCALE,
+             "n_samples": n, "n_segments": len(picks)}
+    with ShardWriter(Path(out_dir) / unit.name, n, size) as writer:
+        for k in picks:
+            surface = prepared.segment(*wins[k])
+            # heatmaps are made from the geometry as stored (float32), so they can be remade from the file
+            verts = surface.mesh.vertices.astype(np.float32)
+            faces = surface.mesh.faces.astype(np.int32)
+            centerline = surface.centerline.astype(np.float32)
+            row = writer.add_segment(segment_id=k, window_mm=surface.window, complete_area_mm2=surface.mesh.area,
+                                     vertices=verts, faces=faces, centerline=centerline)
+            t = stages.add("segment", t)
+            for p in range(perms):
+                hole_model = draw_mix(split["hole_models"], seed, "hole_model", unit.colon_id, lmm, k, p)
+                sigma = draw_mix(split["noise_mm"], seed, "noise", unit.colon_id, lmm, k, p)
+                rng = seeding.rng(seed, "sample", unit.colon_id, lmm, k, p)
+                s = make_sample(rng, prepared.scene, prepared.colon.centerline, surface, hole_model,
+                                config.camera, config.spheres, config.segments, noise_mm=sigma)
+                partial = s.partial_points.astype(np.float32)
+                t = stages.add("sample", t)
+                grid = fit_grid(partial.astype(float), size=size, margin=margin)
+                hm = sample_heatmaps(grid, partial.astype(float), verts.astype(float), faces,
+                                     centerline.astype(float))
+                t = stages.add("heatmaps", t)
+                writer.add_sample(hm.input, hm.target, grid_affine=grid.affine, segment=row, permutation=p,
+                                  hole_model=schema.HOLE_MODEL_CODES[hole_model], noise_mm=sigma,
+                                  coverage=s.coverage, outside_grid=hm.outside["complete"],
+                                  observed_faces=s.observed_faces, partial_points=partial,
+                                  hole_points=s.hole_points, hole_areas_mm2=s.hole_areas)
+                t = stages.add("write", t)
+        writer.close(attrs)
+    return {"name": unit.name, "samples": n, "segments": len(picks), "seconds": stages.t}

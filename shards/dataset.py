@@ -1,0 +1,254 @@
+"""Generating a dataset from a manifest: shards in parallel, resumable, and the lock that describes them.
+
+A dataset folder holds::
+
+    manifest.yaml          the resolved manifest (every default written out)
+    train/colon-00000-50mm.h5, ...   the shards (colonbench.shards.schema)
+    dataset.lock.json      per-shard sha256, bytes and counts; per-split statistics
+    stats.png              holes per sample, hole sizes and coverage per split (the paper's Fig. 2b)
+
+:func:`generate` makes only the shards that are missing, so a second run after
+an interruption finishes the job, and a run with more splits extends it. Shard
+bytes do not depend on the executor: one process, ``workers`` processes or a
+Dask cluster give the same files.
+"""
+
+from __future__ import annotations
+
+import fcntl
+import functools
+import hashlib
+import json
+import multiprocessing
+import os
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from pathlib import Path
+
+import h5py
+import yaml
+
+from colonbench._version import __version__
+from colonbench.errors import ColonbenchError, InputError
+from colonbench.shards import schema, stats
+from colonbench.shards.build import build_shard
+from colonbench.shards.writer import TMP_SUFFIX
+from colonbench.shards.manifest import SPLITS, config_hash, dumps, load, manifest_hash, resolve, units
+
+LOCK_NAME = "dataset.lock.json"
+MANIFEST_NAME = "manifest.yaml"
+STATS_NAME = "stats.png"
+LOCK_FORMAT = "colonbench-dataset-lock"
+LOCK_VERSION = 1
+
+
+def sha256_file(path, block: int = 1 << 22) -> str:
+    """SHA-256 (hex) of a file's bytes."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for chunk in iter(lambda: fh.read(block), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def _job(resolved: dict, out_dir: str, unit):
+    """Build one shard and hash it; failures come back as values so one bad shard does not stop the others."""
+    try:
+        info = build_shard(resolved, unit, out_dir)
+    except ColonbenchError as exc:
+        return {"name": unit.name, "error": str(exc)}
+    except Exception as exc:  # noqa: BLE001 - reported with the shard's name, the run goes on
+        return {"name": unit.name, "error": f"{type(exc).__name__}: {exc}"}
+    path = Path(out_dir) / unit.name
+    info.update(sha256=sha256_file(path), bytes=path.stat().st_size)
+    return info
+
+
+def _execute(fn, jobs, workers: int, scheduler):
+    """Run ``fn`` over ``jobs``; yields results as they complete."""
+    if scheduler is not None:
+        try:
+            from distributed import Client, as_completed as dask_completed
+        except ImportError as exc:
+            raise InputError("--scheduler needs Dask: pip install 'colonbench[cluster]' "
+                             f"(import failed: {exc})") from None
+        client = Client(scheduler) if isinstance(scheduler, str) else scheduler
+        try:
+            futures = client.map(fn, jobs, pure=False)
+            for fut in dask_completed(futures):
+                yield fut.result()
+        finally:
+            if isinstance(scheduler, str):
+                client.close()
+    elif workers > 1 and len(jobs) > 1:
+        ctx = multiprocessing.get_context("spawn")
+        with ProcessPoolExecutor(max_workers=min(workers, len(jobs)), mp_context=ctx) as pool:
+            for fut in as_completed([pool.submit(fn, j) for j in jobs]):
+                yield fut.result()
+    else:
+        for j in jobs:
+            yield fn(j)
+
+
+def _shard_ok(path: Path, digest: str) -> bool:
+    """Whether an existing file under a shard's name is a finished shard of this manifest."""
+    try:
+        with h5py.File(path, "r") as h5:
+            return (h5.attrs.get("format") == schema.FORMAT and h5.attrs.get("manifest_sha256") == digest
+                    and "n_samples" in h5.attrs)
+    except OSError:
+        return False
+
+
+def _progress(total: int, initial: int, enabled: bool):
+    from tqdm.auto import tqdm
+    return tqdm(total=total, initial=initial, unit="shard", desc="generate", disable=None if enabled else True,
+                dynamic_ncols=True)
+
+
+def generate(manifest, out_dir, workers: int = 1, scheduler=None, splits=None, progress: bool = True,
+             allow_version_mismatch: bool = False) -> dict:
+    """Generate (or finish generating) the shards of a manifest, then write the lock and statistics.
+
+    Parameters
+    ----------
+    manifest : path or dict
+        A manifest YAML file, or a manifest dict.
+    out_dir : path
+        Dataset folder; created if needed. It may already hold part of this
+        same dataset, never another one.
+    workers : int
+        Local processes.
+    scheduler : str or distributed.Client, optional
+        A Dask scheduler address (``tcp://host:8786``) or client; shards are
+        then made on its workers, which must see ``out_dir`` at the same path.
+    splits : iterable of str, optional
+        Only these splits (default: all of the manifest).
+    progress : bool
+        Show a progress bar on a terminal.
+    allow_version_mismatch : bool
+        Generate even if the manifest was written for another colonbench version.
+
+    Returns
+    -------
+    dict
+        The lock (also written to ``out_dir/dataset.lock.json``).
+    """
+    resolved = load(manifest) if not isinstance(manifest, dict) else resolve(manifest)
+    if resolved["generator_version"] != __version__ and not allow_version_mismatch:
+        raise InputError(f"manifest {resolved['name']!r} was written for colonbench {resolved['generator_version']}, "
+                         f"this is {__version__}: the data would differ. Install that version, or pass "
+                         "--allow-version-mismatch to generate with this one (the lock records the version used)")
+    if splits is not None:
+        splits = list(splits)
+        bad = [s for s in splits if s not in resolved["splits"]]
+        if bad:
+            raise InputError(f"split(s) {bad} are not in manifest {resolved['name']!r} "
+                             f"(it has {list(resolved['splits'])})")
+    if workers < 1:
+        raise InputError(f"--workers must be >= 1, got {workers}")
+    digest = manifest_hash(resolved)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    with open(out / ".generate.lock", "w") as guard:
+        try:
+            fcntl.flock(guard, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            raise InputError(f"{out}: another generation is running in this folder") from None
+        return _generate_locked(resolved, digest, out, workers, scheduler, splits, progress)
+
+
+def _generate_locked(resolved, digest, out: Path, workers, scheduler, splits, progress) -> dict:
+    saved = out / MANIFEST_NAME
+    if saved.exists():
+        try:
+            previous = manifest_hash(resolve(yaml.safe_load(saved.read_text()), str(saved)))
+        except (InputError, yaml.YAMLError):
+            previous = None
+        if previous != digest:
+            raise InputError(f"{out} holds another dataset (its {MANIFEST_NAME} differs from manifest "
+                             f"{resolved['name']!r}); generate into an empty folder")
+    else:
+        saved.write_text(dumps(resolved))
+    for tmp in out.rglob(f"*.h5{TMP_SUFFIX}*"):
+        tmp.unlink()  # left by a killed run; never a finished shard
+
+    todo_all = units(resolved, splits)
+    known = {}
+    lock_path = out / LOCK_NAME
+    if lock_path.exists():
+        try:
+            known = json.loads(lock_path.read_text()).get("shards", {})
+        except (json.JSONDecodeError, AttributeError):
+            known = {}
+    done, todo = {}, []
+    for u in todo_all:
+        path = out / u.name
+        if path.exists() and _shard_ok(path, digest):
+            entry = known.get(u.name, {})
+            if entry.get("bytes") == path.stat().st_size and "sha256" in entry:
+                done[u.name] = entry
+            else:
+                done[u.name] = {"sha256": sha256_file(path), "bytes": path.stat().st_size}
+        else:
+            todo.append(u)
+    failures = []
+    bar = _progress(len(todo_all), len(done), progress)
+    try:
+        fn = functools.partial(_job, resolved, str(out))
+        for info in _execute(fn, todo, workers, scheduler):
+            if "error" in info:
+                failures.append(f"{info['name']}: {info['error']}")
+            else:
+                done[info["name"]] = {"sha256": info["sha256"], "bytes": info["bytes"]}
+            bar.update(1)
+    finally:
+        bar.close()
+    if failures:
+        raise ColonbenchError(f"{len(failures)} shard(s) failed; the others are kept and a rerun makes only the "
+                              "missing ones:\n  " + "\n  ".join(failures))
+    return write_lock(resolved, out)
+
+
+def write_lock(resolved: dict, out: Path) -> dict:
+    """Describe every shard of the manifest present in ``out``: hashes, counts and per-split statistics."""
+    digest = manifest_hash(resolved)
+    previous = {}
+    if (out / LOCK_NAME).exists():
+        try:
+            previous = json.loads((out / LOCK_NAME).read_text()).get("shards", {})
+        except (json.JSONDecodeError, AttributeError):
+            previous = {}
+    shards, missing, per_split = {}, [], {}
+    for u in units(resolved):
+        path = out / u.name
+        if not path.exists():
+            missing.append(u.name)
+            continue
+        size = path.stat().st_size
+        old = previous.get(u.name, {})
+        sha = old["sha256"] if old.get("bytes") == size and "sha256" in old else sha256_file(path)
+        with h5py.File(path, "r") as h5:
+            n, m = int(h5.attrs["n_samples"]), int(h5.attrs["n_segments"])
+        shards[u.name] = {"sha256": sha, "bytes": size, "samples": n, "segments": m, "split": u.split,
+                          "colon_id": u.colon_id, "length_mm": u.length_mm}
+        per_split.setdefault(u.split, []).append(stats.shard_values(path))
+    split_info = {}
+    for split in SPLITS:
+        if split not in per_split:
+            continue
+        entries = [s for s in shards.values() if s["split"] == split]
+        split_info[split] = {"shards": len(entries), "samples": sum(s["samples"] for s in entries),
+                             "segments": sum(s["segments"] for s in entries),
+                             "colons": len({s["colon_id"] for s in entries}),
+                             "bytes": sum(s["bytes"] for s in entries),
+                             "statistics": stats.summarize(per_split[split])}
+    lock = {"format": LOCK_FORMAT, "format_version": LOCK_VERSION, "manifest_name": resolved["name"],
+            "manifest_sha256": digest, "config_sha256": config_hash(resolved),
+            "generator_version": __version__, "shard_format_version": schema.FORMAT_VERSION,
+            "splits": split_info, "missing": missing, "shards": shards}
+    tmp = out / (LOCK_NAME + ".tmp")
+    tmp.write_text(json.dumps(lock, indent=1) + "\n")
+    os.replace(tmp, out / LOCK_NAME)
+    if split_info:
+        stats.plot({k: v["statistics"] for k, v in split_info.items()}, out / STATS_NAME)
+    return lock

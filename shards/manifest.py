@@ -1,0 +1,234 @@
+"""Dataset manifests: everything needed to regenerate a dataset, and the shards it is cut into.
+
+A manifest is a YAML file (see ``data_manifests/``)::
+
+    name: smoke
+    description: a few seconds of data for tests
+    generator_version: 0.1.0      # the colonbench version whose generator it was written for
+    seed: 7                       # root seed of every random stream
+    grid: {size: 64, margin: 4}   # heatmap grid (colonbench.grid.fit_grid)
+    config:                       # the full generator config (colonbench.datagen.generate.GeneratorConfig)
+      colon: {...}
+      camera: {...}
+      spheres: {...}
+      segments: {...}             # segments.lengths_mm: the segment lengths cut from every colon
+    splits:
+      train:
+        colons: {first: 0, count: 340}    # procedural colons 0..339
+        segments_per_length: 10           # evenly spread along the colon; null = every segment
+        permutations: 15                  # hole permutations per segment
+        hole_models: {camera: 0.5, spheres: 0.5}   # mix, drawn per sample
+        noise_mm: {0.0: 1.0}              # sigma mix, drawn per sample
+
+Colon ranges of different splits may not overlap, so test colons never appear
+in training or validation. A *shard* is the samples of one colon at one
+segment length for one split; it is the unit of work and of storage.
+
+The resolved manifest (defaults filled in, mixes normalised) has a SHA-256,
+:func:`manifest_hash`, written into every shard and the lock, so results can
+name exactly the data they came from.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from colonbench import seeding
+from colonbench._version import __version__
+from colonbench.datagen.generate import GeneratorConfig
+from colonbench.datagen.holes import HOLE_MODELS
+from colonbench.errors import InputError
+from colonbench.grid import GRID_MARGIN, GRID_SIZE
+
+#: The names a split may have.
+SPLITS = ("train", "validation", "test")
+_SPLIT_KEYS = {"colons", "segments_per_length", "permutations", "hole_models", "noise_mm"}
+_TOP_KEYS = {"name", "description", "generator_version", "seed", "grid", "config", "splits"}
+
+
+@dataclass(frozen=True)
+class Unit:
+    """One shard to make: a colon at one segment length, in one split."""
+
+    split: str
+    colon_id: int
+    length_mm: float
+
+    @property
+    def name(self) -> str:
+        """Path of the shard below the dataset folder, e.g. ``train/colon-00012-60mm.h5``."""
+        return f"{self.split}/colon-{self.colon_id:05d}-{self.length_mm:g}mm.h5"
+
+
+def _mix(value, what: str, cast) -> dict:
+    """A ``{choice: weight}`` mapping with positive weights, normalised to sum 1, keys sorted."""
+    if not isinstance(value, dict) or not value:
+        raise InputError(f"{what}: expected a mapping of choice -> weight, got {value!r}")
+    out = {}
+    for k, w in value.items():
+        try:
+            key = cast(k)
+            w = float(w)
+        except (TypeError, ValueError):
+            raise InputError(f"{what}: {k!r}: {w!r} is not a choice -> number") from None
+        if not np.isfinite(w) or w < 0:
+            raise InputError(f"{what}: weight of {k!r} must be >= 0")
+        out[key] = out.get(key, 0.0) + w
+    total = sum(out.values())
+    if total <= 0:
+        raise InputError(f"{what}: weights sum to 0")
+    return {k: out[k] / total for k in sorted(out)}
+
+
+def _hole_model(name):
+    if name not in HOLE_MODELS:
+        raise InputError(f"unknown hole model {name!r}; known: {list(HOLE_MODELS)}")
+    return name
+
+
+def _noise(value):
+    sigma = float(value)
+    if not 0 <= sigma <= 5:
+        raise InputError(f"noise sigma {sigma} mm is outside [0, 5] mm")
+    return sigma
+
+
+def _int(value, what: str, lo: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < lo:
+        raise InputError(f"{what}: expected an integer >= {lo}, got {value!r}")
+    return int(value)
+
+
+def resolve(data: dict, source: str = "manifest") -> dict:
+    """Validate a manifest dict and fill in every default; the result is what gets hashed.
+
+    Raises
+    ------
+    InputError
+        Naming the offending key and what was expected.
+    """
+    if not isinstance(data, dict):
+        raise InputError(f"{source}: a manifest must be a mapping")
+    unknown = sorted(set(data) - _TOP_KEYS)
+    if unknown:
+        raise InputError(f"{source}: unknown key(s) {unknown}; known: {sorted(_TOP_KEYS)}")
+    for key in ("name", "seed", "splits"):
+        if key not in data:
+            raise InputError(f"{source}: {key!r} is required")
+    name = str(data["name"])
+    seed = _int(data["seed"], f"{source}: seed", 0)
+    config = GeneratorConfig.from_dict(data.get("config"))
+    grid = dict(data.get("grid") or {})
+    bad = sorted(set(grid) - {"size", "margin"})
+    if bad:
+        raise InputError(f"{source}: unknown grid key(s) {bad}; known: ['margin', 'size']")
+    size = _int(grid.get("size", GRID_SIZE), f"{source}: grid.size", 8)
+    margin = _int(grid.get("margin", GRID_MARGIN), f"{source}: grid.margin", 0)
+    if size < 2 * margin + 4:
+        raise InputError(f"{source}: grid.size {size} leaves no room inside a margin of {margin}")
+    splits_in = data["splits"]
+    if not isinstance(splits_in, dict) or not splits_in:
+        raise InputError(f"{source}: splits must map split names ({', '.join(SPLITS)}) to their settings")
+    splits = {}
+    for split in SPLITS:
+        if split not in splits_in:
+            continue
+        s = splits_in[split] or {}
+        where = f"{source}: splits.{split}"
+        unknown = sorted(set(s) - _SPLIT_KEYS)
+        if unknown:
+            raise InputError(f"{where}: unknown key(s) {unknown}; known: {sorted(_SPLIT_KEYS)}")
+        colons = s.get("colons")
+        if not isinstance(colons, dict) or set(colons) != {"first", "count"}:
+            raise InputError(f"{where}.colons: expected {{first: ID, count: N}}, got {colons!r}")
+        first = _int(colons["first"], f"{where}.colons.first", 0)
+        count = _int(colons["count"], f"{where}.colons.count", 1)
+        per_length = s.get("segments_per_length")
+        per_length = None if per_length is None else _int(per_length, f"{where}.segments_per_length", 1)
+        splits[split] = {
+            "colons": {"first": first, "count": count},
+            "segments_per_length": per_length,
+            "permutations": _int(s.get("permutations", 1), f"{where}.permutations", 1),
+            "hole_models": _mix(s.get("hole_models", {"camera": 1.0}), f"{where}.hole_models", _hole_model),
+            "noise_mm": _mix(s.get("noise_mm", {config.segments.noise_mm: 1.0}), f"{where}.noise_mm", _noise),
+        }
+    extra = sorted(set(splits_in) - set(SPLITS))
+    if extra:
+        raise InputError(f"{source}: unknown split(s) {extra}; splits are {list(SPLITS)}")
+    ranges = sorted((v["colons"]["first"], v["colons"]["first"] + v["colons"]["count"], k) for k, v in splits.items())
+    for (a0, a1, ka), (b0, b1, kb) in zip(ranges, ranges[1:]):
+        if b0 < a1:
+            raise InputError(f"{source}: the colons of splits {ka} [{a0}, {a1}) and {kb} [{b0}, {b1}) overlap; "
+                             "test colons must never be seen in training or validation")
+    return {"name": name, "description": str(data.get("description", "")),
+            "generator_version": str(data.get("generator_version", __version__)), "seed": seed,
+            "grid": {"size": size, "margin": margin}, "config": config.to_dict(), "splits": splits}
+
+
+def load(path) -> dict:
+    """Read and :func:`resolve` a manifest YAML file."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: no such manifest file")
+    try:
+        data = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        raise InputError(f"{path}: not valid YAML ({exc})") from None
+    return resolve(data, str(path))
+
+
+class _NoAliases(yaml.SafeDumper):
+    def ignore_aliases(self, data):
+        return True
+
+
+def dumps(manifest: dict) -> str:
+    """A manifest dict as YAML, keys in their given order, short lists inline, no YAML aliases."""
+    return yaml.dump(manifest, Dumper=_NoAliases, sort_keys=False, default_flow_style=None, width=110)
+
+
+def _canonical(obj) -> bytes:
+    return json.dumps(obj, sort_keys=True, separators=(",", ":")).encode()
+
+
+def manifest_hash(resolved: dict) -> str:
+    """SHA-256 (hex) of a resolved manifest; equal for manifests that generate the same data."""
+    return hashlib.sha256(_canonical(resolved)).hexdigest()
+
+
+def config_hash(resolved: dict) -> str:
+    """SHA-256 (hex) of the generator config and grid of a resolved manifest."""
+    return hashlib.sha256(_canonical({"config": resolved["config"], "grid": resolved["grid"]})).hexdigest()
+
+
+def units(resolved: dict, splits=None) -> list[Unit]:
+    """The shards of a manifest, split by split, colon by colon, length by length."""
+    lengths = resolved["config"]["segments"]["lengths_mm"]
+    out = []
+    for split, s in resolved["splits"].items():
+        if splits is not None and split not in splits:
+            continue
+        first, count = s["colons"]["first"], s["colons"]["count"]
+        out += [Unit(split, c, float(length)) for c in range(first, first + count) for length in lengths]
+    return out
+
+
+def pick_segments(n_windows: int, per_length: int | None) -> list[int]:
+    """Indices of ``per_length`` windows spread evenly along a colon of ``n_windows`` (all if None or more)."""
+    if per_length is None or per_length >= n_windows:
+        return list(range(n_windows))
+    return sorted({int(round(x)) for x in np.linspace(0, n_windows - 1, per_length)})
+
+
+def draw_mix(mix: dict, root_seed: int, *path):
+    """A choice from a ``{choice: weight}`` mix, drawn from its own stream ``("mix", *path)``."""
+    keys = list(mix)
+    r = seeding.rng(root_seed, "mix", *path).random()
+    cum = np.cumsum([mix[k] for k in keys])
+    return keys[min(int(np.searchsorted(cum, r * cum[-1], side="right")), len(keys) - 1)]

@@ -1,0 +1,228 @@
+"""Reading shards: one sample at a time, lazily, safe to hand to PyTorch ``DataLoader`` workers.
+
+Files are opened on first access in the process that reads them (never
+inherited through ``fork`` or pickling), so a :class:`ShardDataset` can be
+passed to a ``torch.utils.data.DataLoader`` with any number of workers. It
+returns numpy arrays, which the default collate function turns into tensors;
+PyTorch itself is not needed here.
+
+Example
+-------
+>>> ds = ShardDataset("data/paper", split="train")          # doctest: +SKIP
+>>> item = ds[0]; item["input"].shape                       # doctest: +SKIP
+(1, 64, 64, 64)
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from colonbench import seeding
+from colonbench.errors import InputError
+from colonbench.grid import Grid
+from colonbench.shards import schema
+from colonbench.shards.dataset import LOCK_NAME
+
+_NAMES = {v: k for k, v in schema.HOLE_MODEL_CODES.items()}
+
+
+def _rows(group, name, i):
+    off = group[name + "_offsets"]
+    a, b = int(off[i]), int(off[i + 1])
+    return group[name][a:b]
+
+
+class Shard:
+    """One shard file, opened lazily.
+
+    Parameters
+    ----------
+    path : path
+        A ``.h5`` shard.
+    """
+
+    def __init__(self, path):
+        self.path = Path(path)
+        self._h5 = None
+        self._pid = None
+        try:
+            with h5py.File(self.path, "r") as h5:
+                faults = [] if h5.attrs.get("format") == schema.FORMAT else ["not a colonbench shard"]
+                self.attrs = {k: (v.item() if hasattr(v, "item") else v) for k, v in h5.attrs.items()}
+        except OSError as exc:
+            raise InputError(f"{self.path}: not a readable HDF5 file ({exc})") from None
+        if faults:
+            raise InputError(f"{self.path}: {faults[0]}")
+        if int(self.attrs.get("format_version", -1)) != schema.FORMAT_VERSION:
+            raise InputError(f"{self.path}: shard format version {self.attrs.get('format_version')}, "
+                             f"this colonbench reads version {schema.FORMAT_VERSION}")
+
+    @property
+    def h5(self) -> h5py.File:
+        """The open file (opened in this process on first use)."""
+        if self._h5 is None or self._pid != os.getpid():
+            self._h5 = h5py.File(self.path, "r")
+            self._pid = os.getpid()
+        return self._h5
+
+    def __len__(self) -> int:
+        return int(self.attrs["n_samples"])
+
+    def close(self):
+        if self._h5 is not None and self._pid == os.getpid():
+            self._h5.close()
+        self._h5 = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def __getstate__(self):
+        state = dict(self.__dict__)
+        state["_h5"] = None
+        state["_pid"] = None
+        return state
+
+    def _check(self, i: int) -> int:
+        if not -len(self) <= i < len(self):
+            raise IndexError(f"{self.path}: sample {i} out of range ({len(self)} samples)")
+        return i % len(self)
+
+    def heatmaps(self, i: int) -> tuple[np.ndarray, np.ndarray]:
+        """(input, target), each (S, S, S) float32, of sample ``i``."""
+        i = self._check(i)
+        smp = self.h5["samples"]
+        return smp["input"][i].astype(np.float32), smp["target"][i].astype(np.float32)
+
+    def grid(self, i: int) -> Grid:
+        """The :class:`~colonbench.grid.Grid` of sample ``i``'s heatmaps."""
+        i = self._check(i)
+        return Grid(self.h5["samples/grid_affine"][i], int(self.attrs["grid_size"]))
+
+    def segment(self, m: int) -> dict:
+        """Segment row ``m``: ``segment_id``, ``window_mm``, ``complete_area_mm2``, ``vertices``, ``faces``, ``centerline``."""
+        seg = self.h5["segments"]
+        return {"segment_id": int(seg["segment_id"][m]), "window_mm": seg["window_mm"][m],
+                "complete_area_mm2": float(seg["complete_area_mm2"][m]), "vertices": _rows(seg, "vertices", m),
+                "faces": _rows(seg, "faces", m), "centerline": _rows(seg, "centerline", m)}
+
+    def geometry(self, i: int) -> dict:
+        """Sample ``i`` without heatmaps: points, its segment's mesh and centerline, GT values, ids (mm)."""
+        i = self._check(i)
+        smp = self.h5["samples"]
+        m = int(smp["segment"][i])
+        out = {"shard": self.path.name, "index": i, "split": self.attrs["split"],
+               "colon_id": int(self.attrs["colon_id"]), "length_mm": float(self.attrs["length_mm"]),
+               "permutation": int(smp["permutation"][i]), "hole_model": _NAMES[int(smp["hole_model"][i])],
+               "noise_mm": float(smp["noise_mm"][i]), "coverage": float(smp["coverage"][i]),
+               "outside_grid": float(smp["outside_grid"][i]), "grid_affine": smp["grid_affine"][i],
+               "partial_points": _rows(smp, "partial_points", i), "hole_points": _rows(smp, "hole_points", i),
+               "observed_faces": _rows(smp, "observed_faces", i).astype(bool),
+               "hole_areas_mm2": _rows(smp, "hole_areas_mm2", i)}
+        out.update(self.segment(m))
+        return out
+
+    def sample(self, i: int) -> dict:
+        """Every stored field of sample ``i``: :meth:`geometry` plus ``input`` and ``target`` (S, S, S) float32."""
+        out = self.geometry(i)
+        out["input"], out["target"] = self.heatmaps(i)
+        return out
+
+
+def dataset_files(root, split=None) -> list[Path]:
+    """The shard files of a dataset folder (from its lock, in order), optionally of one split."""
+    root = Path(root)
+    lock = root / LOCK_NAME
+    if not lock.exists():
+        raise InputError(f"{root}: no {LOCK_NAME}; generate the dataset first (colonbench generate)")
+    shards = json.loads(lock.read_text())["shards"]
+    files = [root / name for name, e in shards.items() if split is None or e["split"] == split]
+    if not files:
+        raise InputError(f"{root}: no shards" + (f" of split {split!r}" if split else ""))
+    return files
+
+
+class ShardDataset:
+    """A map-style dataset over shards: ``ds[k]`` is one sample's heatmaps (and optionally its geometry).
+
+    Parameters
+    ----------
+    source : path or list of paths
+        A dataset folder (its lock lists the shards) or shard files.
+    split : str, optional
+        Only this split of a dataset folder.
+    geometry : bool
+        Also return :meth:`Shard.geometry` fields (variable-size arrays: use
+        a custom collate function or batch size 1).
+    augment : colonbench.augment.AugmentConfig, optional
+        Remake the heatmaps from augmented geometry on every access
+        (:func:`colonbench.augment.augmented_heatmaps`). The draw for item
+        ``k`` in epoch ``e`` comes from stream ``("augment", e, k)`` under
+        ``seed``: the same whatever worker reads it.
+    seed : int
+        Root seed of the augmentation streams.
+
+    Items
+    -----
+    dict with ``input`` and ``target`` (1, S, S, S) float32 (a channel axis
+    first, as PyTorch's 3D convolutions expect), ``coverage`` float and
+    ``index`` int, plus the geometry fields if asked.
+    """
+
+    def __init__(self, source, split=None, geometry: bool = False, augment=None, seed: int = 0):
+        if isinstance(source, (str, os.PathLike)) and Path(source).is_dir():
+            files = dataset_files(source, split)
+        else:
+            files = [Path(source)] if isinstance(source, (str, os.PathLike)) else [Path(p) for p in source]
+        self.shards = [Shard(f) for f in files]
+        self.offsets = np.concatenate([[0], np.cumsum([len(s) for s in self.shards])]).astype(np.int64)
+        self.geometry = geometry
+        self.augment = augment
+        self.seed = int(seed)
+        self.epoch = 0
+
+    def __len__(self) -> int:
+        return int(self.offsets[-1])
+
+    def set_epoch(self, epoch: int):
+        """Choose the augmentation draws of this epoch."""
+        self.epoch = int(epoch)
+
+    def locate(self, k: int) -> tuple[Shard, int]:
+        """The shard and local index of item ``k``."""
+        if not -len(self) <= k < len(self):
+            raise IndexError(f"item {k} out of range ({len(self)} items)")
+        k %= len(self)
+        s = int(np.searchsorted(self.offsets, k, side="right") - 1)
+        return self.shards[s], int(k - self.offsets[s])
+
+    def __getitem__(self, k: int) -> dict:
+        shard, i = self.locate(k)
+        item = {"index": int(k % len(self))}
+        geo = shard.geometry(i) if (self.geometry or self.augment is not None) else None
+        if self.augment is not None:
+            from colonbench.augment import augmented_heatmaps
+            rng = seeding.rng(self.seed, "augment", self.epoch, item["index"])
+            _, hm = augmented_heatmaps(rng, geo["partial_points"].astype(float), geo["vertices"].astype(float),
+                                       geo["faces"], geo["centerline"].astype(float), self.augment,
+                                       size=int(shard.attrs["grid_size"]))
+            h_in, h_t = hm.input, hm.target
+        else:
+            h_in, h_t = shard.heatmaps(i)
+        item["input"] = h_in[None].astype(np.float32, copy=False)
+        item["target"] = h_t[None].astype(np.float32, copy=False)
+        item["coverage"] = float(shard.h5["samples/coverage"][i])
+        if self.geometry:
+            item.update({k: v for k, v in geo.items() if k not in item})
+        return item
+
+    def close(self):
+        for s in self.shards:
+            s.close()

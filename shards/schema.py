@@ -1,0 +1,241 @@
+"""The HDF5 shard format: every stored field, its shape, dtype, units and frame, defined once.
+
+A shard is one HDF5 file holding the samples of one colon at one segment
+length for one split. It has two groups:
+
+``segments/``
+    One row per segment (``M`` rows): the complete surface mesh, the GT
+    centerline and the arc-length window, stored once however many hole
+    permutations the segment has.
+``samples/``
+    One row per sample (``N`` rows) = one hole permutation of one segment: the
+    64^3 heatmaps, the grid transform, the partial points, GT hole points,
+    coverage, ...; ``samples/segment`` gives its row in ``segments/``.
+
+A field whose rows have different lengths (point sets, meshes) is *ragged*: it
+is stored as one flat array, and ``<name>_offsets`` (rows + 1 int64 values,
+starting at 0) gives where each row starts and ends: row ``i`` is
+``flat[offsets[i]:offsets[i + 1]]``.
+
+Geometry is in mm in the colon's frame (the frame of the partial points).
+Heatmaps are in voxel space; ``samples/grid_affine`` maps a voxel index
+``(i, j, k, 1)`` of ``input[n]`` and ``target[n]`` to mm (see
+:class:`colonbench.grid.Grid`).
+
+The docs table (``docs/shards.md``) is written from :data:`FIELDS` by
+:func:`describe`; :func:`check` is what ``colonbench verify`` runs.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import h5py
+import numpy as np
+
+#: Value of the file attribute ``format``.
+FORMAT = "colonbench-shard"
+#: Bumped whenever a field is added, removed or changes meaning.
+FORMAT_VERSION = 1
+
+#: Hole models, as stored in the enum ``samples/hole_model``.
+HOLE_MODEL_CODES = {"camera": 0, "spheres": 1, "camera+spheres": 2}
+
+
+@dataclass(frozen=True)
+class Field:
+    """One stored dataset.
+
+    Attributes
+    ----------
+    group : {"samples", "segments"}
+    name : str
+    dtype : str
+        numpy dtype string as stored.
+    shape : tuple
+        ``"rows"`` for the group's row count, ``"S"`` for the grid side,
+        ``"flat"`` for the total length of a ragged field, or an int.
+    unit, frame, doc : str
+    ragged : bool
+        Stored flat with ``<name>_offsets``.
+    """
+
+    group: str
+    name: str
+    dtype: str
+    shape: tuple
+    unit: str
+    frame: str
+    doc: str
+    ragged: bool = False
+
+    @property
+    def path(self) -> str:
+        return f"{self.group}/{self.name}"
+
+
+FIELDS = (
+    # --- segments/: one row per segment ---
+    Field("segments", "segment_id", "int32", ("rows",), "-", "-",
+          "index of the segment's window along the colon at this length (0 = caecum end)"),
+    Field("segments", "window_mm", "float64", ("rows", 2), "mm", "colon centerline arc length",
+          "arc-length window [s0, s1] of the segment on the colon's centerline"),
+    Field("segments", "complete_area_mm2", "float64", ("rows",), "mm^2", "-", "area of the complete segment surface"),
+    Field("segments", "vertices", "float32", ("flat", 3), "mm", "colon", "complete surface mesh vertices", True),
+    Field("segments", "faces", "int32", ("flat", 3), "-", "-",
+          "complete surface triangles, indices into the segment's own vertices (0-based)", True),
+    Field("segments", "centerline", "float32", ("flat", 3), "mm", "colon",
+          "GT centerline inside the segment, ordered from s0 to s1, spacing <= 0.5 mm", True),
+    # --- samples/: one row per sample (segment x hole permutation) ---
+    Field("samples", "input", "float16", ("rows", "S", "S", "S"), "-", "grid (i, j, k)",
+          "input heatmap tanh(0.2 d(v, S0)), d in voxels"),
+    Field("samples", "target", "float16", ("rows", "S", "S", "S"), "-", "grid (i, j, k)",
+          "target heatmap tanh(0.2 d(v,S1)) / (tanh(0.2 d(v,S1)) + tanh(0.2 d(v,C)))"),
+    Field("samples", "grid_affine", "float64", ("rows", 4, 4), "mm per voxel", "grid -> colon",
+          "maps voxel index (i, j, k, 1) to (x, y, z, 1) mm; fitted to the partial points alone"),
+    Field("samples", "segment", "int32", ("rows",), "-", "-", "row of the sample's segment in segments/"),
+    Field("samples", "permutation", "int32", ("rows",), "-", "-", "hole permutation index within the segment"),
+    Field("samples", "hole_model", "uint8", ("rows",), "-", "-",
+          "enum: 0 camera, 1 spheres, 2 camera+spheres (names in the dataset's enum type)"),
+    Field("samples", "noise_mm", "float32", ("rows",), "mm", "-",
+          "sigma of the Gaussian noise added to the partial points (0 = noiseless)"),
+    Field("samples", "coverage", "float64", ("rows",), "fraction", "-",
+          "GT coverage: observed area / complete area of the segment, in [0, 1]"),
+    Field("samples", "outside_grid", "float32", ("rows",), "fraction", "-",
+          "share of the complete surface that fell outside the grid (missing from the target)"),
+    Field("samples", "observed_faces", "uint8", ("flat",), "-", "-",
+          "1 where the face of the segment's complete mesh was observed; one value per face", True),
+    Field("samples", "partial_points", "float32", ("flat", 3), "mm", "colon",
+          "partial point cloud (the method's input), noise included", True),
+    Field("samples", "hole_points", "float32", ("flat", 3), "mm", "colon",
+          "GT hole points: dense samples (4/mm^2) of the unobserved part of the complete surface", True),
+    Field("samples", "hole_areas_mm2", "float32", ("flat",), "mm^2", "-",
+          "area of each hole (connected unobserved region), largest first", True),
+)
+
+#: File attributes every shard carries, with their meaning.
+ATTRIBUTES = {
+    "format": f"always {FORMAT!r}",
+    "format_version": f"shard format version (this one: {FORMAT_VERSION})",
+    "generator_version": "colonbench version that wrote the file",
+    "manifest_name": "name of the manifest",
+    "manifest_sha256": "hash of the resolved manifest (see colonbench.shards.manifest)",
+    "config_sha256": "hash of the full generator config",
+    "seed": "root seed of the dataset",
+    "split": "train, validation or test",
+    "colon_id": "procedural colon index (the colon's random stream)",
+    "length_mm": "segment arc length, mm",
+    "grid_size": "heatmap side S, voxels",
+    "grid_margin": "voxels left between the partial points' bounding box and the grid border",
+    "heatmap_scale": "the 0.2 in tanh(0.2 d)",
+    "n_samples": "rows of samples/",
+    "n_segments": "rows of segments/",
+}
+
+#: Options of every dataset: per-sample heatmap chunks, gzip level 4 with shuffle, no timestamps.
+COMPRESSION = {"compression": "gzip", "compression_opts": 4, "shuffle": True}
+
+
+def field(path: str) -> Field:
+    """The :class:`Field` stored at ``group/name``."""
+    for f in FIELDS:
+        if f.path == path:
+            return f
+    raise KeyError(path)
+
+
+def hole_model_dtype():
+    """The HDF5 enum type of ``samples/hole_model``."""
+    return h5py.enum_dtype(HOLE_MODEL_CODES, basetype="u1")
+
+
+def describe() -> list[tuple[str, str, str, str, str, str]]:
+    """Rows ``(path, shape, dtype, unit, frame, description)`` for the docs, offsets included."""
+    rows = []
+    for f in FIELDS:
+        shape = "(" + ", ".join({"rows": "N" if f.group == "samples" else "M", "flat": "total"}.get(s, str(s))
+                                for s in f.shape) + ")"
+        rows.append((f"`{f.path}`", shape, f.dtype, f.unit, f.frame, f.doc))
+        if f.ragged:
+            rows.append((f"`{f.path}_offsets`", "(N+1,)" if f.group == "samples" else "(M+1,)", "int64", "-", "-",
+                         f"row i of `{f.name}` is `{f.name}[offsets[i]:offsets[i+1]]`"))
+    return rows
+
+
+def check(h5: h5py.File) -> list[str]:
+    """Every way in which an open shard departs from the schema; an empty list when it conforms.
+
+    Checks the attributes, the presence, dtype and shape of every field, the
+    offsets of ragged fields, that segment references and per-face masks
+    line up, and that heatmaps and coverages are finite and within [0, 1].
+    Heatmap values are read one sample at a time.
+    """
+    faults = []
+    for key in ATTRIBUTES:
+        if key not in h5.attrs:
+            faults.append(f"attribute {key!r} is missing")
+    if faults:
+        return faults
+    if h5.attrs["format"] != FORMAT:
+        return [f"attribute format is {h5.attrs['format']!r}, not {FORMAT!r}"]
+    if int(h5.attrs["format_version"]) != FORMAT_VERSION:
+        return [f"format_version {int(h5.attrs['format_version'])} is not {FORMAT_VERSION}, the version this "
+                f"colonbench reads"]
+    rows = {"samples": int(h5.attrs["n_samples"]), "segments": int(h5.attrs["n_segments"])}
+    size = int(h5.attrs["grid_size"])
+    offsets = {}
+    for f in FIELDS:
+        if f.path not in h5:
+            faults.append(f"{f.path} is missing")
+            continue
+        ds = h5[f.path]
+        if not isinstance(ds, h5py.Dataset):
+            faults.append(f"{f.path} is not a dataset")
+            continue
+        if ds.dtype != np.dtype(f.dtype):
+            faults.append(f"{f.path} has dtype {ds.dtype}, expected {f.dtype}")
+        n_flat = None
+        if f.ragged:
+            opath = f.path + "_offsets"
+            if opath not in h5:
+                faults.append(f"{opath} is missing")
+                continue
+            off = h5[opath][()]
+            if off.shape != (rows[f.group] + 1,) or off.dtype != np.int64:
+                faults.append(f"{opath} has shape {off.shape} {off.dtype}, expected ({rows[f.group] + 1},) int64")
+                continue
+            if off[0] != 0 or np.any(np.diff(off) < 0) or off[-1] != ds.shape[0]:
+                faults.append(f"{opath} does not start at 0, rise, and end at the {ds.shape[0]} rows of {f.path}")
+                continue
+            offsets[f.path] = off
+            n_flat = ds.shape[0]
+        expected = tuple({"rows": rows[f.group], "S": size, "flat": n_flat}.get(s, s) for s in f.shape)
+        if ds.shape != expected:
+            faults.append(f"{f.path} has shape {ds.shape}, expected {expected}")
+    if faults:
+        return faults
+    seg = h5["samples/segment"][()]
+    if np.any((seg < 0) | (seg >= rows["segments"])):
+        faults.append("samples/segment points outside segments/")
+    else:
+        n_faces = np.diff(offsets["segments/faces"])[seg]
+        if not np.array_equal(np.diff(offsets["samples/observed_faces"]), n_faces):
+            faults.append("samples/observed_faces does not hold one value per face of each sample's segment")
+    n_vert = np.diff(offsets["segments/vertices"])
+    foff = offsets["segments/faces"]
+    faces = h5["segments/faces"][()]
+    for m in range(rows["segments"]):
+        f = faces[foff[m]:foff[m + 1]]
+        if len(f) and (f.min() < 0 or f.max() >= n_vert[m]):
+            faults.append(f"segments/faces of segment row {m} index vertices it does not have")
+    cov = h5["samples/coverage"][()]
+    if not np.all(np.isfinite(cov) & (cov >= 0) & (cov <= 1)):
+        faults.append("samples/coverage has values outside [0, 1]")
+    for name in ("input", "target"):
+        ds = h5["samples/" + name]
+        for i in range(ds.shape[0]):
+            v = ds[i]
+            if not (np.all(np.isfinite(v)) and v.min() >= 0 and v.max() <= 1):
+                faults.append(f"samples/{name}[{i}] has values outside [0, 1]")
+                break
+    return faults
