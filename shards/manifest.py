@@ -72,11 +72,11 @@ def _mix(value, what: str, cast) -> dict:
         raise InputError(f"{what}: expected a mapping of choice -> weight, got {value!r}")
     out = {}
     for k, w in value.items():
+        key = cast(k)
         try:
-            key = cast(k)
             w = float(w)
         except (TypeError, ValueError):
-            raise InputError(f"{what}: {k!r}: {w!r} is not a choice -> number") from None
+            raise InputError(f"{what}: the weight of {k!r} is {w!r}, not a number") from None
         if not np.isfinite(w) or w < 0:
             raise InputError(f"{what}: weight of {k!r} must be >= 0")
         out[key] = out.get(key, 0.0) + w
@@ -93,7 +93,10 @@ def _hole_model(name):
 
 
 def _noise(value):
-    sigma = float(value)
+    try:
+        sigma = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"noise sigma {value!r} is not a number of mm") from None
     if not 0 <= sigma <= 5:
         raise InputError(f"noise sigma {sigma} mm is outside [0, 5] mm")
     return sigma

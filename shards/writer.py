@@ -71,6 +71,9 @@ class ShardWriter:
                                     track_times=False, **opts)
         if data is not None and data.size:
             ds[...] = data
+        # write the chunks out now: when HDF5 allocates their file space must not depend on when Python
+        # happens to release the dataset object (garbage collection timing differs between processes)
+        ds.flush()
         return ds
 
     def add_segment(self, **fields):
@@ -89,8 +92,9 @@ class ShardWriter:
             raise ValueError(f"sample row needs exactly {_SAMPLE_FIELDS}; missing {missing}")
         if self.i >= self.n:
             raise ValueError(f"this shard was opened for {self.n} samples")
-        self.heat["input"][self.i] = np.asarray(input).astype(np.float16)
-        self.heat["target"][self.i] = np.asarray(target).astype(np.float16)
+        for name, value in (("input", input), ("target", target)):
+            self.heat[name][self.i] = np.asarray(value).astype(np.float16)
+            self.heat[name].flush()
         for k, v in fields.items():
             self.samples[k].append(v)
         self.i += 1
@@ -102,7 +106,7 @@ class ShardWriter:
                 flat, offsets = _ragged(values, f.dtype, tuple(s for s in f.shape[1:]))
                 chunks = (min(len(flat), 65536),) + flat.shape[1:] if len(flat) else None
                 self._dataset(f.path, flat, chunks=chunks)
-                self.h5.create_dataset(f.path + "_offsets", data=offsets, track_times=False)
+                self.h5.create_dataset(f.path + "_offsets", data=offsets, track_times=False).flush()
             else:
                 self._dataset(f.path, np.asarray(values).reshape((len(values),) + tuple(f.shape[1:])))
 
