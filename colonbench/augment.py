@@ -80,7 +80,7 @@ def displacement_field(rng, amplitude_mm: float, wavelength_mm: tuple, modes: in
 
 
 def augmented_heatmaps(rng, partial, vertices, faces, centerline, config: AugmentConfig | None = None,
-                       size: int | None = None) -> tuple[Grid, Heatmaps]:
+                       grid_options: dict | None = None) -> tuple[Grid, Heatmaps]:
     """One augmented draw of a stored sample: its grid and heatmaps.
 
     Parameters
@@ -94,8 +94,10 @@ def augmented_heatmaps(rng, partial, vertices, faces, centerline, config: Augmen
     centerline : (m, 3) float
         GT centerline, mm.
     config : AugmentConfig, optional
-    size : int, optional
-        Grid side (default 64).
+    grid_options : dict, optional
+        ``size``, ``margin`` and ``min_extent_mm`` for
+        :func:`colonbench.grid.fit_grid` (defaults: its own), e.g. from a
+        shard's attributes so that no augmentation remakes its heatmaps.
 
     Returns
     -------
@@ -112,6 +114,5 @@ def augmented_heatmaps(rng, partial, vertices, faces, centerline, config: Augmen
     if sigma > 0:
         partial = partial + rng.normal(0.0, sigma, partial.shape)
     rotation = random_rotation(rng, cfg.rotation_deg) @ principal_axes(partial)
-    kwargs = {} if size is None else {"size": size}
-    grid = fit_grid(partial, rotation=rotation, scale=draw(rng, cfg.scale), **kwargs)
+    grid = fit_grid(partial, rotation=rotation, scale=draw(rng, cfg.scale), **(grid_options or {}))
     return grid, sample_heatmaps(grid, partial, vertices, faces, centerline)

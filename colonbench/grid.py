@@ -8,8 +8,10 @@ at integer indices) to a point in mm in the input's frame, as in NIfTI.
 training data is made and when a method estimates: the grid axes are the
 principal axes of the points (or a given rotation), the points' bounding box in
 that frame is centred in the grid, and the voxel size makes its longest side
-span ``size - 1 - 2 * margin`` voxels. A 6 cm segment of a 2 cm radius colon
-thus gets voxels of about 1.1 mm, as in the paper.
+(at least ``min_extent_mm``) span ``size - 1 - 2 * margin`` voxels. A 6 cm
+segment of a 2 cm radius colon thus gets voxels of about 1.1-1.3 mm (the paper:
+about 1 mm); a cloud that covers only part of its segment still gets a grid
+wide enough for the whole segment.
 """
 
 from __future__ import annotations
@@ -24,6 +26,9 @@ from colonbench.errors import InputError
 GRID_SIZE = 64
 #: Empty voxels kept between the partial points' bounding box and the grid border, on each side.
 GRID_MARGIN = 4
+#: Smallest side of the points' box the grid is fitted to, mm: a partial cloud that covers only part of
+#: a segment still gets a grid that can hold the longest segment cut (7 cm).
+GRID_MIN_EXTENT_MM = 70.0
 #: Fewest points :func:`fit_grid` accepts.
 MIN_POINTS = 10
 
@@ -111,7 +116,7 @@ def check_points(points, what: str = "point cloud", min_points: int = MIN_POINTS
 
 
 def fit_grid(points, size: int = GRID_SIZE, margin: int = GRID_MARGIN, rotation=None,
-             scale: float = 1.0) -> Grid:
+             scale: float = 1.0, min_extent_mm: float = GRID_MIN_EXTENT_MM) -> Grid:
     """The grid of a partial segment, from its points alone.
 
     Parameters
@@ -127,6 +132,8 @@ def fit_grid(points, size: int = GRID_SIZE, margin: int = GRID_MARGIN, rotation=
     scale : float
         Multiplies the voxel size (1 = fitted; > 1 leaves more room; used by
         scale augmentation).
+    min_extent_mm : float
+        The longest side of the points' box counts as at least this much.
 
     Returns
     -------
@@ -144,6 +151,7 @@ def fit_grid(points, size: int = GRID_SIZE, margin: int = GRID_MARGIN, rotation=
     extent = float((hi - lo).max())
     if extent <= 0:
         raise InputError("point cloud: all points coincide; no grid can be placed")
+    extent = max(extent, float(min_extent_mm))
     voxel = extent / (size - 1 - 2 * margin) * float(scale)
     mid = (lo + hi) / 2.0
     affine = np.eye(4)

@@ -22,7 +22,7 @@ def split(first, count, per_length, permutations, noise, mix=None):
 
 def dump(name, description, seed, splits, overrides=None):
     manifest = {"name": name, "description": description, "generator_version": __version__, "seed": seed,
-                "grid": {"size": 64, "margin": 4}, "config": GeneratorConfig.from_dict(overrides or {}).to_dict(),
+                "grid": {"size": 64, "margin": 4, "min_extent_mm": 70.0}, "config": GeneratorConfig.from_dict(overrides or {}).to_dict(),
                 "splits": splits}
     head = (f"# colonbench dataset manifest: {name}\n"
             f"# Generate with: colonbench generate data_manifests/{name}.yaml --out data/{name} --workers N\n"

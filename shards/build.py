@@ -74,7 +74,7 @@ def build_shard(resolved: dict, unit: Unit, out_dir) -> dict:
     t = time.perf_counter()
     seed = resolved["seed"]
     split = resolved["splits"][unit.split]
-    size, margin = resolved["grid"]["size"], resolved["grid"]["margin"]
+    size, margin, min_extent = (resolved["grid"][k] for k in ("size", "margin", "min_extent_mm"))
     config = GeneratorConfig.from_dict(resolved["config"])
     prepared = _prepared_colon(config, seed, unit.colon_id, config_hash(resolved))
     t = stages.add("colon", t)
@@ -89,7 +89,8 @@ def build_shard(resolved: dict, unit: Unit, out_dir) -> dict:
     attrs = {"format": schema.FORMAT, "format_version": schema.FORMAT_VERSION, "generator_version": __version__,
              "manifest_name": resolved["name"], "manifest_sha256": manifest_hash(resolved),
              "config_sha256": config_hash(resolved), "seed": seed, "split": unit.split, "colon_id": unit.colon_id,
-             "length_mm": unit.length_mm, "grid_size": size, "grid_margin": margin, "heatmap_scale": HEATMAP_SCALE,
+             "length_mm": unit.length_mm, "grid_size": size, "grid_margin": margin,
+             "grid_min_extent_mm": min_extent, "heatmap_scale": HEATMAP_SCALE,
              "n_samples": n, "n_segments": len(picks)}
     with ShardWriter(Path(out_dir) / unit.name, n, size) as writer:
         for k in picks:
@@ -109,7 +110,7 @@ def build_shard(resolved: dict, unit: Unit, out_dir) -> dict:
                                 config.camera, config.spheres, config.segments, noise_mm=sigma)
                 partial = s.partial_points.astype(np.float32)
                 t = stages.add("sample", t)
-                grid = fit_grid(partial.astype(float), size=size, margin=margin)
+                grid = fit_grid(partial.astype(float), size=size, margin=margin, min_extent_mm=min_extent)
                 hm = sample_heatmaps(grid, partial.astype(float), verts.astype(float), faces,
                                      centerline.astype(float))
                 t = stages.add("heatmaps", t)

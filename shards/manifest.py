@@ -6,7 +6,7 @@ A manifest is a YAML file (see ``data_manifests/``)::
     description: a few seconds of data for tests
     generator_version: 0.1.0      # the colonbench version whose generator it was written for
     seed: 7                       # root seed of every random stream
-    grid: {size: 64, margin: 4}   # heatmap grid (colonbench.grid.fit_grid)
+    grid: {size: 64, margin: 4, min_extent_mm: 70}   # heatmap grid (colonbench.grid.fit_grid)
     config:                       # the full generator config (colonbench.datagen.generate.GeneratorConfig)
       colon: {...}
       camera: {...}
@@ -44,7 +44,7 @@ from colonbench._version import __version__
 from colonbench.datagen.generate import GeneratorConfig
 from colonbench.datagen.holes import HOLE_MODELS
 from colonbench.errors import InputError
-from colonbench.grid import GRID_MARGIN, GRID_SIZE
+from colonbench.grid import GRID_MARGIN, GRID_MIN_EXTENT_MM, GRID_SIZE
 
 #: The names a split may have.
 SPLITS = ("train", "validation", "test")
@@ -128,11 +128,17 @@ def resolve(data: dict, source: str = "manifest") -> dict:
     seed = _int(data["seed"], f"{source}: seed", 0)
     config = GeneratorConfig.from_dict(data.get("config"))
     grid = dict(data.get("grid") or {})
-    bad = sorted(set(grid) - {"size", "margin"})
+    bad = sorted(set(grid) - {"size", "margin", "min_extent_mm"})
     if bad:
-        raise InputError(f"{source}: unknown grid key(s) {bad}; known: ['margin', 'size']")
+        raise InputError(f"{source}: unknown grid key(s) {bad}; known: ['margin', 'min_extent_mm', 'size']")
     size = _int(grid.get("size", GRID_SIZE), f"{source}: grid.size", 8)
     margin = _int(grid.get("margin", GRID_MARGIN), f"{source}: grid.margin", 0)
+    try:
+        min_extent = float(grid.get("min_extent_mm", GRID_MIN_EXTENT_MM))
+    except (TypeError, ValueError):
+        raise InputError(f"{source}: grid.min_extent_mm must be a number of mm") from None
+    if not 0 <= min_extent <= 1000:
+        raise InputError(f"{source}: grid.min_extent_mm {min_extent} is outside [0, 1000] mm")
     if size < 2 * margin + 4:
         raise InputError(f"{source}: grid.size {size} leaves no room inside a margin of {margin}")
     splits_in = data["splits"]
@@ -171,7 +177,7 @@ def resolve(data: dict, source: str = "manifest") -> dict:
                              "test colons must never be seen in training or validation")
     return {"name": name, "description": str(data.get("description", "")),
             "generator_version": str(data.get("generator_version", __version__)), "seed": seed,
-            "grid": {"size": size, "margin": margin}, "config": config.to_dict(), "splits": splits}
+            "grid": {"size": size, "margin": margin, "min_extent_mm": min_extent}, "config": config.to_dict(), "splits": splits}
 
 
 def load(path) -> dict:

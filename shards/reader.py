@@ -95,6 +95,12 @@ class Shard:
             raise IndexError(f"{self.path}: sample {i} out of range ({len(self)} samples)")
         return i % len(self)
 
+    @property
+    def grid_options(self) -> dict:
+        """``size``, ``margin`` and ``min_extent_mm`` the grids of this shard were fitted with."""
+        return {"size": int(self.attrs["grid_size"]), "margin": int(self.attrs["grid_margin"]),
+                "min_extent_mm": float(self.attrs["grid_min_extent_mm"])}
+
     def heatmaps(self, i: int) -> tuple[np.ndarray, np.ndarray]:
         """(input, target), each (S, S, S) float32, of sample ``i``."""
         i = self._check(i)
@@ -212,7 +218,7 @@ class ShardDataset:
             rng = seeding.rng(self.seed, "augment", self.epoch, item["index"])
             _, hm = augmented_heatmaps(rng, geo["partial_points"].astype(float), geo["vertices"].astype(float),
                                        geo["faces"], geo["centerline"].astype(float), self.augment,
-                                       size=int(shard.attrs["grid_size"]))
+                                       shard.grid_options)
             h_in, h_t = hm.input, hm.target
         else:
             h_in, h_t = shard.heatmaps(i)

@@ -127,6 +127,7 @@ ATTRIBUTES = {
     "length_mm": "segment arc length, mm",
     "grid_size": "heatmap side S, voxels",
     "grid_margin": "voxels left between the partial points' bounding box and the grid border",
+    "grid_min_extent_mm": "smallest box side the grid is fitted to, mm (colonbench.grid.fit_grid)",
     "heatmap_scale": "the 0.2 in tanh(0.2 d)",
     "n_samples": "rows of samples/",
     "n_segments": "rows of segments/",
@@ -153,8 +154,8 @@ def describe() -> list[tuple[str, str, str, str, str, str]]:
     """Rows ``(path, shape, dtype, unit, frame, description)`` for the docs, offsets included."""
     rows = []
     for f in FIELDS:
-        shape = "(" + ", ".join({"rows": "N" if f.group == "samples" else "M", "flat": "total"}.get(s, str(s))
-                                for s in f.shape) + ")"
+        dims = [{"rows": "N" if f.group == "samples" else "M", "flat": "total"}.get(s, str(s)) for s in f.shape]
+        shape = "(" + ", ".join(dims) + ("," if len(dims) == 1 else "") + ")"
         rows.append((f"`{f.path}`", shape, f.dtype, f.unit, f.frame, f.doc))
         if f.ragged:
             rows.append((f"`{f.path}_offsets`", "(N+1,)" if f.group == "samples" else "(M+1,)", "int64", "-", "-",

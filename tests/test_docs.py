@@ -1,5 +1,6 @@
-"""The docs' configuration tables are the code's."""
+"""The docs' reference tables are the code's."""
 
+import importlib.util
 from pathlib import Path
 
 import pytest
@@ -7,13 +8,10 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def test_config_tables_in_docs_are_current():
-    import importlib.util
-
-    spec = importlib.util.spec_from_file_location("config_table", ROOT / "scripts" / "config_table.py")
+@pytest.mark.parametrize("script, doc", [("config_table.py", "datagen.md"), ("schema_table.py", "shards.md")])
+def test_reference_tables_in_docs_are_current(script, doc):
+    spec = importlib.util.spec_from_file_location(script[:-3], ROOT / "scripts" / script)
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
-    doc = (ROOT / "docs" / "datagen.md").read_text()
-    if not doc.strip():
-        pytest.fail("docs/datagen.md is empty")
-    assert mod.tables().strip() in doc, "regenerate with: python scripts/config_table.py"
+    text = (ROOT / "docs" / doc).read_text()
+    assert mod.tables().strip() in text, f"regenerate docs/{doc}'s tables with: python scripts/{script}"

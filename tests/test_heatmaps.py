@@ -76,18 +76,20 @@ def test_target_formula_edge_cases():
 def test_fit_grid_places_a_segment_from_its_points_alone(cylinder):
     colon, _ = cylinder
     pts = dense_points(colon, lambda t, z: np.ones_like(z, bool))
-    grid = fit_grid(pts)
-    # principal axis along the cylinder (64 mm long > 40 mm wide), longest side spans 64 - 1 - 2 * 4 voxels
+    grid = fit_grid(pts, min_extent_mm=0.0)
+    # principal axis along the cylinder (63 mm long > 40 mm wide), longest side spans 64 - 1 - 2 * 4 voxels
     assert abs(grid.rotation[0] @ [0, 0, 1]) == pytest.approx(1.0, abs=1e-6)
     assert grid.voxel_size == pytest.approx(np.ptp(pts[:, 2]) / 55, rel=1e-9)
+    # by default the box counts as at least 70 mm, room for the longest segment
+    assert fit_grid(pts).voxel_size == pytest.approx(70.0 / 55, rel=1e-9)
     ijk = grid.to_voxel(pts)
     assert ijk.min() >= 4 - 1e-9 and ijk.max() <= 59 + 1e-9
     np.testing.assert_allclose(grid.to_mm(ijk), pts, atol=1e-9)
     assert np.linalg.det(grid.rotation) == pytest.approx(1.0)
     # the same points in another order or another frame give the same grid relative to them
     rng = np.random.default_rng(0)
-    assert np.allclose(fit_grid(pts[rng.permutation(len(pts))]).affine, grid.affine)
-    shifted = fit_grid(pts + [100.0, -50.0, 3.0])
+    assert np.allclose(fit_grid(pts[rng.permutation(len(pts))], min_extent_mm=0.0).affine, grid.affine)
+    shifted = fit_grid(pts + [100.0, -50.0, 3.0], min_extent_mm=0.0)
     np.testing.assert_allclose(shifted.to_voxel(pts + [100.0, -50.0, 3.0]), ijk, atol=1e-9)
 
 

@@ -55,6 +55,7 @@ def shard_attrs(n_samples, n_segments, size):
     return {"format": schema.FORMAT, "format_version": schema.FORMAT_VERSION, "generator_version": "test",
             "manifest_name": "t", "manifest_sha256": "0" * 64, "config_sha256": "1" * 64, "seed": 0,
             "split": "test", "colon_id": 3, "length_mm": 60.0, "grid_size": size, "grid_margin": 1,
+            "grid_min_extent_mm": 70.0,
             "heatmap_scale": 0.2, "n_samples": n_samples, "n_segments": n_segments}
 
 

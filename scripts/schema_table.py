@@ -1,0 +1,19 @@
+"""Print the Markdown tables of the shard format (the source of docs/shards.md's tables)."""
+
+from colonbench.augment import AugmentConfig
+from colonbench.datagen.config import describe as describe_config
+from colonbench.shards.schema import ATTRIBUTES, describe
+
+
+def tables() -> str:
+    out = ["| dataset | shape | dtype | unit | frame | meaning |", "|---|---|---|---|---|---|"]
+    out += [f"| {p} | {s} | {d} | {u} | {f} | {m} |" for p, s, d, u, f, m in describe()]
+    out += ["", "| file attribute | meaning |", "|---|---|"]
+    out += [f"| `{k}` | {v} |" for k, v in ATTRIBUTES.items()]
+    out += ["", "| augmentation field | default | limits | unit | meaning |", "|---|---|---|---|---|"]
+    out += [f"| `{n}` | {d} | {lim} | {u} | {m} |" for n, d, lim, u, m in describe_config(AugmentConfig)]
+    return "\n".join(out) + "\n"
+
+
+if __name__ == "__main__":
+    print(tables())
