@@ -25,6 +25,7 @@ demo: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/python scripts/bench_datagen.py
+	$(BIN)/python scripts/bench_shards.py
 
 clean:
 	rm -rf $(VENV) out .pytest_cache *.egg-info

@@ -12,7 +12,10 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
+
+import yaml
 
 from colonbench.errors import InputError
 
@@ -159,6 +162,17 @@ def describe(cls) -> list[tuple[str, str, str, str, str]]:
         rows.append((f.name, str(list(f.default) if isinstance(f.default, tuple) else f.default),
                      f"[{m['limits'][0]}, {m['limits'][1]}]", m["unit"], m["doc"]))
     return rows
+
+
+def read_yaml(path, what: str = "config"):
+    """The parsed content of a YAML file, or an :class:`InputError` naming the file and what is wrong."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: no such {what} file")
+    try:
+        return yaml.safe_load(path.read_text())
+    except (yaml.YAMLError, UnicodeDecodeError) as exc:
+        raise InputError(f"{path}: not valid YAML ({exc})") from None
 
 
 def draw(rng, value, integer: bool = False):

@@ -13,13 +13,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from colonbench import seeding
 from colonbench.datagen.camera import SurfaceScene
 from colonbench.datagen.colon import Colon, generate_colon
 from colonbench.datagen.config import (CONFIG_CLASSES, CameraConfig, ColonConfig, SegmentConfig, SphereConfig,
-                                       from_dict, to_dict)
+                                       from_dict, read_yaml, to_dict)
 from colonbench.datagen.holes import check_hole_model
 from colonbench.datagen.sample import Sample, make_sample
 from colonbench.datagen.segments import segment_surface, windows
@@ -47,13 +46,7 @@ class GeneratorConfig:
     @classmethod
     def from_yaml(cls, path) -> "GeneratorConfig":
         """Read a YAML file of sections (all optional)."""
-        path = Path(path)
-        if not path.is_file():
-            raise InputError(f"{path}: no such config file")
-        try:
-            data = yaml.safe_load(path.read_text())
-        except yaml.YAMLError as exc:
-            raise InputError(f"{path}: not valid YAML ({exc})") from None
+        data = read_yaml(path, "config")
         if data is not None and not isinstance(data, dict):
             raise InputError(f"{path}: a config must be a mapping of sections")
         return cls.from_dict(data)

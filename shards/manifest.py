@@ -34,13 +34,13 @@ from __future__ import annotations
 import hashlib
 import json
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 import yaml
 
 from colonbench import seeding
 from colonbench._version import __version__
+from colonbench.datagen.config import read_yaml
 from colonbench.datagen.generate import GeneratorConfig
 from colonbench.datagen.holes import HOLE_MODELS
 from colonbench.errors import InputError
@@ -182,14 +182,7 @@ def resolve(data: dict, source: str = "manifest") -> dict:
 
 def load(path) -> dict:
     """Read and :func:`resolve` a manifest YAML file."""
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(f"{path}: no such manifest file")
-    try:
-        data = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        raise InputError(f"{path}: not valid YAML ({exc})") from None
-    return resolve(data, str(path))
+    return resolve(read_yaml(path, "manifest"), str(path))
 
 
 class _NoAliases(yaml.SafeDumper):

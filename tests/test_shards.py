@@ -282,5 +282,10 @@ def test_cli_generate_splits_and_extend(tmp_path, capsys):
     assert main(["verify", str(dest)]) == 0
     assert main(["generate", str(MANIFESTS / "smoke.yaml"), "--out", str(dest), "--splits", "nope"]) == 2
     assert "not in manifest" in capsys.readouterr().err
+    assert main(["generate", str(tmp_path / "nope.yaml"), "--out", str(dest)]) == 2
+    assert "no such manifest file" in capsys.readouterr().err
+    (tmp_path / "bad.yaml").write_text("name: [unclosed")
+    assert main(["generate", str(tmp_path / "bad.yaml"), "--out", str(dest)]) == 2
+    assert "not valid YAML" in capsys.readouterr().err
     assert (dest / "stats.png").stat().st_size > 10_000
     assert os.access(dest / "manifest.yaml", os.R_OK)
