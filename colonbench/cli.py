@@ -169,6 +169,67 @@ def cmd_verify(args):
     return 0
 
 
+def cmd_train(args):
+    """Train (or resume) the completion network on a generated dataset."""
+    from colonbench.completion.train import TrainConfig, train
+
+    cfg = TrainConfig(network=args.network, batch_size=args.batch_size, lr=args.lr, epochs=args.epochs,
+                      augment_prob=args.augment_prob, seed=args.seed, workers=args.workers,
+                      checkpoint_minutes=args.checkpoint_minutes, max_minutes=args.max_minutes)
+    command = "colonbench train " + " ".join(sys.argv[2:]) if len(sys.argv) > 2 else ""
+    result = train(args.data, args.out, cfg, device=args.device, progress=not args.quiet, command=command)
+    how = "time budget reached; run the same command to resume" if result["stopped"] == "time" else "done"
+    print(f"{result['epochs']} epochs, {result['steps']} steps, best validation L2 {result['best_val_l2']:.5f}, "
+          f"{result['seconds'] / 60:.1f} min in all: {how}. Model: {Path(args.out) / 'best.safetensors'}")
+
+
+def estimate_name(path: Path) -> str:
+    """Output name of an input: its folder's name for ``partial.ply``, else its stem."""
+    return path.parent.resolve().name if path.name == "partial.ply" else path.stem
+
+
+def cmd_estimate(args):
+    """Estimate coverage, holes and centerline of partial segments; one JSON per input."""
+    from colonbench.completion.method import CompletionMethod
+    from colonbench.datagen.generate import write_points_ply
+    from colonbench.pointio import read_points, write_mesh_ply
+
+    files = [Path(f) for f in args.files]
+    names = [estimate_name(f) for f in files]
+    clash = sorted({n for n in names if names.count(n) > 1})
+    if clash:
+        raise ColonbenchError(f"several inputs would write the same output name(s) {clash}; "
+                              "call estimate separately for them")
+    if args.method != "completion":
+        raise ColonbenchError(f"unknown method {args.method!r}; available here: completion")
+    method = CompletionMethod(args.model, device=args.device)  # loaded once for every file
+    out = Path(args.out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    failed = 0
+    for f, name in zip(files, names):
+        try:
+            est = method.estimate(read_points(f))
+        except ColonbenchError as exc:
+            print(f"colonbench: error: {f}: {exc}", file=sys.stderr)
+            failed += 1
+            continue
+        result = {"input": str(f), **est.to_json(), "model": method.version}
+        tmp = out / f".{name}.json.tmp"
+        tmp.write_text(json.dumps(result))
+        tmp.replace(out / f"{name}.json")
+        if args.mesh:
+            import numpy as np
+
+            colors = np.where(est.hole_vertices[:, None], [[220, 30, 30]], [[200, 200, 200]])
+            write_mesh_ply(out / f"{name}_mesh.ply", est.mesh_vertices, est.mesh_faces, colors)
+            write_points_ply(out / f"{name}_centerline.ply", est.centerline)
+        total = sum(est.seconds.values())
+        print(f"{name}: coverage {est.coverage:.3f}, {len(est.holes)} hole points, "
+              f"centerline {len(est.centerline)} points, {total:.2f} s")
+    if failed:
+        raise ColonbenchError(f"{failed} of {len(files)} input(s) failed (see above); the others were written")
+
+
 def cmd_demo(args):
     """The data-generation part of the main job: one colon, its segments with holes, pictures, a summary."""
     import numpy as np
@@ -244,6 +305,34 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("path", help="dataset folder or .h5 shard")
     p.add_argument("--quick", action="store_true", help="checksums and counts only, skip reading every heatmap")
     p.set_defaults(func=cmd_verify)
+
+    p = sub.add_parser("train", help="train (or resume) the completion network on generated shards")
+    p.add_argument("data", help="dataset folder with train and validation splits (colonbench generate)")
+    p.add_argument("--out", required=True, help="run folder: log.csv, last.pt, best.safetensors; rerun to resume")
+    p.add_argument("--network", default="small", help="network configuration: small (CPU) or large (GPU)")
+    p.add_argument("--epochs", type=_positive(int), default=100, help="epochs in all (default 100)")
+    p.add_argument("--batch-size", type=_positive(int), default=4, help="samples per step per process (default 4)")
+    p.add_argument("--lr", type=_positive(float), default=1e-3, help="Adam learning rate (default 1e-3)")
+    p.add_argument("--augment-prob", type=float, default=0.3,
+                   help="share of samples augmented on the fly (default 0.3)")
+    p.add_argument("--seed", type=int, default=0, help="seed of weights, sample order and augmentations")
+    p.add_argument("--workers", type=int, default=1, help="DataLoader worker processes (default 1)")
+    p.add_argument("--device", default="auto", help="auto, cpu, cuda, cuda:1, ... (default auto)")
+    p.add_argument("--max-minutes", type=_positive(float), help="stop cleanly after this long (resume later)")
+    p.add_argument("--checkpoint-minutes", type=_positive(float), default=10.0,
+                   help="rewrite last.pt this often (default 10)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=cmd_train)
+
+    p = sub.add_parser("estimate", help="estimate coverage, holes and centerline of partial segments (mm)")
+    p.add_argument("files", nargs="+", help="partial point clouds (.ply, .npy, .xyz; mm), one segment each")
+    p.add_argument("--out-dir", required=True, help="folder for <name>.json per input")
+    p.add_argument("--method", default="completion", help="method (default completion: the paper's)")
+    p.add_argument("--model", help="model .safetensors from colonbench train (default: the shipped model)")
+    p.add_argument("--device", default="cpu", help="cpu, cuda, auto (default cpu)")
+    p.add_argument("--mesh", action="store_true",
+                   help="also write <name>_mesh.ply (completed mesh, holes red) and <name>_centerline.ply")
+    p.set_defaults(func=cmd_estimate)
 
     p = sub.add_parser("demo", help="run the main job on a small default dataset")
     p.add_argument("--out", default="out/demo", help="output folder (default out/demo)")

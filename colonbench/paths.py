@@ -40,7 +40,7 @@ def travel_time(speed: np.ndarray, start, mask: np.ndarray | None = None, dx: fl
     phi = np.ma.MaskedArray(phi, ~mask)
     spd = np.where(mask, np.maximum(speed, 1e-6), 1.0)
     t = skfmm.travel_time(phi, spd, dx=dx)
-    out = np.asarray(t.filled(np.inf), dtype=np.float64)
+    out = np.asarray(np.ma.filled(t, np.inf), dtype=np.float64)
     out[tuple(start)] = 0.0
     out[~np.isfinite(out)] = np.inf
     return out

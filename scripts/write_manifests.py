@@ -41,6 +41,10 @@ dump("paper", "The paper's Table 1 protocol: 10200 / 3000 / 1200 segments of 5, 
 dump("demo", "A small dataset for the demo, a few minutes on a laptop: 2 train, 1 validation and 2 test colons, "
      "4 segments per length.", 11,
      {"train": split(0, 2, 4, 3, NOISY), "validation": split(2, 1, 4, 3, NOISY), "test": split(3, 2, 4, 1, CLEAN)})
+dump("train-cpu", "Training data of the shipped small model, sized for CPU training: 40 train colons (a subset of "
+     "paper.yaml's train colons) and 5 validation colons (a subset of its validation colons), so paper.yaml's test "
+     "colons stay unseen.", 20210901,
+     {"train": split(0, 40, 10, 3, NOISY), "validation": split(340, 5, 4, 2, NOISY)})
 dump("smoke", "Seconds of data for tests: short coarse colons, one 6 cm segment length, 1-2 segments per colon.", 7,
      {"train": split(0, 1, 2, 2, NOISY), "validation": split(1, 1, 1, 2, CLEAN), "test": split(2, 1, 2, 1, CLEAN)},
      {"colon": {"length_mm": [450, 550], "ring_spacing_mm": 1.0, "edge_mm": 1.5}, "segments": {"lengths_mm": [60.0]}})

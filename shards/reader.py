@@ -174,6 +174,9 @@ class ShardDataset:
         ``seed``: the same whatever worker reads it.
     seed : int
         Root seed of the augmentation streams.
+    augment_prob : float
+        Share of items augmented (drawn per item from the same stream); the
+        others return their stored heatmaps.
 
     Items
     -----
@@ -182,7 +185,8 @@ class ShardDataset:
     ``index`` int, plus the geometry fields if asked.
     """
 
-    def __init__(self, source, split=None, geometry: bool = False, augment=None, seed: int = 0):
+    def __init__(self, source, split=None, geometry: bool = False, augment=None, seed: int = 0,
+                 augment_prob: float = 1.0):
         if isinstance(source, (str, os.PathLike)) and Path(source).is_dir():
             files = dataset_files(source, split)
         else:
@@ -192,6 +196,7 @@ class ShardDataset:
         self.geometry = geometry
         self.augment = augment
         self.seed = int(seed)
+        self.augment_prob = float(augment_prob)
         self.epoch = 0
 
     def __len__(self) -> int:
@@ -212,10 +217,11 @@ class ShardDataset:
     def __getitem__(self, k: int) -> dict:
         shard, i = self.locate(k)
         item = {"index": int(k % len(self))}
-        geo = shard.geometry(i) if (self.geometry or self.augment is not None) else None
-        if self.augment is not None:
+        rng = seeding.rng(self.seed, "augment", self.epoch, item["index"]) if self.augment is not None else None
+        augment = rng is not None and (self.augment_prob >= 1.0 or rng.random() < self.augment_prob)
+        geo = shard.geometry(i) if (self.geometry or augment) else None
+        if augment:
             from colonbench.augment import augmented_heatmaps
-            rng = seeding.rng(self.seed, "augment", self.epoch, item["index"])
             _, hm = augmented_heatmaps(rng, geo["partial_points"].astype(float), geo["vertices"].astype(float),
                                        geo["faces"], geo["centerline"].astype(float), self.augment,
                                        shard.grid_options)

@@ -1,0 +1,276 @@
+"""Training the completion network: L2 on the paper's heatmaps, resumable, on CPU, one GPU or several.
+
+``colonbench train DATA --out RUN`` reads the shards of a generated dataset
+(its ``train`` and ``validation`` splits), applies the augmentations
+(:mod:`colonbench.augment`) to a share of the samples, validates after every
+epoch and writes into ``RUN``:
+
+``log.csv``
+    one row per epoch: epoch, steps, samples seen, train and validation L2,
+    learning rate, wall seconds (cumulative over resumed runs);
+``last.pt``
+    everything needed to resume (weights, optimizer, scheduler, position in the
+    epoch, best validation loss), rewritten every ``checkpoint_minutes`` and on
+    stopping;
+``best.safetensors``
+    the weights with the lowest validation loss, with the network
+    configuration and a description of the run in the file's metadata
+    (:func:`colonbench.completion.network.save_model`).
+
+Running the same command again resumes from ``last.pt`` exactly where it
+stopped (the epoch's sample order is drawn from the seed, so the remaining
+batches are the same ones). ``max_minutes`` stops cleanly after a time budget,
+which is how a long CPU training is spread over several sessions.
+
+Several GPUs: launch with ``torchrun --nproc_per_node N -m colonbench.cli
+train ...``; each process takes every N-th sample of the epoch's order and
+PyTorch's DistributedDataParallel averages the gradients.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from colonbench import seeding
+from colonbench._version import __version__
+from colonbench.augment import AugmentConfig
+from colonbench.completion.network import (NETWORKS, build_network, network_config, resolve_device,
+                                           save_model)
+from colonbench.errors import InputError
+from colonbench.shards.dataset import LOCK_NAME
+from colonbench.shards.reader import ShardDataset
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Settings of a training run (all recorded in the checkpoint and the model's metadata)."""
+
+    network: str = "small"
+    batch_size: int = 4
+    lr: float = 1e-3
+    weight_decay: float = 0.0
+    epochs: int = 100
+    augment_prob: float = 0.3
+    seed: int = 0
+    workers: int = 1
+    lr_patience: int = 3
+    lr_factor: float = 0.5
+    checkpoint_minutes: float = 10.0
+    max_minutes: float | None = None
+    augment: dict = field(default_factory=dict)
+
+    def check(self):
+        if self.network not in NETWORKS:
+            raise InputError(f"unknown network {self.network!r}; known: {sorted(NETWORKS)}")
+        for name in ("batch_size", "epochs"):
+            if getattr(self, name) < 1:
+                raise InputError(f"{name} must be >= 1")
+        if not 0 <= self.augment_prob <= 1:
+            raise InputError("augment_prob must be in [0, 1]")
+        if self.lr <= 0:
+            raise InputError("lr must be positive")
+        from colonbench.datagen.config import from_dict
+        from_dict(AugmentConfig, self.augment)
+        return self
+
+
+LOG_FIELDS = ("epoch", "steps", "samples", "train_l2", "val_l2", "lr", "seconds")
+
+
+def _dist():
+    """(rank, world size), initialising torch.distributed when launched by torchrun."""
+    world = int(os.environ.get("WORLD_SIZE", "1"))
+    if world > 1 and not torch.distributed.is_initialized():
+        backend = "nccl" if torch.cuda.is_available() else "gloo"
+        torch.distributed.init_process_group(backend)
+    rank = torch.distributed.get_rank() if world > 1 else 0
+    return rank, world
+
+
+def epoch_order(n: int, seed: int, epoch: int) -> np.ndarray:
+    """The sample order of an epoch: a permutation drawn from stream ``("shuffle", epoch)``."""
+    return seeding.rng(seed, "shuffle", epoch).permutation(n)
+
+
+def _collate(items):
+    return (torch.from_numpy(np.stack([it["input"] for it in items])),
+            torch.from_numpy(np.stack([it["target"] for it in items])))
+
+
+def evaluate_l2(net, dataset, device, batch_size: int = 4, rank: int = 0, world: int = 1) -> float:
+    """Mean squared error of the network's prediction over a dataset (all ranks combined)."""
+    net.eval()
+    total = torch.zeros(2, dtype=torch.float64, device=device)
+    idx = np.arange(len(dataset))[rank::world]
+    with torch.no_grad():
+        for b in range(0, len(idx), batch_size):
+            x, y = _collate([dataset[int(k)] for k in idx[b:b + batch_size]])
+            pred = net(x.to(device))
+            total[0] += torch.sum((pred - y.to(device)) ** 2).double()
+            total[1] += y.numel()
+    if world > 1:
+        torch.distributed.all_reduce(total)
+    net.train()
+    return float(total[0] / total[1])
+
+
+def _data_hash(data_dir: Path) -> str:
+    lock = data_dir / LOCK_NAME
+    if not lock.exists():
+        raise InputError(f"{data_dir}: no {LOCK_NAME}; generate the dataset first (colonbench generate)")
+    return json.loads(lock.read_text())["manifest_sha256"]
+
+
+def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "auto", progress: bool = True,
+          command: str | None = None) -> dict:
+    """Train (or resume training) the completion network on a generated dataset.
+
+    Parameters
+    ----------
+    data_dir : path
+        Dataset folder with ``train`` and ``validation`` splits.
+    out_dir : path
+        Run folder (log, checkpoints, best model). If it holds ``last.pt`` the
+        run resumes; its settings must then match.
+    config : TrainConfig
+    device : str
+        ``auto``, ``cpu``, ``cuda``, ``cuda:1``...
+    progress : bool
+        Progress bar on a terminal.
+    command : str, optional
+        The command line, recorded in the model's metadata.
+
+    Returns
+    -------
+    dict
+        ``epochs``, ``steps``, ``best_val_l2``, ``stopped`` ("done" or "time").
+    """
+    cfg = (config or TrainConfig()).check()
+    data_dir, out = Path(data_dir), Path(out_dir)
+    data_hash = _data_hash(data_dir)
+    rank, world = _dist()
+    dev = resolve_device(device)
+    if dev.type == "cuda" and world > 1:
+        dev = torch.device("cuda", int(os.environ.get("LOCAL_RANK", "0")))
+        torch.cuda.set_device(dev)
+    out.mkdir(parents=True, exist_ok=True)
+    aug = AugmentConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in cfg.augment.items()})
+    train_ds = ShardDataset(data_dir, split="train", augment=aug if cfg.augment_prob > 0 else None,
+                            seed=cfg.seed, augment_prob=cfg.augment_prob)
+    val_ds = ShardDataset(data_dir, split="validation")
+
+    torch.manual_seed(cfg.seed)
+    net_cfg = network_config(cfg.network)
+    net = build_network(net_cfg).to(dev)
+    opt = torch.optim.Adam(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
+    sched = torch.optim.lr_scheduler.ReduceLROnPlateau(opt, factor=cfg.lr_factor, patience=cfg.lr_patience)
+    state = {"epoch": 0, "position": 0, "steps": 0, "samples": 0, "best_val": float("inf"), "seconds": 0.0,
+             "train_sum": 0.0, "train_n": 0}
+    ckpt = out / "last.pt"
+    settings = {"train_config": asdict(cfg), "data_sha256": data_hash, "world_size": world}
+    if ckpt.exists():
+        saved = torch.load(ckpt, map_location=dev, weights_only=False)
+        if saved["settings"]["data_sha256"] != data_hash:
+            raise InputError(f"{out} is a run on other data (dataset manifest differs); use another --out")
+        old = {k: v for k, v in saved["settings"]["train_config"].items() if k not in ("max_minutes", "epochs",
+                                                                                        "checkpoint_minutes")}
+        new = {k: v for k, v in asdict(cfg).items() if k not in ("max_minutes", "epochs", "checkpoint_minutes")}
+        if old != new or saved["settings"]["world_size"] != world:
+            raise InputError(f"{out} holds a run with other settings ({old}, {saved['settings']['world_size']} "
+                             "process(es)); resume with the same settings or use another --out")
+        net.load_state_dict(saved["model"])
+        opt.load_state_dict(saved["optimizer"])
+        sched.load_state_dict(saved["scheduler"])
+        state.update(saved["state"])
+    if world > 1:
+        net = torch.nn.parallel.DistributedDataParallel(net, device_ids=[dev.index] if dev.type == "cuda" else None)
+
+    def save_checkpoint():
+        if rank == 0:
+            module = net.module if hasattr(net, "module") else net
+            tmp = ckpt.with_name("last.pt.tmp")
+            torch.save({"model": module.state_dict(), "optimizer": opt.state_dict(), "scheduler": sched.state_dict(),
+                        "state": state, "settings": settings, "version": __version__}, tmp)
+            tmp.replace(ckpt)
+
+    log_path = out / "log.csv"
+    if rank == 0 and not log_path.exists():
+        with open(log_path, "w", newline="") as fh:
+            csv.writer(fh).writerow(LOG_FIELDS)
+
+    from tqdm.auto import tqdm
+
+    start = time.perf_counter()
+    base_seconds = state["seconds"]
+    last_ckpt = start
+    stopped = "done"
+    loader_kwargs = {"batch_size": cfg.batch_size, "collate_fn": _collate, "num_workers": cfg.workers,
+                     "persistent_workers": False}
+    net.train()
+    while state["epoch"] < cfg.epochs:
+        epoch = state["epoch"]
+        train_ds.set_epoch(epoch)
+        order = epoch_order(len(train_ds), cfg.seed, epoch)
+        n_batches = len(order) // (cfg.batch_size * world)
+        mine = order[: n_batches * cfg.batch_size * world][rank::world]
+        todo = mine[state["position"] * cfg.batch_size:]
+        loader = torch.utils.data.DataLoader(torch.utils.data.Subset(train_ds, todo.tolist()), **loader_kwargs)
+        bar = tqdm(total=n_batches, initial=state["position"], desc=f"epoch {epoch}", unit="batch",
+                   disable=None if (progress and rank == 0) else True, dynamic_ncols=True)
+        for x, y in loader:
+            x, y = x.to(dev, non_blocking=True), y.to(dev, non_blocking=True)
+            opt.zero_grad(set_to_none=True)
+            loss = torch.mean((net(x) - y) ** 2)
+            loss.backward()
+            opt.step()
+            state["position"] += 1
+            state["steps"] += 1
+            state["samples"] += len(x) * world
+            state["train_sum"] += float(loss.detach())
+            state["train_n"] += 1
+            bar.update(1)
+            bar.set_postfix(l2=f"{state['train_sum'] / state['train_n']:.5f}")
+            now = time.perf_counter()
+            state["seconds"] = base_seconds + now - start
+            if cfg.max_minutes is not None and now - start > cfg.max_minutes * 60:
+                stopped = "time"
+                break
+            if now - last_ckpt > cfg.checkpoint_minutes * 60:
+                save_checkpoint()
+                last_ckpt = now
+        bar.close()
+        if stopped == "time":
+            break
+        val = evaluate_l2(net, val_ds, dev, cfg.batch_size, rank, world)
+        sched.step(val)
+        train_l2 = state["train_sum"] / max(state["train_n"], 1)
+        state.update(epoch=epoch + 1, position=0, train_sum=0.0, train_n=0,
+                     seconds=base_seconds + time.perf_counter() - start)
+        if rank == 0:
+            with open(log_path, "a", newline="") as fh:
+                csv.writer(fh).writerow([epoch, state["steps"], state["samples"], f"{train_l2:.6f}", f"{val:.6f}",
+                                         f"{opt.param_groups[0]['lr']:.3g}", f"{state['seconds']:.1f}"])
+            if val < state["best_val"]:
+                state["best_val"] = val
+                meta = {"data_manifest_sha256": data_hash, "data_dir": data_dir.name, "train_config": asdict(cfg),
+                        "epoch": epoch, "steps": state["steps"], "samples_seen": state["samples"],
+                        "val_l2": val, "train_seconds": round(state["seconds"], 1), "device": str(dev),
+                        "world_size": world, "torch": torch.__version__, "colonbench": __version__,
+                        "grid_options": train_ds.shards[0].grid_options, "command": command or ""}
+                save_model(out / "best.safetensors", net, net_cfg, meta)
+        save_checkpoint()
+        last_ckpt = time.perf_counter()
+    if stopped == "time":
+        save_checkpoint()
+    if world > 1:
+        torch.distributed.barrier()
+    return {"epochs": state["epoch"], "steps": state["steps"], "best_val_l2": state["best_val"], "stopped": stopped,
+            "seconds": state["seconds"]}

@@ -1,0 +1,187 @@
+"""The completion method: centerline, mesh and coverage on shapes with known answers, training and estimate."""
+
+import json
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+pytest.importorskip("torch")
+pytest.importorskip("monai")
+
+from colonbench.cli import main  # noqa: E402
+from colonbench.completion.centerline import extract_centerline  # noqa: E402
+from colonbench.completion.method import CompletionMethod, check_cloud, from_heatmap  # noqa: E402
+from colonbench.completion.network import build_network, load_model, network_config, save_model  # noqa: E402
+from colonbench.completion.surface import complete, triangle_areas  # noqa: E402
+from colonbench.completion.train import TrainConfig, train  # noqa: E402
+from colonbench.datagen.colon import tube_colon  # noqa: E402
+from colonbench.datagen.generate import write_points_ply  # noqa: E402
+from colonbench.errors import InputError  # noqa: E402
+from colonbench.grid import Grid, fit_grid  # noqa: E402
+from colonbench.heatmaps import densify_polyline, sample_heatmaps  # noqa: E402
+from colonbench.shards.reader import ShardDataset  # noqa: E402
+from shapes import arc, straight  # noqa: E402
+
+R = 20.0
+UNIT = Grid(np.array([[1, 0, 0, -32], [0, 1, 0, -32], [0, 0, 1, 0], [0, 0, 0, 1]], float))
+
+
+def tube_heatmaps(centerline, grid=None, radius=R):
+    colon = tube_colon(centerline, radius, ring_spacing_mm=0.5, n_around=256)
+    pts = colon.mesh.vertices[::2]
+    grid = grid or fit_grid(pts)
+    return colon, grid, pts, sample_heatmaps(grid, pts, colon.mesh.vertices, colon.mesh.faces,
+                                             colon.centerline.points)
+
+
+def distance_to_polyline(points, polyline):
+    d, _ = cKDTree(densify_polyline(polyline, 0.05)).query(points)
+    return d
+
+
+@pytest.mark.parametrize("shape", ["straight", "curved"])
+def test_centerline_of_a_tube_heatmap_is_within_one_voxel(shape):
+    line = straight(63.0) if shape == "straight" else arc(60.0, 1.0)  # a 60 mm arc of radius 60 mm
+    colon, grid, _, hm = tube_heatmaps(line, UNIT if shape == "straight" else None, radius=15.0)
+    est = extract_centerline(hm.target)
+    gt = grid.to_voxel(colon.centerline.points)
+    assert distance_to_polyline(est, gt).max() < 1.0  # every estimated point near the true line
+    assert distance_to_polyline(gt, est).max() < 1.5  # and the whole true line covered, ends included
+
+
+def test_marching_cubes_on_a_cylinder_heatmap_gives_its_area():
+    colon, grid, pts, hm = tube_heatmaps(straight(63.0), UNIT)
+    comp = complete(hm.target, extract_centerline(hm.target), grid.to_voxel(pts))
+    centroid_z = comp.vertices[comp.faces].mean(axis=1)[:, 2]
+    mid = (centroid_z > 5) & (centroid_z < 58)
+    area = triangle_areas(comp.vertices, comp.faces)[mid].sum()
+    assert area == pytest.approx(2 * np.pi * R * 53.0, rel=0.02)
+    radius = np.linalg.norm(comp.vertices[:, :2] - 32, axis=1)
+    assert np.median(radius) == pytest.approx(R, abs=0.25)
+    assert comp.coverage == pytest.approx(1.0, abs=0.01)  # every part of the wall has points
+
+
+def test_a_cut_window_is_found_as_a_hole_of_its_area():
+    colon, grid, pts, hm = tube_heatmaps(straight(63.0), UNIT)
+    theta = np.arctan2(pts[:, 1], pts[:, 0])
+    window = (np.abs(theta) < 0.5) & (pts[:, 2] > 20) & (pts[:, 2] < 40)  # 1 rad x 20 mm: 400 mm^2
+    est = from_heatmap(hm.target, grid, pts[~window])
+    wall = 2 * np.pi * R * (est.mesh_vertices[:, 2].max() - est.mesh_vertices[:, 2].min())
+    assert 1 - est.coverage == pytest.approx(R * 1.0 * 20.0 / wall, abs=0.01)
+    inside = (np.abs(np.arctan2(est.holes[:, 1], est.holes[:, 0])) < 0.55) & (est.holes[:, 2] > 19) & \
+        (est.holes[:, 2] < 41)
+    assert inside.mean() > 0.95
+
+
+def test_gt_heatmap_as_prediction_bounds_the_error_after_the_network(smoke_dataset):
+    out, _ = smoke_dataset
+    ds = ShardDataset(out, geometry=True)
+    errors = []
+    for k in range(len(ds)):
+        item = ds[k]
+        shard, i = ds.locate(k)
+        est = from_heatmap(item["target"][0], shard.grid(i), item["partial_points"])
+        if item["outside_grid"] < 0.01:  # the grid holds the segment (it is fitted to the partial cloud)
+            errors.append(est.coverage - item["coverage"])
+        cl_d, _ = cKDTree(item["centerline"]).query(est.centerline)
+        assert np.mean(cl_d < 2.0) > 0.95  # centerline precision at 2 mm
+    errors = np.abs(errors)
+    assert len(errors) >= 6
+    # within a point of the truth on the median segment; the rest is false holes where marching cubes
+    # cannot follow a fold thinner than a voxel
+    assert np.median(errors) < 0.01 and errors.mean() < 0.015 and errors.max() < 0.04, errors
+
+
+@pytest.fixture(scope="module")
+def tiny_run(smoke_dataset, tmp_path_factory):
+    out, _ = smoke_dataset
+    run = tmp_path_factory.mktemp("run")
+    cfg = TrainConfig(epochs=1, batch_size=2, workers=0, augment_prob=0.5)
+    result = train(out, run, cfg, device="cpu", progress=False)
+    return out, run, cfg, result
+
+
+def test_train_save_load_predict_round_trip(tiny_run):
+    out, run, cfg, result = tiny_run
+    assert result["epochs"] == 1 and result["steps"] == 2
+    log = (run / "log.csv").read_text().splitlines()
+    assert log[0].startswith("epoch,steps") and len(log) == 2
+    net, config, meta = load_model(run / "best.safetensors")
+    assert config == network_config("small") and meta["steps"] == 2 and meta["data_manifest_sha256"]
+    again = run / "copy.safetensors"
+    save_model(again, net, config, meta)
+    net2, _, _ = load_model(again)
+    for (k, a), (_, b) in zip(net.state_dict().items(), net2.state_dict().items()):
+        assert torch_equal(a, b), k
+    method = CompletionMethod(run / "best.safetensors")
+    item = ShardDataset(out, split="test", geometry=True)[0]
+    grid, h_in, pred = method.predict(item["partial_points"].astype(float))
+    np.testing.assert_allclose(h_in, item["input"][0], atol=1e-3)  # voxelized exactly as in training
+    assert pred.shape == (64, 64, 64) and 0 <= pred.min() and pred.max() <= 1
+    est = method.estimate(item["partial_points"].astype(float))
+    assert 0 <= est.coverage <= 1 or np.isnan(est.coverage)
+    assert set(est.seconds) >= {"network", "centerline", "mesh_holes"}
+
+
+def torch_equal(a, b):
+    import torch
+
+    return torch.equal(a, b)
+
+
+def test_training_resumes_and_refuses_other_settings(tiny_run):
+    out, run, cfg, _ = tiny_run
+    import dataclasses
+
+    more = train(out, run, dataclasses.replace(cfg, epochs=2), device="cpu", progress=False)
+    assert more["epochs"] == 2 and more["steps"] == 4
+    assert len((run / "log.csv").read_text().splitlines()) == 3
+    with pytest.raises(InputError, match="other settings"):
+        train(out, run, dataclasses.replace(cfg, epochs=3, lr=0.5), device="cpu", progress=False)
+
+
+@pytest.mark.parametrize("cloud, message", [
+    (np.zeros((0, 3)), "at least"),
+    (np.random.default_rng(0).normal(size=(12, 3)) * 20, "only 12 point"),
+    (np.full((500, 3), np.nan), "NaN"),
+    (np.random.default_rng(0).normal(size=(5000, 3)) * 0.02, "metres"),
+    (np.random.default_rng(0).normal(size=(5000, 3)) * 300, "far more than one colon segment"),
+])
+def test_bad_clouds_get_clear_messages(cloud, message):
+    with pytest.raises(InputError, match=message):
+        check_cloud(cloud)
+
+
+def test_estimate_command_writes_one_json_per_input(tiny_run, tmp_path, capsys):
+    out, run, _, _ = tiny_run
+    ds = ShardDataset(out, split="test", geometry=True)
+    inputs = []
+    for k in range(2):
+        folder = tmp_path / f"seg{k}"
+        folder.mkdir()
+        inputs.append(write_points_ply(folder / "partial.ply", ds[k]["partial_points"]))
+    np.save(tmp_path / "other.npy", ds[0]["partial_points"])
+    res = tmp_path / "res"
+    assert main(["estimate", *map(str, inputs), str(tmp_path / "other.npy"), "--model", str(run / "best.safetensors"),
+                 "--out-dir", str(res), "--mesh"]) == 0
+    for name in ("seg0", "seg1", "other"):
+        data = json.loads((res / f"{name}.json").read_text())
+        assert {"coverage", "holes", "centerline", "method"} <= set(data)
+        assert data["method"] == "completion"
+        assert all(len(p) == 3 for p in data["centerline"])
+    assert (res / "seg0_mesh.ply").exists() and (res / "seg0_centerline.ply").exists()
+    # one bad input among good ones: named, the others still written
+    (tmp_path / "bad.xyz").write_text("1 2 3\n")
+    assert main(["estimate", str(tmp_path / "bad.xyz"), str(tmp_path / "other.npy"), "--model",
+                 str(run / "best.safetensors"), "--out-dir", str(tmp_path / "res2")]) == 2
+    err = capsys.readouterr().err
+    assert "bad.xyz" in err and "only 1 point" in err
+    assert (tmp_path / "res2" / "other.json").exists()
+
+
+def test_network_shapes():
+    import torch
+
+    net = build_network(network_config("small"))
+    assert net(torch.zeros(1, 1, 64, 64, 64)).shape == (1, 1, 64, 64, 64)
