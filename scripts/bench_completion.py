@@ -1,0 +1,80 @@
+"""Accuracy and speed of the completion method on test shards: per-stage seconds, MAE, precision/recall.
+
+    python scripts/bench_completion.py data/paper --split test --limit 200 --model runs/small-cpu/best.safetensors
+    python scripts/bench_completion.py data/paper --gt      # the GT target heatmap as prediction
+
+Noise (``--noise 0.5``) is added to the partial points from a seeded stream
+per sample. One process, one torch thread (the "one CPU core" of the speed
+target), the model loaded once. Prints figures only.
+"""
+
+from __future__ import annotations
+
+import argparse
+import resource
+import sys
+import time
+
+import numpy as np
+
+from colonbench import seeding
+from colonbench.benchmark.metrics import segment_metrics
+from colonbench.shards.reader import ShardDataset
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("data")
+    ap.add_argument("--split", default="test")
+    ap.add_argument("--limit", type=int, default=100, help="samples, spread evenly over the split")
+    ap.add_argument("--model", help="model file (default: the shipped one)")
+    ap.add_argument("--gt", action="store_true", help="feed the GT target heatmap instead of the network's")
+    ap.add_argument("--noise", type=float, default=0.0, help="Gaussian noise sigma on the inputs, mm")
+    ap.add_argument("--threads", type=int, default=1)
+    args = ap.parse_args(argv)
+
+    import torch
+
+    torch.set_num_threads(args.threads)
+    from colonbench.completion.method import CompletionMethod, check_cloud, from_heatmap
+
+    ds = ShardDataset(args.data, split=args.split, geometry=True)
+    picks = np.unique(np.linspace(0, len(ds) - 1, min(args.limit, len(ds))).astype(int))
+    method = None if args.gt else CompletionMethod(args.model)
+    rows, stages = [], {}
+    t_all = time.perf_counter()
+    for k in picks:
+        item = ds[int(k)]
+        pts = item["partial_points"].astype(float)
+        if args.noise > 0:
+            pts = pts + seeding.rng(0, "eval-noise", int(round(args.noise * 1000)), int(k)).normal(0, args.noise,
+                                                                                                  pts.shape)
+        if args.gt:
+            shard, i = ds.locate(int(k))
+            est = from_heatmap(item["target"][0], shard.grid(i), check_cloud(pts))
+        else:
+            est = method.estimate(pts)
+        for s, v in est.seconds.items():
+            stages[s] = stages.get(s, 0.0) + v
+        rows.append(segment_metrics(est.coverage, est.holes, est.centerline, item))
+    wall = time.perf_counter() - t_all
+    n = len(rows)
+    err = np.array([r["coverage_error"] for r in rows])
+    print(f"{'GT heatmap' if args.gt else method.version} on {n} {args.split} samples of {args.data}, "
+          f"noise {args.noise} mm")
+    print(f"  coverage MAE {100 * np.nanmean(np.abs(err)):.2f} points, median {100 * np.nanmedian(np.abs(err)):.2f}, "
+          f"bias {100 * np.nanmean(err):+.2f}, q95 {100 * np.nanquantile(np.abs(err), 0.95):.2f}, "
+          f"undefined {int(np.isnan(err).sum())}")
+    for key in rows[0]:
+        if key == "coverage_error":
+            continue
+        v = np.array([r[key] for r in rows])
+        print(f"  {key:<28} mean {np.nanmean(v):.3f}  median {np.nanmedian(v):.3f}  undefined {int(np.isnan(v).sum())}")
+    print("  seconds per segment by stage: " + ", ".join(f"{s} {v / n:.3f}" for s, v in stages.items())
+          + f"; total {wall / n:.3f} (threads: {args.threads})")
+    print(f"  peak memory {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MiB")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
