@@ -61,7 +61,7 @@ class NetworkConfig:
 
 #: Named configurations: ``small`` trains on a CPU in hours (0.6 M parameters,
 #: about 0.12 s per sample per training step and 0.09 s per inference on one
-#: 2-core CPU); ``large`` is for a GPU (22 M parameters, one more level).
+#: 2-core CPU); ``large`` is for a GPU (19 M parameters, one more level).
 NETWORKS = {
     "small": NetworkConfig(),
     "large": NetworkConfig(channels=(32, 64, 128, 256, 512), strides=(2, 2, 2, 2), num_res_units=2),
