@@ -272,5 +272,6 @@ def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "a
         save_checkpoint()
     if world > 1:
         torch.distributed.barrier()
+        torch.distributed.destroy_process_group()
     return {"epochs": state["epoch"], "steps": state["steps"], "best_val_l2": state["best_val"], "stopped": stopped,
             "seconds": state["seconds"]}

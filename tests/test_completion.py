@@ -180,6 +180,23 @@ def test_estimate_command_writes_one_json_per_input(tiny_run, tmp_path, capsys):
     assert (tmp_path / "res2" / "other.json").exists()
 
 
+def test_two_process_distributed_training(smoke_dataset, tmp_path):
+    # PyTorch's own launcher and DistributedDataParallel, on the CPU (gloo)
+    import subprocess
+    import sys
+
+    out, _ = smoke_dataset
+    run = tmp_path / "ddp"
+    proc = subprocess.run([sys.executable, "-m", "torch.distributed.run", "--nproc_per_node", "2",
+                           "--master_port", "29517", "-m", "colonbench.cli", "train", str(out), "--out", str(run),
+                           "--epochs", "1", "--batch-size", "1", "--workers", "0", "--device", "cpu", "--quiet"],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    _, _, meta = load_model(run / "best.safetensors")
+    assert meta["world_size"] == 2 and meta["steps"] == 2 and meta["samples_seen"] == 4
+    assert len((run / "log.csv").read_text().splitlines()) == 2
+
+
 def test_network_shapes():
     import torch
 
