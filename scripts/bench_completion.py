@@ -31,6 +31,9 @@ def main(argv=None):
     ap.add_argument("--gt", action="store_true", help="feed the GT target heatmap instead of the network's")
     ap.add_argument("--noise", type=float, default=0.0, help="Gaussian noise sigma on the inputs, mm")
     ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--constant", type=float, help="also report the MAE of this constant guess (e.g. the mean "
+                    "training coverage)")
+    ap.add_argument("--json", help="also write the figures to this JSON file (for the model card)")
     args = ap.parse_args(argv)
 
     import torch
@@ -65,6 +68,9 @@ def main(argv=None):
     print(f"  coverage MAE {100 * np.nanmean(np.abs(err)):.2f} points, median {100 * np.nanmedian(np.abs(err)):.2f}, "
           f"bias {100 * np.nanmean(err):+.2f}, q95 {100 * np.nanquantile(np.abs(err), 0.95):.2f}, "
           f"undefined {int(np.isnan(err).sum())}")
+    true = np.array([ds[int(k)]["coverage"] for k in picks]) if args.constant is not None else None
+    if true is not None:
+        print(f"  constant guess {args.constant:.3f}: MAE {100 * np.mean(np.abs(args.constant - true)):.2f} points")
     for key in rows[0]:
         if key == "coverage_error":
             continue
@@ -72,7 +78,25 @@ def main(argv=None):
         print(f"  {key:<28} mean {np.nanmean(v):.3f}  median {np.nanmedian(v):.3f}  undefined {int(np.isnan(v).sum())}")
     print("  seconds per segment by stage: " + ", ".join(f"{s} {v / n:.3f}" for s, v in stages.items())
           + f"; total {wall / n:.3f} (threads: {args.threads})")
-    print(f"  peak memory {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MiB")
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    print(f"  peak memory {peak:.0f} MiB")
+    if args.json:
+        import json
+
+        summary = {"data": str(args.data), "split": args.split, "samples": n, "noise_mm": args.noise,
+                   "model": "GT heatmap" if args.gt else method.version, "threads": args.threads,
+                   "coverage_mae_points": 100 * float(np.nanmean(np.abs(err))),
+                   "coverage_median_abs_points": 100 * float(np.nanmedian(np.abs(err))),
+                   "coverage_bias_points": 100 * float(np.nanmean(err)),
+                   "seconds_per_segment": {s: v / n for s, v in stages.items()}, "wall_per_segment": wall / n,
+                   "peak_mib": peak,
+                   "constant_guess": args.constant,
+                   "constant_guess_mae_points": None if true is None else 100 * float(np.mean(np.abs(args.constant - true))),
+                   "metrics_mean": {k: float(np.nanmean([r[k] for r in rows])) for k in rows[0] if k != "coverage_error"},
+                   "metrics_median": {k: float(np.nanmedian([r[k] for r in rows])) for k in rows[0]
+                                      if k != "coverage_error"}}
+        with open(args.json, "w") as fh:
+            json.dump(summary, fh, indent=1)
     return 0
 
 

@@ -1,0 +1,71 @@
+"""Write the model card of a trained model from what the run recorded (no figure typed by hand).
+
+    python scripts/model_card.py runs/small-cpu/best.safetensors --log runs/small-cpu/log.csv \
+        --eval eval-noiseless.json eval-noisy.json --hardware "2-core CPU" > colonbench/completion/models/MODEL_CARD.md
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import sys
+
+from colonbench.completion.network import load_model
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("model")
+    ap.add_argument("--log", required=True)
+    ap.add_argument("--eval", nargs="*", default=[], help="JSON files of scripts/bench_completion.py --json")
+    ap.add_argument("--hardware", required=True)
+    ap.add_argument("--data-manifest", default="data_manifests/train-cpu.yaml")
+    ap.add_argument("--note", default="")
+    args = ap.parse_args(argv)
+    _, config, meta = load_model(args.model)
+    rows = list(csv.DictReader(open(args.log)))
+    tc = meta.get("train_config", {})
+    out = ["# Model card: the shipped completion network (`small.safetensors`)", ""]
+    if args.note:
+        out += [args.note, ""]
+    out += ["| | |", "|---|---|",
+            f"| network | MONAI 3D UNet, channels {list(config.channels)}, strides {list(config.strides)}, "
+            f"{config.num_res_units} residual unit(s), {config.norm} norm; 64^3 input heatmap -> 64^3 target heatmap |",
+            f"| training data | `{args.data_manifest}` (manifest sha256 `{meta.get('data_manifest_sha256', '?')}`), "
+            "its train split; validation split for model selection |",
+            f"| command | `colonbench generate {args.data_manifest} --out data/train-cpu --workers 2` then "
+            f"`{meta.get('command') or 'colonbench train'}` (resumed with the same command) |",
+            f"| settings | batch {tc.get('batch_size')}, Adam lr {tc.get('lr')}, L2 loss, augmentation share "
+            f"{tc.get('augment_prob')}, seed {tc.get('seed')} |",
+            f"| selected | epoch {meta.get('epoch')}, {meta.get('steps')} steps, {meta.get('samples_seen')} samples seen, "
+            f"validation L2 {meta.get('val_l2'):.5f} |",
+            f"| hardware | {args.hardware} ({meta.get('device')}, {meta.get('world_size')} process(es)) |",
+            f"| wall time | {meta.get('train_seconds', 0) / 60:.0f} min of training to the selected checkpoint |",
+            f"| software | colonbench {meta.get('colonbench')}, torch {meta.get('torch')} |",
+            f"| grid | {meta.get('grid_options')} |", "",
+            "## Training log", "", "| epoch | steps | train L2 | validation L2 | lr | minutes |", "|---|---|---|---|---|---|"]
+    out += [f"| {r['epoch']} | {r['steps']} | {r['train_l2']} | {r['val_l2']} | {r['lr']} | "
+            f"{float(r['seconds']) / 60:.0f} |" for r in rows]
+    if args.eval:
+        out += ["", "## Figures", "",
+                "Measured with `python scripts/bench_completion.py DATA --split test --limit N [--noise S] "
+                "[--gt]` (one process, one torch thread, the model loaded once).", "",
+                "| evaluated | samples | noise mm | coverage MAE (points) | median | bias | holes P / R @2mm (mean) | "
+                "centerline P / R @2mm (mean) | s per segment | constant guess MAE |",
+                "|---|---|---|---|---|---|---|---|---|---|"]
+        for path in args.eval:
+            e = json.load(open(path))
+            m = e["metrics_mean"]
+            out.append(f"| {e['model']} on {e['data']} {e['split']} | {e['samples']} | {e['noise_mm']} | "
+                       f"{e['coverage_mae_points']:.2f} | {e['coverage_median_abs_points']:.2f} | "
+                       f"{e['coverage_bias_points']:+.2f} | {m['holes_precision_2mm']:.2f} / "
+                       f"{m['holes_recall_2mm']:.2f} | {m['centerline_precision_2mm']:.2f} / "
+                       f"{m['centerline_recall_2mm']:.2f} | {e['wall_per_segment']:.2f} | "
+                       + (f"{e['constant_guess_mae_points']:.2f} |" if e.get("constant_guess_mae_points") else "- |"))
+    print("\n".join(out))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
