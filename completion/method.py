@@ -19,7 +19,6 @@ e.g. the ground truth, which bounds the error of everything after the network.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 
@@ -28,6 +27,7 @@ import numpy as np
 from colonbench.completion.centerline import extract_centerline, resample
 from colonbench.completion.surface import complete
 from colonbench.errors import InputError
+from colonbench.estimate import Estimate
 from colonbench.grid import Grid, check_points, fit_grid
 from colonbench.heatmaps import input_from_points
 
@@ -44,44 +44,6 @@ CENTERLINE_SPACING_MM = 0.5
 def shipped_model() -> Path:
     """Path of the model that ships in the package (``colonbench/completion/models/small.safetensors``)."""
     return Path(str(resources.files("colonbench.completion").joinpath("models/small.safetensors")))
-
-
-@dataclass
-class Estimate:
-    """What a coverage-estimation method returns for one partial segment (mm, the input's frame).
-
-    Attributes
-    ----------
-    coverage : float
-        Estimated observed fraction of the segment surface, in [0, 1].
-    holes : (k, 3) float
-        Points of the estimated holes, mm.
-    centerline : (m, 3) float
-        Estimated centerline, mm, spacing 0.5 mm.
-    method : str
-    mesh_vertices : (v, 3) float
-        Completed mesh, mm (empty for methods without one).
-    mesh_faces : (f, 3) int
-    hole_vertices : (v,) bool
-        Which mesh vertices are holes.
-    seconds : dict
-        Wall time per stage.
-    """
-
-    coverage: float
-    holes: np.ndarray
-    centerline: np.ndarray
-    method: str
-    mesh_vertices: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
-    mesh_faces: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), dtype=np.int64))
-    hole_vertices: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
-    seconds: dict = field(default_factory=dict)
-
-    def to_json(self) -> dict:
-        """The ``estimate`` command's JSON: coverage, holes, centerline (mm), method."""
-        return {"coverage": float(self.coverage), "holes": np.round(self.holes, 4).tolist(),
-                "centerline": np.round(self.centerline, 4).tolist(), "method": self.method,
-                "seconds": {k: round(v, 4) for k, v in self.seconds.items()}}
 
 
 def check_cloud(points, what: str = "point cloud") -> np.ndarray:

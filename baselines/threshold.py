@@ -1,0 +1,52 @@
+"""Thresholding (the paper's baseline 1): the learned heatmap, with mesh extraction replaced by thresholding.
+
+The voxels of the (predicted) target heatmap below ``threshold`` (near its
+zero, the surface) stand for the completed surface; those farther than
+sqrt(2)/2 voxel from every partial point are hole voxels, and
+
+    coverage = 1 - hole voxels / surface voxels.
+
+As the paper notes, such a surface varies in thickness, which is what the
+mesh step fixes. For a fair comparison the surface voxels are cut at the
+same segment end planes as the mesh of the full method
+(:func:`colonbench.completion.surface.end_planes`), so the two differ only in
+the step the paper compares.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from colonbench.completion.centerline import extract_centerline, resample
+from colonbench.completion.surface import END_INSET, HOLE_DISTANCE, end_planes, hole_vertices
+from colonbench.estimate import Estimate
+from colonbench.grid import Grid
+
+#: Voxels below this heatmap value are surface voxels.
+THRESHOLD = 0.1
+
+
+def threshold_coverage(heatmap: np.ndarray, grid: Grid, points, threshold: float = THRESHOLD,
+                       method: str = "thresholding", centerline_vox: np.ndarray | None = None) -> Estimate:
+    """Coverage, hole points and centerline from a target heatmap by thresholding (points and results in mm).
+
+    Parameters
+    ----------
+    heatmap : (S, S, S) float
+        Target heatmap on ``grid``.
+    grid : Grid
+    points : (n, 3) float
+        Partial cloud, mm.
+    threshold : float
+    centerline_vox : (m, 3) float, optional
+        Centerline in voxels, if already extracted from the same heatmap.
+    """
+    cl = extract_centerline(heatmap) if centerline_vox is None else np.asarray(centerline_vox, float)
+    vox = np.argwhere(np.asarray(heatmap) < threshold).astype(float)
+    for point, normal in end_planes(cl):
+        vox = vox[(vox - point) @ normal >= END_INSET]
+    partial = grid.to_voxel(np.asarray(points, dtype=float))
+    hole = hole_vertices(vox, partial, HOLE_DISTANCE)
+    coverage = float(1.0 - hole.mean()) if len(vox) else float("nan")
+    centerline = resample(grid.to_mm(cl), 0.5) if len(cl) else np.zeros((0, 3))
+    return Estimate(coverage, grid.to_mm(vox[hole]) if hole.any() else np.zeros((0, 3)), centerline, method)
