@@ -1,9 +1,10 @@
 """Centerline from a (predicted) target heatmap, as the paper describes.
 
-1. Candidate voxels: heatmap > 1 - delta (the target is 1 on the centerline).
-   The largest 26-connected component is kept. If fewer than ``min_voxels``
-   pass, the threshold drops to the ``min_voxels``-th highest value, so a
-   network whose maximum falls short of 1 still gives a line.
+1. Candidate voxels: heatmap > 1 - delta (the target is 1 on the centerline),
+   or > max - delta when the heatmap's maximum falls short of 1 (a network
+   that has not learned the peak's full height still gives its ridge). The
+   largest 26-connected component is kept. If fewer than ``min_voxels`` pass,
+   the threshold drops to the ``min_voxels``-th highest value.
 2. End points: the two ends of the longest shortest path in the 26-neighbour
    graph of the candidates (edge length = voxel step). It is found by repeated
    double sweeps (Dijkstra from a node, then from the farthest node found,
@@ -40,7 +41,7 @@ _NEIGHBOURS = np.array([(i, j, k) for i in (-1, 0, 1) for j in (-1, 0, 1) for k 
 def candidates(heatmap: np.ndarray, delta: float = DELTA, min_voxels: int = MIN_VOXELS) -> np.ndarray:
     """(n, 3) int voxels of the largest 26-connected component above the threshold."""
     h = np.asarray(heatmap, dtype=np.float32)
-    thr = 1.0 - delta
+    thr = min(1.0 - delta, float(h.max()) - delta)
     if int((h > thr).sum()) < min_voxels:
         thr = float(np.partition(h.ravel(), -min_voxels)[-min_voxels]) - 1e-7
     mask = h > thr
