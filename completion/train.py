@@ -122,11 +122,15 @@ def evaluate_l2(net, dataset, device, batch_size: int = 4, rank: int = 0, world:
     return float(total[0] / total[1])
 
 
-def _data_hash(data_dir: Path) -> str:
+def _data_lock(data_dir: Path) -> dict:
     lock = data_dir / LOCK_NAME
     if not lock.exists():
         raise InputError(f"{data_dir}: no {LOCK_NAME}; generate the dataset first (colonbench generate)")
-    return json.loads(lock.read_text())["manifest_sha256"]
+    lock = json.loads(lock.read_text())
+    missing = [s for s in ("train", "validation") if s not in lock.get("splits", {})]
+    if missing:
+        raise InputError(f"{data_dir}: the dataset has no {' and no '.join(missing)} split; generate it with them")
+    return lock
 
 
 def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "auto", progress: bool = True,
@@ -155,7 +159,9 @@ def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "a
     """
     cfg = (config or TrainConfig()).check()
     data_dir, out = Path(data_dir), Path(out_dir)
-    data_hash = _data_hash(data_dir)
+    lock = _data_lock(data_dir)
+    data_hash = lock["manifest_sha256"]
+    train_coverage = lock["splits"]["train"]["statistics"]["coverage"]["mean"]
     rank, world = _dist()
     dev = resolve_device(device)
     if dev.type == "cuda" and world > 1:
@@ -264,7 +270,8 @@ def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "a
                         "epoch": epoch, "steps": state["steps"], "samples_seen": state["samples"],
                         "val_l2": val, "train_seconds": round(state["seconds"], 1), "device": str(dev),
                         "world_size": world, "torch": torch.__version__, "colonbench": __version__,
-                        "grid_options": train_ds.shards[0].grid_options, "command": command or ""}
+                        "grid_options": train_ds.shards[0].grid_options, "command": command or "",
+                        "train_coverage_mean": train_coverage}
                 save_model(out / "best.safetensors", net, net_cfg, meta)
         save_checkpoint()
         last_ckpt = time.perf_counter()

@@ -141,6 +141,17 @@ def test_training_resumes_and_refuses_other_settings(tiny_run):
         train(out, run, dataclasses.replace(cfg, epochs=3, lr=0.5), device="cpu", progress=False)
 
 
+def test_training_needs_train_and_validation_splits(tmp_path):
+    from colonbench.shards.dataset import generate
+    from conftest import MANIFESTS
+
+    generate(MANIFESTS / "smoke.yaml", tmp_path / "d", splits=["test"], progress=False)
+    with pytest.raises(InputError, match="no train and no validation split"):
+        train(tmp_path / "d", tmp_path / "run", TrainConfig(epochs=1), device="cpu", progress=False)
+    with pytest.raises(InputError, match="no dataset.lock.json"):
+        train(tmp_path / "nothing", tmp_path / "run", TrainConfig(epochs=1), device="cpu", progress=False)
+
+
 @pytest.mark.parametrize("cloud, message", [
     (np.zeros((0, 3)), "at least"),
     (np.random.default_rng(0).normal(size=(12, 3)) * 20, "only 12 point"),
