@@ -231,7 +231,7 @@ def cmd_estimate(args):
 
 
 def cmd_demo(args):
-    """The data-generation part of the main job: one colon, its segments with holes, pictures, a summary."""
+    """The main job so far: one colon, its segments with holes, pictures, and the shipped model's estimates."""
     import numpy as np
 
     from colonbench.datagen.generate import GeneratorConfig, colon_samples, procedural_colon, write_sample_folder
@@ -256,7 +256,38 @@ def cmd_demo(args):
     c = np.array(covs)
     print(f"{len(c)} segments of 60 mm, camera holes: coverage mean {c.mean():.3f}, "
           f"min {c.min():.3f}, max {c.max():.3f}")
-    print(f"wrote {out}/colon.png and {out}/segments/ in {time.perf_counter() - t:.0f} s")
+    _demo_estimates(out, c)
+    print(f"wrote {out}/colon.png, {out}/segments/ and {out}/estimates/ in {time.perf_counter() - t:.0f} s")
+
+
+def _demo_estimates(out: Path, truth):
+    """Estimate every demo segment with the shipped model; print the errors."""
+    import numpy as np
+
+    try:
+        from colonbench.completion.method import CompletionMethod, shipped_model
+    except ImportError as exc:
+        print(f"(no estimates: {exc})")
+        return
+    if not shipped_model().is_file():
+        print("(no estimates: no model ships with this installation)")
+        return
+    from colonbench.pointio import read_points
+
+    method = CompletionMethod()
+    est_dir = out / "estimates"
+    est_dir.mkdir(parents=True, exist_ok=True)
+    errors = []
+    for k, folder in enumerate(sorted((out / "segments").iterdir())):
+        est = method.estimate(read_points(folder / "partial.ply"))
+        (est_dir / f"{folder.name}.json").write_text(json.dumps({**est.to_json(), "model": method.version}))
+        errors.append(est.coverage - truth[k])
+    e = 100 * np.asarray(errors)
+    constant = method.meta.get("train_coverage_mean")
+    ref = "" if constant is None else (f"; guessing the training data's mean coverage ({constant:.3f}) gives "
+                                       f"{100 * np.mean(np.abs(truth - constant)):.1f}")
+    print(f"shipped model ({method.version}): coverage error mean {np.nanmean(e):+.1f}, absolute mean "
+          f"{np.nanmean(np.abs(e)):.1f} points over {len(e)} segments{ref}")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -88,9 +88,9 @@ def test_gt_heatmap_as_prediction_bounds_the_error_after_the_network(smoke_datas
         assert np.mean(cl_d < 2.0) > 0.95  # centerline precision at 2 mm
     errors = np.abs(errors)
     assert len(errors) >= 6
-    # within a point of the truth on the median segment; the rest is false holes where marching cubes
-    # cannot follow a fold thinner than a voxel
-    assert np.median(errors) < 0.01 and errors.mean() < 0.015 and errors.max() < 0.04, errors
+    # about a point from the truth (on paper.yaml's test split: MAE 1.3, median 0.9 points); the rest is
+    # false holes where marching cubes cannot follow a fold thinner than a voxel (1.5 mm on these coarse colons)
+    assert np.median(errors) < 0.015 and errors.mean() < 0.02 and errors.max() < 0.04, errors
 
 
 @pytest.fixture(scope="module")
