@@ -77,6 +77,8 @@ class TrainConfig:
             raise InputError("augment_prob must be in [0, 1]")
         if self.lr <= 0:
             raise InputError("lr must be positive")
+        if self.seed < 0 or self.workers < 0:
+            raise InputError("seed and workers must be >= 0")
         from colonbench.datagen.config import from_dict
         from_dict(AugmentConfig, self.augment)
         return self

@@ -148,6 +148,8 @@ def test_training_needs_train_and_validation_splits(tmp_path):
     generate(MANIFESTS / "smoke.yaml", tmp_path / "d", splits=["test"], progress=False)
     with pytest.raises(InputError, match="no train and no validation split"):
         train(tmp_path / "d", tmp_path / "run", TrainConfig(epochs=1), device="cpu", progress=False)
+    with pytest.raises(InputError, match="seed and workers"):
+        train(tmp_path / "d", tmp_path / "run", TrainConfig(seed=-1), device="cpu", progress=False)
     with pytest.raises(InputError, match="no dataset.lock.json"):
         train(tmp_path / "nothing", tmp_path / "run", TrainConfig(epochs=1), device="cpu", progress=False)
 
