@@ -25,6 +25,7 @@ from scipy import ndimage
 
 from colonbench.datagen.centerline import Centerline
 from colonbench.estimate import Estimate
+from colonbench.grid import principal_axes
 
 #: Raster cell, mm.
 CELL_MM = 1.0
@@ -36,7 +37,7 @@ def pca_axis(points: np.ndarray, spacing: float = 0.5) -> np.ndarray:
     """A straight centerline: the points' first principal axis, over the extent of their projections."""
     pts = np.asarray(points, dtype=float)
     c = pts.mean(axis=0)
-    axis = np.linalg.svd(pts - c, full_matrices=False)[2][0]
+    axis = principal_axes(pts)[0]
     t = (pts - c) @ axis
     n = max(int(np.ceil((t.max() - t.min()) / spacing)), 1)
     return c + np.linspace(t.min(), t.max(), n + 1)[:, None] * axis

@@ -188,6 +188,15 @@ def estimate_name(path: Path) -> str:
     return path.parent.resolve().name if path.name == "partial.ply" else path.stem
 
 
+def write_estimate(out_dir: Path, name: str, est, model: str, **extra) -> Path:
+    """Write ``<out_dir>/<name>.json`` (the estimate contract plus ``model`` and ``extra``) atomically."""
+    path = Path(out_dir) / f"{name}.json"
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(json.dumps({**extra, **est.to_json(), "model": model}))
+    tmp.replace(path)
+    return path
+
+
 def cmd_estimate(args):
     """Estimate coverage, holes and centerline of partial segments; one JSON per input."""
     from colonbench.completion.method import CompletionMethod
@@ -213,10 +222,7 @@ def cmd_estimate(args):
             print(f"colonbench: error: {f}: {exc}", file=sys.stderr)
             failed += 1
             continue
-        result = {"input": str(f), **est.to_json(), "model": method.version}
-        tmp = out / f".{name}.json.tmp"
-        tmp.write_text(json.dumps(result))
-        tmp.replace(out / f"{name}.json")
+        write_estimate(out, name, est, method.version, input=str(f))
         if args.mesh:
             import numpy as np
 
@@ -280,7 +286,7 @@ def _demo_estimates(out: Path, truth):
     errors = []
     for k, folder in enumerate(sorted((out / "segments").iterdir())):
         est = method.estimate(read_points(folder / "partial.ply"))
-        (est_dir / f"{folder.name}.json").write_text(json.dumps({**est.to_json(), "model": method.version}))
+        write_estimate(est_dir, folder.name, est, method.version)
         errors.append(est.coverage - truth[k])
     e = 100 * np.asarray(errors)
     constant = method.meta.get("train_coverage_mean")

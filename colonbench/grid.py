@@ -75,11 +75,6 @@ class Grid:
         idx = np.asarray(ijk, dtype=float).reshape(-1, 3)
         return idx @ self.affine[:3, :3].T + self.affine[:3, 3]
 
-    def inside(self, ijk) -> np.ndarray:
-        """(n,) bool: which continuous voxel indices round to a voxel of the grid."""
-        idx = np.rint(np.asarray(ijk, dtype=float).reshape(-1, 3))
-        return np.all((idx >= 0) & (idx <= self.size - 1), axis=1)
-
 
 def principal_axes(points) -> np.ndarray:
     """(3, 3) rotation whose rows are the principal axes of ``points``, largest variance first.

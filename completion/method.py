@@ -28,7 +28,7 @@ from colonbench.completion.centerline import extract_centerline, resample
 from colonbench.completion.surface import complete
 from colonbench.errors import InputError
 from colonbench.estimate import Estimate
-from colonbench.grid import Grid, check_points, fit_grid
+from colonbench.grid import Grid, check_points, fit_grid, principal_axes
 from colonbench.heatmaps import input_from_points
 
 #: Fewest points accepted: below this there is no segment to complete.
@@ -52,9 +52,7 @@ def check_cloud(points, what: str = "point cloud") -> np.ndarray:
     if len(pts) < MIN_POINTS:
         raise InputError(f"{what}: only {len(pts)} point(s); a partial colon segment needs at least {MIN_POINTS} "
                          "(colonbench's clouds have about 2 points per mm^2)")
-    centred = pts - pts.mean(axis=0)
-    extent = float(np.ptp(centred @ np.linalg.svd(centred[:: max(len(pts) // 5000, 1)], full_matrices=False)[2].T,
-                          axis=0).max())
+    extent = float(np.ptp((pts - pts.mean(axis=0)) @ principal_axes(pts).T, axis=0).max())
     if extent < METRES_BELOW_MM:
         raise InputError(f"{what}: spans only {extent:.3g} units; colonbench works in millimetres, and this looks "
                          "like metres (multiply by 1000)")

@@ -25,13 +25,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import edt as _edt
 import numpy as np
 from scipy import ndimage
 from scipy.spatial import cKDTree
 from skimage.measure import marching_cubes
 
-from colonbench.heatmaps import densify_polyline
+from colonbench.grid import Grid
+from colonbench.heatmaps import distance_to, voxelize_polyline
 
 #: Voxels below this value are surface voxels.
 SURFACE_THRESHOLD = 0.15
@@ -87,17 +87,15 @@ def resigned_field(heatmap: np.ndarray, centerline_vox: np.ndarray, threshold: f
     surface = h < threshold
     if not surface.any() or len(centerline_vox) == 0:
         return np.zeros_like(h), np.zeros(h.shape, bool)
-    line = np.zeros(h.shape, bool)
-    idx = np.rint(densify_polyline(centerline_vox, 0.5)).astype(int)
-    idx = idx[np.all((idx >= 0) & (idx < np.array(h.shape)), axis=1)]
-    line[idx[:, 0], idx[:, 1], idx[:, 2]] = True
+    # the centerline is voxelized as for the training targets, on a grid whose voxel index is the coordinate
+    line, _ = voxelize_polyline(Grid(np.eye(4), h.shape[0]), centerline_vox)
     if not line.any():
         return np.zeros_like(h), np.zeros(h.shape, bool)
-    d_c = _edt.edt(np.ascontiguousarray(~line), black_border=False, parallel=1).astype(np.float32)
+    d_c = distance_to(line)
     weight = np.where(surface, threshold - h, 0.0).astype(np.float32)
     num = ndimage.gaussian_filter(weight * d_c, sigma, mode="constant")
     den = ndimage.gaussian_filter(weight, sigma, mode="constant")
-    near = _edt.edt(np.ascontiguousarray(~surface), black_border=False, parallel=1) <= band
+    near = distance_to(surface) <= band
     valid = den > 1e-6
     mask = near & valid
     wall = np.where(valid, num / np.maximum(den, 1e-12), 0.0)

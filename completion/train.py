@@ -124,6 +124,15 @@ def evaluate_l2(net, dataset, device, batch_size: int = 4, rank: int = 0, world:
     return float(total[0] / total[1])
 
 
+#: Settings a resumed run may change: how long it runs and how often it saves.
+_RUN_LENGTH = ("max_minutes", "epochs", "checkpoint_minutes")
+
+
+def _fixed_settings(train_config: dict) -> dict:
+    """The settings a resumed run must share with the stored one."""
+    return {k: v for k, v in train_config.items() if k not in _RUN_LENGTH}
+
+
 def _data_lock(data_dir: Path) -> dict:
     lock = data_dir / LOCK_NAME
     if not lock.exists():
@@ -188,9 +197,7 @@ def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "a
         saved = torch.load(ckpt, map_location=dev, weights_only=False)
         if saved["settings"]["data_sha256"] != data_hash:
             raise InputError(f"{out} is a run on other data (dataset manifest differs); use another --out")
-        old = {k: v for k, v in saved["settings"]["train_config"].items() if k not in ("max_minutes", "epochs",
-                                                                                        "checkpoint_minutes")}
-        new = {k: v for k, v in asdict(cfg).items() if k not in ("max_minutes", "epochs", "checkpoint_minutes")}
+        old, new = _fixed_settings(saved["settings"]["train_config"]), _fixed_settings(asdict(cfg))
         if old != new or saved["settings"]["world_size"] != world:
             raise InputError(f"{out} holds a run with other settings ({old}, {saved['settings']['world_size']} "
                              "process(es)); resume with the same settings or use another --out")

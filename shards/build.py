@@ -101,6 +101,7 @@ def build_shard(resolved: dict, unit: Unit, out_dir) -> dict:
             centerline = surface.centerline.astype(np.float32)
             row = writer.add_segment(segment_id=k, window_mm=surface.window, complete_area_mm2=surface.mesh.area,
                                      vertices=verts, faces=faces, centerline=centerline)
+            verts64, centerline64 = verts.astype(float), centerline.astype(float)  # once for all permutations
             t = stages.add("segment", t)
             for p in range(perms):
                 hole_model = draw_mix(split["hole_models"], seed, "hole_model", unit.colon_id, lmm, k, p)
@@ -109,10 +110,10 @@ def build_shard(resolved: dict, unit: Unit, out_dir) -> dict:
                 s = make_sample(rng, prepared.scene, prepared.colon.centerline, surface, hole_model,
                                 config.camera, config.spheres, config.segments, noise_mm=sigma)
                 partial = s.partial_points.astype(np.float32)
+                partial64 = partial.astype(float)
                 t = stages.add("sample", t)
-                grid = fit_grid(partial.astype(float), size=size, margin=margin, min_extent_mm=min_extent)
-                hm = sample_heatmaps(grid, partial.astype(float), verts.astype(float), faces,
-                                     centerline.astype(float))
+                grid = fit_grid(partial64, size=size, margin=margin, min_extent_mm=min_extent)
+                hm = sample_heatmaps(grid, partial64, verts64, faces, centerline64)
                 t = stages.add("heatmaps", t)
                 writer.add_sample(hm.input, hm.target, grid_affine=grid.affine, segment=row, permutation=p,
                                   hole_model=schema.HOLE_MODEL_CODES[hole_model], noise_mm=sigma,

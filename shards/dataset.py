@@ -173,51 +173,44 @@ def _generate_locked(resolved, digest, out: Path, workers, scheduler, splits, pr
         tmp.unlink()  # left by a killed run; never a finished shard
 
     todo_all = units(resolved, splits)
-    known = {}
-    lock_path = out / LOCK_NAME
-    if lock_path.exists():
-        try:
-            known = json.loads(lock_path.read_text()).get("shards", {})
-        except (json.JSONDecodeError, AttributeError):
-            known = {}
-    done, todo = {}, []
-    for u in todo_all:
-        path = out / u.name
-        if path.exists() and _shard_ok(path, digest):
-            entry = known.get(u.name, {})
-            if entry.get("bytes") == path.stat().st_size and "sha256" in entry:
-                done[u.name] = entry
-            else:
-                done[u.name] = {"sha256": sha256_file(path), "bytes": path.stat().st_size}
-        else:
-            todo.append(u)
+    todo = [u for u in todo_all if not ((out / u.name).exists() and _shard_ok(out / u.name, digest))]
+    hashes = _locked_shards(out)  # finished shards keep the hash of the last lock; write_lock hashes the others
     failures = []
-    bar = _progress(len(todo_all), len(done), progress)
+    bar = _progress(len(todo_all), len(todo_all) - len(todo), progress)
     try:
         fn = functools.partial(_job, resolved, str(out))
         for info in _execute(fn, todo, workers, scheduler):
             if "error" in info:
                 failures.append(f"{info['name']}: {info['error']}")
             else:
-                done[info["name"]] = {"sha256": info["sha256"], "bytes": info["bytes"]}
+                hashes[info["name"]] = {"sha256": info["sha256"], "bytes": info["bytes"]}
             bar.update(1)
     finally:
         bar.close()
     if failures:
         raise ColonbenchError(f"{len(failures)} shard(s) failed; the others are kept and a rerun makes only the "
                               "missing ones:\n  " + "\n  ".join(failures))
-    return write_lock(resolved, out)
+    return write_lock(resolved, out, hashes)
 
 
-def write_lock(resolved: dict, out: Path) -> dict:
-    """Describe every shard of the manifest present in ``out``: hashes, counts and per-split statistics."""
+def _locked_shards(out: Path) -> dict:
+    """The ``shards`` entries of the lock in ``out`` ({} when there is none or it is unreadable)."""
+    try:
+        shards = json.loads((out / LOCK_NAME).read_text()).get("shards", {})
+    except (OSError, json.JSONDecodeError, AttributeError):
+        return {}
+    return shards if isinstance(shards, dict) else {}
+
+
+def write_lock(resolved: dict, out: Path, hashes: dict | None = None) -> dict:
+    """Describe every shard of the manifest present in ``out``: hashes, counts and per-split statistics.
+
+    ``hashes`` maps shard names to known ``{"sha256", "bytes"}`` (default: the
+    current lock's); a shard whose size differs from its known entry, or that
+    has none, is hashed here.
+    """
     digest = manifest_hash(resolved)
-    previous = {}
-    if (out / LOCK_NAME).exists():
-        try:
-            previous = json.loads((out / LOCK_NAME).read_text()).get("shards", {})
-        except (json.JSONDecodeError, AttributeError):
-            previous = {}
+    previous = _locked_shards(out) if hashes is None else hashes
     shards, missing, per_split = {}, [], {}
     for u in units(resolved):
         path = out / u.name
