@@ -50,3 +50,40 @@ def threshold_coverage(heatmap: np.ndarray, grid: Grid, points, threshold: float
     coverage = float(1.0 - hole.mean()) if len(vox) else float("nan")
     centerline = resample(grid.to_mm(cl), 0.5) if len(cl) else np.zeros((0, 3))
     return Estimate(coverage, grid.to_mm(vox[hole]) if hole.any() else np.zeros((0, 3)), centerline, method)
+
+
+class ThresholdMethod:
+    """Baseline 1 behind the method interface: the shared network prediction, thresholded.
+
+    Parameters
+    ----------
+    model : path, optional
+        Model of the prediction (default: the shipped one); shared with the
+        ``completion`` method in the same process, so the network runs once.
+    device : str
+    threshold : float
+        Voxels of the predicted heatmap below this are surface voxels.
+    """
+
+    name = "thresholding"
+
+    def __init__(self, model=None, device: str = "cpu", threshold: float = THRESHOLD):
+        from colonbench.completion.method import shared_predictor
+
+        self.predictor = shared_predictor(model, device)
+        self.threshold = float(threshold)
+        self.version = f"{self.predictor.version},threshold={self.threshold:g}"
+
+    def estimate(self, points) -> Estimate:
+        """Coverage, holes and centerline of one partial segment (mm)."""
+        import time
+
+        from colonbench.completion.method import check_cloud
+
+        pts = check_cloud(points)
+        p = self.predictor(pts)
+        cl = p.centerline_vox
+        t = time.perf_counter()
+        est = threshold_coverage(p.heatmap, p.grid, pts, self.threshold, self.name, cl)
+        est.seconds = {**p.seconds, "threshold": time.perf_counter() - t}
+        return est

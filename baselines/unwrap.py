@@ -121,3 +121,51 @@ def unwrap_coverage(points, centerline, method: str = "unwrap", cell_mm: float =
     k = np.clip(np.searchsorted(line.arclength, s_c), 0, len(line.points) - 1)
     hole_pts = (line.points[k] + row_radius[hr, None] * (np.cos(th)[:, None] * nrm[k] + np.sin(th)[:, None] * bin_[k]))
     return Estimate(coverage, hole_pts, line.points, method)
+
+
+class UnwrapMethod:
+    """Baseline 3 as the paper ran it: unwrapping around the centerline of the shared network prediction.
+
+    Parameters
+    ----------
+    model : path, optional
+        Model of the prediction (default: the shipped one); shared with the
+        other methods built on it in the same process.
+    device : str
+    """
+
+    name = "unwrap"
+
+    def __init__(self, model=None, device: str = "cpu"):
+        from colonbench.completion.method import shared_predictor
+
+        self.predictor = shared_predictor(model, device)
+        self.version = f"{self.predictor.version},cell={CELL_MM:g}mm"
+
+    def estimate(self, points) -> Estimate:
+        """Coverage, holes and centerline of one partial segment (mm)."""
+        import time
+
+        from colonbench.completion.method import check_cloud
+
+        pts = check_cloud(points)
+        p = self.predictor(pts)
+        cl = p.centerline_vox
+        t = time.perf_counter()
+        est = unwrap_coverage(pts, p.grid.to_mm(cl) if len(cl) else np.zeros((0, 3)), self.name)
+        est.seconds = {**p.seconds, "unwrap": time.perf_counter() - t}
+        return est
+
+
+class UnwrapPCAMethod:
+    """Baseline 3 as Ma et al. ran it: unwrapping around a straight axis, the points' first principal component."""
+
+    name = "unwrap-pca"
+    version = f"cell={CELL_MM:g}mm"
+
+    def estimate(self, points) -> Estimate:
+        """Coverage, holes and (straight) centerline of one partial segment (mm)."""
+        from colonbench.completion.method import check_cloud
+
+        pts = check_cloud(points)
+        return unwrap_coverage(pts, pca_axis(pts), self.name)
