@@ -33,7 +33,7 @@ def _shade(vertices, faces, color, light=(0.4, -0.5, 0.75)):
 
 
 def _axes(fig, pos=111, title=None):
-    ax = fig.add_subplot(pos, projection="3d")
+    ax = fig.add_subplot(*pos, projection="3d") if isinstance(pos, tuple) else fig.add_subplot(pos, projection="3d")
     ax.set_xlabel("x (mm)")
     ax.set_ylabel("y (mm)")
     ax.set_zlabel("z (mm)")

@@ -1,0 +1,461 @@
+"""The benchmark harness: methods over the test shards of a dataset, per segment, resumable, in parallel.
+
+A run folder holds::
+
+    run.json                    what was evaluated: data identity, noise levels and seed,
+                                metric settings, methods with versions, package versions
+    parts/<method>/<unit>.csv   per-segment rows of one shard at one noise level (resume points)
+    results/<method>.csv        every per-segment row of a method, once all its parts exist
+    results/<method>.json       its summary (colonbench.benchmark.summary) with the run's settings
+    examples/<method>/*.npz     a few segments' completed meshes, for the Fig. 5 triplets
+
+One unit of work is one shard at one noise level. Each worker process loads
+the methods once; for every segment of a unit the noise is drawn once
+(stream ``("eval-noise", sigma in um, shard, index)`` under ``noise_seed``, so
+every method and every rerun sees the same noisy cloud), and methods built on
+the network share its prediction (:func:`colonbench.completion.method.shared_predictor`).
+A method that raises on a segment gets a row with the error and NaN metrics;
+the leaderboard counts these rows, it never drops them.
+
+A rerun with the same data, noise and methods finishes what is missing. A
+rerun with more methods adds them to the run; a method whose version changed
+is refused (start a new run folder).
+"""
+
+from __future__ import annotations
+
+import fcntl
+import hashlib
+import json
+import multiprocessing
+import os
+import platform
+import resource
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from colonbench import seeding
+from colonbench._version import __version__
+from colonbench.benchmark.metrics import THRESHOLDS_MM, segment_metrics
+from colonbench.benchmark.registry import as_estimate, load_method
+from colonbench.benchmark.summary import metric_columns, summarize
+from colonbench.errors import ColonbenchError, InputError
+
+RUN_FILE = "run.json"
+RUN_FORMAT = "colonbench-run"
+RUN_FORMAT_VERSION = 1
+#: Per-segment columns, in order (then the metric columns, ``seconds`` and ``error``).
+ID_COLUMNS = ["method", "shard", "index", "colon_id", "length_mm", "hole_model", "noise_mm", "true_coverage",
+              "coverage", "coverage_error"]
+
+
+def result_columns() -> list[str]:
+    """Columns of a per-segment results CSV."""
+    return ID_COLUMNS + metric_columns() + ["seconds", "error"]
+
+
+# ---------------------------------------------------------------------------------------------- the data
+
+
+def _load_lock(data: Path) -> dict:
+    from colonbench.shards.dataset import LOCK_NAME
+
+    path = data / LOCK_NAME
+    if not path.is_file():
+        raise InputError(f"{data}: no {LOCK_NAME}; generate the dataset first (colonbench generate)")
+    try:
+        return json.loads(path.read_text())
+    except json.JSONDecodeError as exc:
+        raise InputError(f"{path}: unreadable ({exc}); run colonbench verify") from None
+
+
+def select(data, split: str = "test", limit: int | None = None) -> tuple[dict, list[tuple[str, list[int]]]]:
+    """The samples a run evaluates.
+
+    Returns
+    -------
+    identity : dict
+        ``manifest_name``, ``manifest_sha256``, ``config_sha256``, ``split``,
+        ``samples`` and ``samples_sha256`` (of the shards' sha256 and the
+        chosen indices): runs with equal identities evaluated the same data.
+    picks : list of (shard name, [index, ...])
+        In the lock's order.
+    """
+    data = Path(data)
+    lock = _load_lock(data)
+    shards = {n: e for n, e in lock.get("shards", {}).items() if e.get("split") == split}
+    missing = [n for n in lock.get("missing", []) if n.startswith(f"{split}/")]
+    if missing:
+        raise InputError(f"{data}: split {split!r} is incomplete ({len(missing)} shard(s) missing, e.g. "
+                         f"{missing[0]}); finish it with colonbench generate --splits {split}")
+    if not shards:
+        raise InputError(f"{data}: no shards of split {split!r}")
+    for name, e in shards.items():
+        path = data / name
+        if not path.is_file() or path.stat().st_size != e["bytes"]:
+            raise InputError(f"{path}: missing or not the size its lock records; run colonbench verify {data}")
+    flat = [(n, i) for n, e in shards.items() for i in range(int(e["samples"]))]
+    if limit is not None:
+        if limit < 1:
+            raise InputError(f"--limit must be >= 1, got {limit}")
+        keep = np.unique(np.linspace(0, len(flat) - 1, min(limit, len(flat))).astype(int))
+        flat = [flat[k] for k in keep]
+    h = hashlib.sha256()
+    picks: dict[str, list[int]] = {}
+    for n, i in flat:
+        h.update(f"{shards[n]['sha256']} {i}\n".encode())
+        picks.setdefault(n, []).append(i)
+    identity = {"manifest_name": lock.get("manifest_name"), "manifest_sha256": lock.get("manifest_sha256"),
+                "config_sha256": lock.get("config_sha256"), "split": split, "samples": len(flat),
+                "samples_sha256": h.hexdigest()}
+    return identity, list(picks.items())
+
+
+def noisy(points: np.ndarray, sigma: float, seed: int, shard: str, index: int) -> np.ndarray:
+    """The partial cloud with Gaussian noise of ``sigma`` mm, the same draw for every method and rerun."""
+    points = np.asarray(points, dtype=float)
+    if sigma <= 0:
+        return points
+    rng = seeding.rng(seed, "eval-noise", int(round(sigma * 1000)), shard, int(index))
+    return points + rng.normal(0.0, sigma, points.shape)
+
+
+# ---------------------------------------------------------------------------------------------- one unit
+
+_WORKER: dict = {}
+
+
+def _init_worker(specs: list[str], options: dict, threads: int):
+    try:
+        import torch
+
+        torch.set_num_threads(threads)
+    except ImportError:
+        pass
+    _WORKER["methods"] = {m.name: m for m in (load_method(s, **options) for s in specs)}
+
+
+def _truth(shard, i: int, geo: dict, needs_heatmap: bool) -> dict:
+    truth = {"coverage": geo["coverage"], "hole_points": geo["hole_points"].astype(float),
+             "centerline": geo["centerline"].astype(float), "vertices": geo["vertices"].astype(float),
+             "faces": geo["faces"]}
+    if needs_heatmap:
+        truth["target"] = shard.heatmaps(i)[1]
+        truth["grid"] = shard.grid(i)
+    return truth
+
+
+def _one(method, pts: np.ndarray, truth: dict):
+    t = time.perf_counter()
+    result = method.estimate(pts, truth=truth) if getattr(method, "uses_truth", False) else method.estimate(pts)
+    wall = time.perf_counter() - t
+    est = as_estimate(result, method.name)
+    stages = getattr(est, "seconds", None) or {}
+    # shared steps (the network) are counted in full for every method that uses them
+    return est, (float(sum(stages.values())) if stages else wall)
+
+
+def _save_example(path: Path, pts, est, truth):
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    with open(tmp, "wb") as fh:
+        np.savez_compressed(fh, partial_points=pts.astype(np.float32),
+                            mesh_vertices=np.asarray(est.mesh_vertices, np.float32),
+                            mesh_faces=np.asarray(est.mesh_faces, np.int32),
+                            hole_vertices=np.asarray(est.hole_vertices, bool),
+                            centerline=np.asarray(est.centerline, np.float32),
+                            true_centerline=truth["centerline"].astype(np.float32),
+                            coverage=np.float64(est.coverage), true_coverage=np.float64(truth["coverage"]))
+    tmp.replace(path)
+
+
+def run_unit(data: str, shard_name: str, indices: list[int], sigma: float, noise_seed: int, names: list[str],
+             examples: list[int], run_dir: str, methods: dict | None = None) -> dict[str, list[dict]]:
+    """Every method in ``names`` on the chosen samples of one shard at one noise level.
+
+    Returns
+    -------
+    dict
+        ``{method name: [per-segment row, ...]}`` (columns: :func:`result_columns`).
+    """
+    from colonbench.shards.reader import Shard
+
+    methods = methods if methods is not None else _WORKER["methods"]
+    chosen = [methods[n] for n in names]
+    needs_heatmap = any(getattr(m, "uses_truth", False) for m in chosen)
+    out = {n: [] for n in names}
+    with Shard(Path(data) / shard_name) as shard:
+        for i in indices:
+            geo = shard.geometry(i)
+            truth = _truth(shard, i, geo, needs_heatmap)
+            pts = noisy(geo["partial_points"], sigma, noise_seed, shard_name, i)
+            base = {"shard": shard_name, "index": int(i), "colon_id": geo["colon_id"],
+                    "length_mm": geo["length_mm"], "hole_model": geo["hole_model"], "noise_mm": float(sigma),
+                    "true_coverage": geo["coverage"]}
+            for m in chosen:
+                row = {"method": m.name, **base}
+                try:
+                    est, seconds = _one(m, pts, truth)
+                except Exception as exc:  # noqa: BLE001 - recorded in the row and counted in the tables
+                    msg = str(exc) if isinstance(exc, ColonbenchError) else f"{type(exc).__name__}: {exc}"
+                    row.update({"coverage": np.nan, "coverage_error": np.nan, "seconds": np.nan,
+                                "error": msg.replace("\n", " ")[:500]})
+                    row.update({c: np.nan for c in metric_columns()})
+                else:
+                    metrics = segment_metrics(est.coverage, est.holes, est.centerline, truth)
+                    row.update({"coverage": est.coverage, **metrics, "seconds": seconds, "error": ""})
+                    if i in examples and len(getattr(est, "mesh_faces", ())):
+                        stem = shard_name.replace("/", "_").removesuffix(".h5")
+                        _save_example(Path(run_dir) / "examples" / m.name / f"{stem}-{i:03d}-noise{sigma:g}.npz",
+                                      pts, est, truth)
+                out[m.name].append(row)
+    return out
+
+
+# ---------------------------------------------------------------------------------------------- the run
+
+
+def _unit_key(shard_name: str, sigma: float) -> str:
+    return f"{shard_name.replace('/', '_').removesuffix('.h5')}__noise{sigma:g}"
+
+
+def _write_csv(path: Path, rows: list[dict] | pd.DataFrame):
+    path.parent.mkdir(parents=True, exist_ok=True)
+    df = rows if isinstance(rows, pd.DataFrame) else pd.DataFrame(rows, columns=result_columns())
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    df.to_csv(tmp, index=False)
+    tmp.replace(path)
+
+
+def read_rows(path) -> pd.DataFrame:
+    """A per-segment results CSV (columns: :func:`result_columns`; ``error`` is "" where there was none)."""
+    df = pd.read_csv(path, dtype={"error": str, "shard": str, "method": str, "hole_model": str})
+    df["error"] = df["error"].fillna("")
+    return df
+
+
+def _write_json(path: Path, obj: dict):
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    tmp.write_text(json.dumps(obj, indent=1, default=_json_default))
+    tmp.replace(path)
+
+
+def _json_default(o):
+    if isinstance(o, (np.floating, np.integer)):
+        return o.item()
+    raise TypeError(f"not JSON serializable: {type(o).__name__}")
+
+
+def versions() -> dict:
+    """Versions of colonbench, Python and the libraries that shape the numbers."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    out = {"colonbench": __version__, "python": platform.python_version()}
+    for pkg in ("numpy", "scipy", "scikit-image", "scikit-fmm", "edt", "torch", "monai", "h5py"):
+        try:
+            out[pkg] = version(pkg)
+        except PackageNotFoundError:
+            pass
+    return out
+
+
+def _method_record(spec: str, m) -> dict:
+    return {"spec": spec, "version": str(getattr(m, "version", "unversioned")),
+            "uses_truth": bool(getattr(m, "uses_truth", False)),
+            "reference": bool(getattr(m, "reference", getattr(m, "uses_truth", False))),
+            "class": f"{type(m).__module__}.{type(m).__qualname__}"}
+
+
+def _open_run(out: Path, settings: dict, methods: dict[str, dict]) -> dict:
+    """The run record: a new one, or the existing one extended by new methods (after checking it matches)."""
+    path = out / RUN_FILE
+    if path.exists():
+        try:
+            run = json.loads(path.read_text())
+        except json.JSONDecodeError as exc:
+            raise InputError(f"{path}: unreadable ({exc})") from None
+        if run.get("format") != RUN_FORMAT:
+            raise InputError(f"{path}: not a colonbench run")
+        for key, value in settings.items():
+            if json.dumps(run.get(key), sort_keys=True) != json.dumps(value, sort_keys=True, default=_json_default):
+                raise InputError(f"{out} is a run with other {key} ({run.get(key)!r}, now {value!r}); "
+                                 "evaluate into a new run folder")
+        for name, rec in methods.items():
+            old = run["methods"].get(name)
+            if old is not None and old["version"] != rec["version"]:
+                raise InputError(f"{out}: method {name!r} was evaluated as version {old['version']!r}, it is now "
+                                 f"{rec['version']!r}; evaluate into a new run folder")
+            run["methods"].setdefault(name, rec)
+    else:
+        run = {"format": RUN_FORMAT, "format_version": RUN_FORMAT_VERSION, **settings, "methods": dict(methods),
+               "sessions": []}
+    return run
+
+
+def _finalize(out: Path, run: dict, name: str, keys: list[str]) -> Path:
+    df = pd.concat([read_rows(out / "parts" / name / f"{k}.csv") for k in keys], ignore_index=True)
+    _write_csv(out / "results" / f"{name}.csv", df)
+    rec = run["methods"][name]
+    summary = {"method": name, **rec, "data": run["data"], "noise_mm": run["noise_mm"],
+               "noise_seed": run["noise_seed"], "thresholds_mm": run["thresholds_mm"], "versions": run["versions"],
+               "summary": summarize(df).to_dict("records")}
+    _write_json(out / "results" / f"{name}.json", summary)
+    return out / "results" / f"{name}.csv"
+
+
+def evaluate(data, methods, out, noise=(0.0, 0.5), split: str = "test", limit: int | None = None,
+             workers: int = 1, model=None, device: str = "cpu", examples: int = 3, noise_seed: int = 0,
+             progress: bool = True) -> Path:
+    """Evaluate methods on a dataset split; write (or finish) a run folder.
+
+    Parameters
+    ----------
+    data : path
+        Dataset folder (``colonbench generate``).
+    methods : list of str
+        Registered names or ``module:Class`` specs (:mod:`colonbench.benchmark.registry`).
+    out : path
+        Run folder.
+    noise : sequence of float
+        Gaussian noise sigmas added to the inputs, mm.
+    split : str
+    limit : int, optional
+        Only this many samples, spread evenly over the split.
+    workers : int
+        Processes (each loads the methods once and uses one torch thread).
+    model, device
+        Passed to methods that take them (default: the shipped model, CPU).
+    examples : int
+        Segments whose completed meshes are kept for the Fig. 5 triplets.
+    noise_seed : int
+        Root seed of the input noise.
+    progress : bool
+
+    Returns
+    -------
+    Path
+        The run folder.
+    """
+    data, out = Path(data), Path(out)
+    if workers < 1:
+        raise InputError(f"--workers must be >= 1, got {workers}")
+    sigmas = sorted({float(s) for s in noise})
+    if not sigmas or any(s < 0 or not np.isfinite(s) for s in sigmas):
+        raise InputError(f"noise levels must be non-negative mm, got {list(noise)}")
+    specs = [s.strip() for s in methods if s.strip()]
+    if not specs:
+        raise InputError("no methods given")
+    identity, picks = select(data, split, limit)
+    options = {"model": str(model) if model is not None else None, "device": device}
+    t0 = time.perf_counter()
+    loaded = {}
+    for spec in specs:
+        m = load_method(spec, **options)
+        if m.name in loaded:
+            raise InputError(f"two methods are named {m.name!r}; rename one")
+        loaded[m.name] = (spec, m)
+    records = {name: _method_record(spec, m) for name, (spec, m) in loaded.items()}
+    settings = {"data": identity, "noise_mm": sigmas, "noise_seed": int(noise_seed),
+                "thresholds_mm": list(THRESHOLDS_MM)}
+    if out.is_dir() and not (out / RUN_FILE).exists() and any(not p.name.startswith(".") for p in out.iterdir()):
+        raise InputError(f"{out} is not empty and holds no {RUN_FILE}; give a new or empty run folder")
+    out.mkdir(parents=True, exist_ok=True)
+    with open(out / ".evaluate.lock", "w") as guard:
+        try:
+            fcntl.flock(guard, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            raise InputError(f"{out}: another evaluation is running in this folder") from None
+        run = _open_run(out, settings, records)
+        run["versions"] = run.get("versions") or versions()
+        run["data_path"] = str(data)
+        _write_json(out / RUN_FILE, run)
+        for tmp in out.rglob(".*.tmp-*"):
+            tmp.unlink()
+        return _run(out, run, data, picks, sigmas, loaded, options, workers, examples, noise_seed, progress, t0)
+
+
+def _run(out, run, data, picks, sigmas, loaded, options, workers, examples, noise_seed, progress, t0) -> Path:
+    flat = [(n, i) for n, idx in picks for i in idx]
+    ex_keys = {flat[k] for k in np.unique(np.linspace(0, len(flat) - 1, examples).astype(int))} if examples else set()
+    units, keys = [], []
+    for shard_name, idx in picks:
+        for s in sigmas:
+            key = _unit_key(shard_name, s)
+            keys.append(key)
+            todo = [n for n in loaded if not (out / "parts" / n / f"{key}.csv").exists()]
+            if todo:
+                ex = [i for i in idx if (shard_name, i) in ex_keys]
+                units.append((shard_name, idx, s, todo, ex, key))
+    from tqdm.auto import tqdm
+
+    total = sum(len(u[1]) for u in units)
+    bar = tqdm(total=total, unit="segment", desc="evaluate", disable=None if progress else True, dynamic_ncols=True)
+    args = lambda u: (str(data), u[0], u[1], u[2], noise_seed, u[3], u[4], str(out))  # noqa: E731
+    try:
+        if workers == 1 or len(units) <= 1:
+            methods = {n: m for n, (_, m) in loaded.items()}
+            for u in units:
+                _store(out, u, run_unit(*args(u), methods=methods))
+                bar.update(len(u[1]))
+        else:
+            ctx = multiprocessing.get_context("spawn")  # torch and HDF5 are not fork-safe
+            specs = [spec for spec, _ in loaded.values()]
+            with ProcessPoolExecutor(min(workers, len(units)), mp_context=ctx, initializer=_init_worker,
+                                     initargs=(specs, options, 1)) as pool:
+                futures = {pool.submit(run_unit, *args(u)): u for u in units}
+                for f in as_completed(futures):
+                    _store(out, futures[f], f.result())
+                    bar.update(len(futures[f][1]))
+    finally:
+        bar.close()
+    for name in loaded:
+        _finalize(out, run, name, keys)
+    wall = time.perf_counter() - t0
+    peak = max(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss,
+               resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss) / 1024
+    run["sessions"].append({"segments": total, "wall_seconds": round(wall, 1), "workers": workers,
+                            "peak_process_mib": round(peak), "finished": time.strftime("%Y-%m-%dT%H:%M:%S")})
+    run["complete"] = True
+    _write_json(out / RUN_FILE, run)
+    return out
+
+
+def _store(out: Path, unit, rows: dict):
+    key = unit[5]
+    for name, r in rows.items():
+        _write_csv(out / "parts" / name / f"{key}.csv", r)
+
+
+def load_results(run_dir) -> tuple[dict, pd.DataFrame]:
+    """A finished run: its record and every per-segment row of every method.
+
+    Raises
+    ------
+    InputError
+        Not a run, or a run with methods whose results are not all there.
+    """
+    run_dir = Path(run_dir)
+    path = run_dir / RUN_FILE
+    if not path.is_file():
+        raise InputError(f"{run_dir}: not a colonbench run (no {RUN_FILE}); colonbench evaluate writes one")
+    try:
+        run = json.loads(path.read_text())
+    except json.JSONDecodeError as exc:
+        raise InputError(f"{path}: unreadable ({exc})") from None
+    if run.get("format") != RUN_FORMAT or run.get("format_version") != RUN_FORMAT_VERSION:
+        raise InputError(f"{path}: not a colonbench run of format version {RUN_FORMAT_VERSION}")
+    frames = []
+    for name in run["methods"]:
+        csv = run_dir / "results" / f"{name}.csv"
+        if not csv.is_file():
+            raise InputError(f"{run_dir}: method {name!r} is not finished; rerun colonbench evaluate into it")
+        df = read_rows(csv)
+        expected = run["data"]["samples"] * len(run["noise_mm"])
+        if len(df) != expected:
+            raise InputError(f"{csv}: {len(df)} rows, the run needs {expected}; rerun colonbench evaluate into it")
+        frames.append(df)
+    return run, pd.concat(frames, ignore_index=True)

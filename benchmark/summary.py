@@ -1,0 +1,75 @@
+"""Summary statistics of per-segment results, defined once for run summaries and leaderboards.
+
+Per noise level and method:
+
+* coverage, in percentage points of the absolute error ``|estimated - true|``:
+  MAE (mean), median, q95, and the bias (mean signed error); segments where a
+  method returned no coverage (NaN) or failed are counted as undefined, never
+  averaged in silently;
+* for each precision / recall column (:func:`metric_columns`): mean, median,
+  q25 and q75 over the segments where it is defined, and the count of
+  undefined ones (one side empty, or the method failed);
+* ``seconds``: mean wall time per segment (shared steps counted in full for
+  every method that uses them);
+* ``segments`` and ``failed``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from colonbench.benchmark.metrics import THRESHOLDS_MM
+
+#: Columns of a per-segment result row that identify the sample.
+KEY_COLUMNS = ("shard", "index", "noise_mm")
+#: Quantiles reported for precision / recall.
+QUANTILES = {"median": 0.5, "q25": 0.25, "q75": 0.75}
+
+
+def metric_columns(thresholds=THRESHOLDS_MM) -> list[str]:
+    """Names of the precision / recall columns: ``holes_precision_1mm``, ..., ``centerline_recall_2mm``."""
+    return [f"{what}_{pr}_{th:g}mm" for th in thresholds for what in ("holes", "centerline")
+            for pr in ("precision", "recall")]
+
+
+def _stats(g: pd.DataFrame, metrics: list[str]) -> dict:
+    err = g["coverage_error"].to_numpy(float)
+    ok = err[~np.isnan(err)]
+    a = np.abs(ok)
+    row = {"segments": len(g), "failed": int(g["error"].fillna("").astype(str).ne("").sum()),
+           "coverage_undefined": int(np.isnan(err).sum()),
+           "coverage_mae": 100 * float(a.mean()) if len(a) else np.nan,
+           "coverage_median": 100 * float(np.median(a)) if len(a) else np.nan,
+           "coverage_bias": 100 * float(ok.mean()) if len(a) else np.nan,
+           "coverage_q95": 100 * float(np.quantile(a, 0.95)) if len(a) else np.nan,
+           "seconds": float(g["seconds"].mean())}
+    for m in metrics:
+        v = g[m].to_numpy(float)
+        d = v[~np.isnan(v)]
+        row[f"{m}_mean"] = float(d.mean()) if len(d) else np.nan
+        for q, at in QUANTILES.items():
+            row[f"{m}_{q}"] = float(np.quantile(d, at)) if len(d) else np.nan
+        row[f"{m}_undefined"] = int(len(v) - len(d))
+    return row
+
+
+def summarize(results: pd.DataFrame, thresholds=THRESHOLDS_MM) -> pd.DataFrame:
+    """One row per (noise level, method) of per-segment results.
+
+    Parameters
+    ----------
+    results : DataFrame
+        Per-segment rows with ``method``, ``noise_mm``, ``coverage_error``
+        (fraction), ``seconds``, ``error`` and the :func:`metric_columns`.
+
+    Returns
+    -------
+    DataFrame
+        ``noise_mm``, ``method`` and the statistics above (coverage in points).
+    """
+    metrics = metric_columns(thresholds)
+    rows = []
+    for (noise, method), g in results.groupby(["noise_mm", "method"], sort=True):
+        rows.append({"noise_mm": float(noise), "method": method, **_stats(g, metrics)})
+    return pd.DataFrame(rows)

@@ -1,0 +1,1 @@
+"""colonbench.reports: leaderboard tables and figures rebuilt from stored benchmark runs."""
