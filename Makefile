@@ -24,7 +24,7 @@ test: $(STAMP)
 	$(BIN)/python -m pytest -q
 
 demo: $(STAMP)
-	$(BIN)/colonbench demo --out out/demo
+	$(BIN)/colonbench demo --out out/demo --workers 2
 
 bench: $(STAMP)
 	$(BIN)/python scripts/bench_datagen.py

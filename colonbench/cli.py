@@ -199,7 +199,7 @@ def write_estimate(out_dir: Path, name: str, est, model: str, **extra) -> Path:
 
 def cmd_estimate(args):
     """Estimate coverage, holes and centerline of partial segments; one JSON per input."""
-    from colonbench.completion.method import CompletionMethod
+    from colonbench.benchmark.registry import as_estimate, load_method
     from colonbench.datagen.generate import write_points_ply
     from colonbench.pointio import read_points, write_mesh_ply
 
@@ -209,91 +209,112 @@ def cmd_estimate(args):
     if clash:
         raise ColonbenchError(f"several inputs would write the same output name(s) {clash}; "
                               "call estimate separately for them")
-    if args.method != "completion":
-        raise ColonbenchError(f"unknown method {args.method!r}; available here: completion")
-    method = CompletionMethod(args.model, device=args.device)  # loaded once for every file
+    method = load_method(args.method, model=args.model, device=args.device)  # loaded once for every file
+    if getattr(method, "uses_truth", False):
+        raise ColonbenchError(f"method {method.name!r} is a reference that needs ground truth; it runs only in "
+                              "colonbench evaluate")
     out = Path(args.out_dir)
     out.mkdir(parents=True, exist_ok=True)
     failed = 0
     for f, name in zip(files, names):
         try:
-            est = method.estimate(read_points(f))
+            est = as_estimate(method.estimate(read_points(f)), method.name)
         except ColonbenchError as exc:
             print(f"colonbench: error: {f}: {exc}", file=sys.stderr)
             failed += 1
             continue
         write_estimate(out, name, est, method.version, input=str(f))
-        if args.mesh:
+        if args.mesh and len(est.mesh_faces):
             import numpy as np
 
             colors = np.where(est.hole_vertices[:, None], [[220, 30, 30]], [[200, 200, 200]])
             write_mesh_ply(out / f"{name}_mesh.ply", est.mesh_vertices, est.mesh_faces, colors)
             write_points_ply(out / f"{name}_centerline.ply", est.centerline)
-        total = sum(est.seconds.values())
+        total = sum(est.seconds.values()) if est.seconds else float("nan")
         print(f"{name}: coverage {est.coverage:.3f}, {len(est.holes)} hole points, "
               f"centerline {len(est.centerline)} points, {total:.2f} s")
     if failed:
         raise ColonbenchError(f"{failed} of {len(files)} input(s) failed (see above); the others were written")
 
 
-def cmd_demo(args):
-    """The main job so far: one colon, its segments with holes, pictures, and the shipped model's estimates."""
-    import numpy as np
-
-    from colonbench.datagen.generate import GeneratorConfig, colon_samples, procedural_colon, write_sample_folder
-    from colonbench.datagen.render import colon_picture, segment_picture
-
-    out = Path(args.out)
-    config = GeneratorConfig()
-    t = time.perf_counter()
-    colon = procedural_colon(config, args.seed, 0)
-    print(f"colon: {colon.centerline.length:.0f} mm, {len(colon.mesh.faces)} faces")
-    covs = []
-    for k, p, sample in colon_samples(colon, config, args.seed, 0, 60.0, 1, "camera"):
-        folder = write_sample_folder(sample, out / "segments" / f"s{k:03d}",
-                                     {"seed": args.seed, "colon_id": 0, "segment_id": k, "permutation": p})
-        if k % 5 == 0:
-            segment_picture(sample, folder / "picture.png")
-        covs.append(sample.coverage)
-    from colonbench.datagen.segments import windows
-
-    colon_picture(colon, out / "colon.png",
-                  segments=windows(colon.centerline.length, 60.0, config.segments.end_margin_mm))
-    c = np.array(covs)
-    print(f"{len(c)} segments of 60 mm, camera holes: coverage mean {c.mean():.3f}, "
-          f"min {c.min():.3f}, max {c.max():.3f}")
-    _demo_estimates(out, c)
-    print(f"wrote {out}/colon.png, {out}/segments/ and {out}/estimates/ in {time.perf_counter() - t:.0f} s")
-
-
-def _demo_estimates(out: Path, truth):
-    """Estimate every demo segment with the shipped model; print the errors."""
-    import numpy as np
-
+def _floats(text: str) -> list[float]:
     try:
-        from colonbench.completion.method import CompletionMethod, shipped_model
-    except ImportError as exc:
-        print(f"(no estimates: {exc})")
-        return
-    if not shipped_model().is_file():
-        print("(no estimates: no model ships with this installation)")
-        return
-    from colonbench.pointio import read_points
+        return [float(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a comma-separated list of numbers") from None
 
-    method = CompletionMethod()
-    est_dir = out / "estimates"
-    est_dir.mkdir(parents=True, exist_ok=True)
-    errors = []
-    for k, folder in enumerate(sorted((out / "segments").iterdir())):
-        est = method.estimate(read_points(folder / "partial.ply"))
-        write_estimate(est_dir, folder.name, est, method.version)
-        errors.append(est.coverage - truth[k])
-    e = 100 * np.asarray(errors)
-    constant = method.meta.get("train_coverage_mean")
-    ref = "" if constant is None else (f"; guessing the training data's mean coverage ({constant:.3f}) gives "
-                                       f"{100 * np.mean(np.abs(truth - constant)):.1f}")
-    print(f"shipped model ({method.version}): coverage error mean {np.nanmean(e):+.1f}, absolute mean "
-          f"{np.nanmean(np.abs(e)):.1f} points over {len(e)} segments{ref}")
+
+def _method_list(text: str) -> list[str]:
+    from colonbench.benchmark.registry import DEFAULT_METHODS
+
+    names = [m.strip() for m in text.split(",") if m.strip()]
+    return list(DEFAULT_METHODS) if names == ["all"] else names
+
+
+def cmd_evaluate(args):
+    """Evaluate methods on a dataset's test shards into a run folder (resumable)."""
+    from colonbench.benchmark.evaluate import evaluate, load_results
+    from colonbench.benchmark.summary import summarize
+
+    t = time.perf_counter()
+    run = evaluate(args.data, _method_list(args.methods), args.out, noise=args.noise, split=args.split,
+                   limit=args.limit, workers=args.workers, model=args.model, device=args.device,
+                   examples=args.examples, noise_seed=args.noise_seed, progress=not args.quiet)
+    meta, results = load_results(run)
+    s = summarize(results)
+    for _, r in s.iterrows():
+        failed = f", {r['failed']} failed" if r["failed"] else ""
+        print(f"noise {r['noise_mm']:g} mm  {r['method']:<14} MAE {r['coverage_mae']:6.2f} points over "
+              f"{r['segments'] - r['coverage_undefined']} of {r['segments']} segments{failed}")
+    errors = results[results["error"] != ""]
+    for name, g in errors.groupby("method"):
+        print(f"colonbench: warning: {name} failed on {len(g)} segment(s); first: {g['error'].iloc[0]}",
+              file=sys.stderr)
+    print(f"wrote {run}/results/ in {time.perf_counter() - t:.0f} s; tables: colonbench leaderboard {run} --out DIR")
+
+
+def cmd_leaderboard(args):
+    """Rebuild the leaderboard tables (and figures) from stored runs."""
+    from colonbench.reports.leaderboard import write_leaderboard
+
+    result = write_leaderboard(args.runs, args.out, figures=not args.no_figures)
+    print(result["markdown"])
+    print(f"wrote {', '.join(p.name for p in result['paths'])} to {args.out}")
+
+
+def cmd_methods(args):
+    """List the registered methods."""
+    from colonbench.benchmark.registry import available
+
+    for name, target in sorted(available().items()):
+        print(f"{name:<14} {target}")
+
+
+def cmd_demo(args):
+    """The main job on demo.yaml: generate its test split, evaluate every method at both noise levels, report."""
+    from colonbench.benchmark.evaluate import evaluate
+    from colonbench.benchmark.registry import DEFAULT_METHODS
+    from colonbench.reports.leaderboard import write_leaderboard
+    from colonbench.shards.dataset import generate
+
+    manifest = Path(args.manifest)
+    if not manifest.is_file():
+        raise ColonbenchError(f"{manifest}: no such manifest; run the demo from a colonbench checkout (it uses "
+                              "data_manifests/demo.yaml) or pass --manifest")
+    out = Path(args.out)
+    t0 = time.perf_counter()
+    lock = generate(manifest, out / "data", workers=args.workers, splits=["test"], progress=not args.quiet)
+    n = lock["splits"]["test"]["samples"]
+    t1 = time.perf_counter()
+    print(f"data: {n} test segments of {manifest.name} in {out / 'data'} ({t1 - t0:.0f} s)")
+    evaluate(out / "data", list(DEFAULT_METHODS), out / "run", noise=(0.0, 0.5), workers=args.workers,
+             model=args.model, progress=not args.quiet)
+    t2 = time.perf_counter()
+    print(f"evaluated {len(DEFAULT_METHODS)} methods at noise 0 and 0.5 mm ({t2 - t1:.0f} s)")
+    result = write_leaderboard([out / "run"], out / "report")
+    print(result["markdown"])
+    print(f"report: {out / 'report'} ({', '.join(p.name for p in result['paths'])}); "
+          f"{time.perf_counter() - t0:.0f} s in all")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -371,9 +392,39 @@ def build_parser() -> argparse.ArgumentParser:
                    help="also write <name>_mesh.ply (completed mesh, holes red) and <name>_centerline.ply")
     p.set_defaults(func=cmd_estimate)
 
-    p = sub.add_parser("demo", help="run the main job on a small default dataset")
+    p = sub.add_parser("evaluate", help="run methods over a dataset's test shards into a run folder (resumable)")
+    p.add_argument("data", help="dataset folder (colonbench generate)")
+    p.add_argument("--methods", default="all",
+                   help="comma-separated registered names or package.module:Class (default all: "
+                        "the paper's method, its baselines and the reference rows; see colonbench methods)")
+    p.add_argument("--noise", type=_floats, default=[0.0, 0.5],
+                   help="input noise sigmas, mm, comma-separated (default 0,0.5)")
+    p.add_argument("--out", required=True, help="run folder (a rerun finishes it or adds methods)")
+    p.add_argument("--split", default="test", help="split to evaluate (default test)")
+    p.add_argument("--limit", type=_positive(int), help="only this many samples, spread evenly over the split")
+    p.add_argument("--workers", type=_positive(int), default=1, help="processes (default 1)")
+    p.add_argument("--model", help="model .safetensors for the methods built on the network (default: shipped)")
+    p.add_argument("--device", default="cpu", help="cpu, cuda, auto (default cpu)")
+    p.add_argument("--examples", type=int, default=3, help="segments whose meshes are kept for figures (default 3)")
+    p.add_argument("--noise-seed", type=int, default=0, help="root seed of the input noise (default 0)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=cmd_evaluate)
+
+    p = sub.add_parser("leaderboard", help="tables (md, csv, json) and figures from stored runs on the same data")
+    p.add_argument("runs", nargs="+", help="run folders (colonbench evaluate)")
+    p.add_argument("--out", required=True, help="folder for leaderboard.md/.csv/.json and the figures")
+    p.add_argument("--no-figures", action="store_true", help="tables only")
+    p.set_defaults(func=cmd_leaderboard)
+
+    p = sub.add_parser("methods", help="list the registered coverage-estimation methods")
+    p.set_defaults(func=cmd_methods)
+
+    p = sub.add_parser("demo", help="the main job on demo.yaml: generate, evaluate every method, leaderboard, figures")
     p.add_argument("--out", default="out/demo", help="output folder (default out/demo)")
-    p.add_argument("--seed", type=int, default=0, help="root seed (default 0)")
+    p.add_argument("--manifest", default="data_manifests/demo.yaml", help="manifest (default data_manifests/demo.yaml)")
+    p.add_argument("--workers", type=_positive(int), default=2, help="processes (default 2)")
+    p.add_argument("--model", help="model .safetensors (default: the shipped one)")
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(func=cmd_demo)
     return parser
 

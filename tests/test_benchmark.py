@@ -1,0 +1,204 @@
+"""The benchmark: metrics with known answers, the method registry, evaluate runs and leaderboards."""
+
+import json
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from colonbench.benchmark.evaluate import evaluate, load_results, noisy, read_rows, result_columns
+from colonbench.benchmark.metrics import precision_recall, segment_metrics
+from colonbench.benchmark.registry import DEFAULT_METHODS, as_estimate, available, load_method
+from colonbench.benchmark.summary import metric_columns, summarize
+from colonbench.cli import main
+from colonbench.errors import InputError
+from colonbench.reports.leaderboard import merge_runs, write_leaderboard
+
+
+# ------------------------------------------------------------------------------------------------ metrics
+
+
+def test_precision_recall_on_hand_made_point_sets():
+    truth = np.array([[0.0, 0, 0], [10, 0, 0], [20, 0, 0], [30, 0, 0]])
+    est = np.array([[0.5, 0, 0], [10, 1.5, 0], [50, 0, 0]])
+    # at 1 mm: only (0.5,0,0) is near a GT point; only GT (0,0,0) has an estimate that near
+    assert precision_recall(est, truth, 1.0) == (pytest.approx(1 / 3), pytest.approx(1 / 4))
+    # at 2 mm: two of three estimates, two of four GT points
+    assert precision_recall(est, truth, 2.0) == (pytest.approx(2 / 3), pytest.approx(2 / 4))
+    assert precision_recall(truth, truth, 1e-6) == (1.0, 1.0)
+    p, r = precision_recall(np.zeros((0, 3)), truth, 1.0)
+    assert math.isnan(p) and math.isnan(r)  # undefined, never 0 or 1
+    m = segment_metrics(0.7, est, truth, {"coverage": 0.75, "hole_points": truth, "centerline": np.zeros((0, 3))})
+    assert m["coverage_error"] == pytest.approx(-0.05)
+    assert m["holes_precision_2mm"] == pytest.approx(2 / 3) and math.isnan(m["centerline_recall_1mm"])
+    assert set(m) == {"coverage_error", *metric_columns()}
+
+
+def test_summary_statistics_by_hand():
+    rows = []
+    errors = [0.01, -0.03, 0.05, np.nan]  # the last: the method gave no coverage
+    for k, e in enumerate(errors):
+        row = {"method": "m", "noise_mm": 0.0, "coverage_error": e, "seconds": 0.5 * (k + 1), "error": ""}
+        row.update({c: (1.0 if k % 2 == 0 else 0.5) for c in metric_columns()})
+        rows.append(row)
+    rows[3]["holes_precision_2mm"] = np.nan
+    rows.append({**rows[0], "coverage_error": np.nan, "error": "RuntimeError: boom", "seconds": np.nan,
+                 **{c: np.nan for c in metric_columns()}})
+    s = summarize(pd.DataFrame(rows)).iloc[0]
+    assert s["segments"] == 5 and s["failed"] == 1 and s["coverage_undefined"] == 2
+    assert s["coverage_mae"] == pytest.approx(100 * (0.01 + 0.03 + 0.05) / 3)
+    assert s["coverage_median"] == pytest.approx(3.0)
+    assert s["coverage_bias"] == pytest.approx(100 * 0.03 / 3)
+    assert s["coverage_q95"] == pytest.approx(100 * np.quantile([0.01, 0.03, 0.05], 0.95))
+    assert s["holes_precision_2mm_mean"] == pytest.approx((1 + 0.5 + 1) / 3)
+    assert s["holes_precision_2mm_undefined"] == 2 and s["holes_recall_2mm_undefined"] == 1
+    assert s["centerline_recall_1mm_median"] == pytest.approx(0.75)
+    assert s["seconds"] == pytest.approx(np.mean([0.5, 1.0, 1.5, 2.0]))
+
+
+# ------------------------------------------------------------------------------------------------ registry
+
+
+def test_builtin_methods_are_registered_like_a_plugin_would_be():
+    assert set(DEFAULT_METHODS) <= set(available())
+    m = load_method("unwrap-pca")
+    assert m.name == "unwrap-pca" and m.version
+    half = load_method("plugin_methods:HalfCoverage")
+    assert half.name == "HalfCoverage" and half.version == "unversioned"
+    est = as_estimate(half.estimate(np.ones((10, 3))), half.name)
+    assert est.coverage == 0.5 and est.holes.shape == (3, 3) and est.centerline.shape == (0, 3)
+    with pytest.raises(InputError, match="unknown method 'nope'"):
+        load_method("nope")
+    with pytest.raises(InputError, match="cannot import"):
+        load_method("no_such_module_here:X")
+    with pytest.raises(InputError, match="has no 'Missing'"):
+        load_method("plugin_methods:Missing")
+    with pytest.raises(InputError, match=r"fraction in \[0, 1\]"):
+        as_estimate({"coverage": 3.0}, "x")
+    with pytest.raises(InputError, match=r"shape \(4,\)"):
+        as_estimate({"coverage": 0.5, "holes": [1, 2, 3, 4]}, "x")
+
+
+def test_noise_is_the_same_draw_for_every_method_and_rerun():
+    pts = np.zeros((100, 3))
+    a = noisy(pts, 0.5, 0, "test/a.h5", 3)
+    assert np.array_equal(a, noisy(pts, 0.5, 0, "test/a.h5", 3))
+    assert a.std() == pytest.approx(0.5, rel=0.15)
+    assert not np.array_equal(a, noisy(pts, 0.5, 0, "test/a.h5", 4))
+    assert not np.array_equal(a, noisy(pts, 0.5, 1, "test/a.h5", 3))
+    assert np.array_equal(noisy(pts, 0.0, 0, "test/a.h5", 3), pts)
+
+
+# ------------------------------------------------------------------------------------------------ runs
+
+
+def test_ground_truth_fed_as_the_prediction_scores_perfectly(smoke_dataset, tmp_path):
+    data, _ = smoke_dataset
+    run = evaluate(data, ["plugin_methods:Oracle"], tmp_path / "run", noise=(0, 0.5), progress=False)
+    meta, res = load_results(run)
+    assert list(res.columns) == result_columns()
+    assert len(res) == 2 * meta["data"]["samples"] and (res["error"] == "").all()
+    assert (res["coverage_error"] == 0).all()
+    for c in metric_columns():
+        v = res[c].dropna()
+        assert len(v) and (v == 1.0).all(), c
+    assert meta["methods"]["oracle"]["reference"] and meta["methods"]["oracle"]["version"] == "1.0"
+    summary = json.loads((run / "results" / "oracle.json").read_text())
+    assert summary["data"]["manifest_name"] == "smoke" and summary["versions"]["colonbench"]
+    assert all(r["coverage_mae"] == 0 for r in summary["summary"])
+
+
+def test_a_run_resumes_adds_methods_and_refuses_other_settings(smoke_dataset, tmp_path):
+    data, _ = smoke_dataset
+    out = tmp_path / "run"
+    evaluate(data, ["constant", "plugin_methods:Oracle"], out, noise=(0,), progress=False)
+    first = read_rows(out / "results" / "constant.csv").drop(columns="seconds")
+    part = next((out / "parts" / "constant").glob("*.csv"))
+    part.unlink()  # as if killed before this unit was written
+    evaluate(data, ["constant", "plugin_methods:Oracle"], out, noise=(0,), progress=False)
+    pd.testing.assert_frame_equal(read_rows(out / "results" / "constant.csv").drop(columns="seconds"), first)
+    evaluate(data, ["unwrap-pca"], out, noise=(0,), progress=False)  # a method added to the run
+    meta, res = load_results(out)
+    assert set(meta["methods"]) == {"constant", "oracle", "unwrap-pca"}
+    assert set(res["method"]) == set(meta["methods"])
+    with pytest.raises(InputError, match="other noise_mm"):
+        evaluate(data, ["constant"], out, noise=(0, 0.5), progress=False)
+    with pytest.raises(InputError, match="other data"):
+        evaluate(data, ["constant"], out, noise=(0,), limit=1, progress=False)
+    other = tmp_path / "stuff"
+    other.mkdir()
+    (other / "notes.txt").write_text("mine")
+    with pytest.raises(InputError, match="not empty"):
+        evaluate(data, ["constant"], other, progress=False)
+    with pytest.raises(InputError, match="no shards of split 'nope'"):
+        evaluate(data, ["constant"], tmp_path / "r2", split="nope", progress=False)
+
+
+def test_leaderboard_merges_runs_counts_failures_and_refuses_other_data(smoke_dataset, tmp_path):
+    data, _ = smoke_dataset
+    a = evaluate(data, ["plugin_methods:Oracle"], tmp_path / "a", progress=False)
+    b = evaluate(data, ["constant", "plugin_methods:Broken"], tmp_path / "b", progress=False)
+    result = write_leaderboard([a, b], tmp_path / "lb")
+    names = {p.name for p in result["paths"]}
+    assert {"leaderboard.md", "leaderboard.csv", "leaderboard.json", "boxplots.png", "scatter.png"} <= names
+    tab = pd.read_csv(tmp_path / "lb" / "leaderboard.csv")
+    assert set(tab["method"]) == {"oracle", "constant", "broken"}
+    assert len(tab) == 3 * 2  # per noise level
+    broken = tab[tab["method"] == "broken"]
+    n = load_results(a)[0]["data"]["samples"]
+    assert (broken["failed"] == n).all() and (broken["coverage_undefined"] == n).all()
+    assert broken["coverage_mae"].isna().all()  # no number where there is none, and not dropped
+    const = tab[tab["method"] == "constant"]
+    assert (const["holes_recall_2mm_undefined"] == n).all() and const["reference"].all()
+    text = (tmp_path / "lb" / "leaderboard.md").read_text()
+    assert "| oracle * | 1.0 |" in text and "| broken |" in text
+    js = json.loads((tmp_path / "lb" / "leaderboard.json").read_text())
+    assert js["data"]["manifest_name"] == "smoke" and len(js["rows"]) == 6
+    # a run on other samples, a method given twice, an unfinished run: refused
+    c = evaluate(data, ["constant"], tmp_path / "c", limit=1, progress=False)
+    with pytest.raises(InputError, match="other data"):
+        merge_runs([a, c])
+    with pytest.raises(InputError, match="in both"):
+        merge_runs([b, b])
+    (b / "results" / "constant.csv").unlink()
+    with pytest.raises(InputError, match="not finished"):
+        merge_runs([a, b])
+
+
+def test_cli_evaluates_the_real_methods_in_parallel_like_in_one_process(smoke_dataset, tmp_path, capsys):
+    data, _ = smoke_dataset
+    methods = "completion,thresholding,unwrap,gt-heatmap,unwrap-gt"
+    assert main(["evaluate", str(data), "--methods", methods, "--out", str(tmp_path / "one"), "--quiet"]) == 0
+    assert main(["evaluate", str(data), "--methods", methods, "--out", str(tmp_path / "two"), "--workers", "2",
+                 "--quiet"]) == 0
+    _, one = load_results(tmp_path / "one")
+    _, two = load_results(tmp_path / "two")
+    keys = ["method", "shard", "index", "noise_mm"]
+    one, two = one.sort_values(keys).reset_index(drop=True), two.sort_values(keys).reset_index(drop=True)
+    assert (one["error"] == "").all(), one["error"].unique()
+    pd.testing.assert_frame_equal(one.drop(columns="seconds"), two.drop(columns="seconds"))
+    gt = one[one["method"] == "gt-heatmap"]
+    assert gt["coverage_error"].abs().max() < 0.05 and (gt["centerline_recall_2mm"] > 0.95).all()
+    assert len(list((tmp_path / "one" / "examples" / "completion").glob("*.npz"))) >= 2
+    capsys.readouterr()
+    assert main(["leaderboard", str(tmp_path / "one"), "--out", str(tmp_path / "lb")]) == 0
+    out = capsys.readouterr().out
+    assert "## Noise sigma = 0.5 mm" in out and "| gt-heatmap * |" in out
+    assert any(p.name.startswith("triplets-completion") for p in (tmp_path / "lb").iterdir())
+    assert main(["methods"]) == 0
+    assert "unwrap-pca" in capsys.readouterr().out
+    assert main(["evaluate", str(data), "--methods", "nope", "--out", str(tmp_path / "x")]) == 2
+    assert main(["leaderboard", str(tmp_path / "x2"), "--out", str(tmp_path / "lb2")]) == 2
+    assert "not a colonbench run" in capsys.readouterr().err
+
+
+def test_estimate_runs_any_registered_method_but_not_references(smoke_dataset, tmp_path, capsys):
+    from colonbench.shards.reader import ShardDataset
+
+    data, _ = smoke_dataset
+    np.save(tmp_path / "seg.npy", ShardDataset(data, split="test", geometry=True)[0]["partial_points"])
+    assert main(["estimate", str(tmp_path / "seg.npy"), "--method", "unwrap-pca", "--out-dir", str(tmp_path / "o")]) == 0
+    assert json.loads((tmp_path / "o" / "seg.json").read_text())["method"] == "unwrap-pca"
+    assert main(["estimate", str(tmp_path / "seg.npy"), "--method", "gt-heatmap", "--out-dir", str(tmp_path / "o")]) == 2
+    assert "needs ground truth" in capsys.readouterr().err
