@@ -15,3 +15,21 @@ def test_reference_tables_in_docs_are_current(script, doc):
     spec.loader.exec_module(mod)
     text = (ROOT / "docs" / doc).read_text()
     assert mod.tables().strip() in text, f"regenerate docs/{doc}'s tables with: python scripts/{script}"
+
+
+def test_the_plugin_example_in_the_docs_runs_through_evaluate(smoke_dataset, tmp_path, monkeypatch):
+    import re
+    import sys
+
+    from colonbench.benchmark.evaluate import evaluate, load_results
+
+    text = (ROOT / "docs" / "benchmark.md").read_text()
+    code = re.search(r"<!-- example: my_methods.py -->\n```python\n(.*?)```", text, re.S).group(1)
+    (tmp_path / "my_methods.py").write_text(code)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    sys.modules.pop("my_methods", None)
+    data, _ = smoke_dataset
+    run = evaluate(data, ["my_methods:CoarseUnwrap"], tmp_path / "run", noise=(0,), progress=False)
+    meta, res = load_results(run)
+    assert meta["methods"]["coarse-unwrap"]["version"] == "0.1"
+    assert (res["error"] == "").all() and res["coverage"].between(0, 1).all()
