@@ -33,6 +33,7 @@ import platform
 import resource
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 
 import numpy as np
@@ -407,9 +408,13 @@ def _run(out, run, data, picks, sigmas, loaded, options, workers, examples, nois
             with ProcessPoolExecutor(min(workers, len(units)), mp_context=ctx, initializer=_init_worker,
                                      initargs=(specs, options, 1)) as pool:
                 futures = {pool.submit(run_unit, *args(u)): u for u in units}
-                for f in as_completed(futures):
-                    _store(out, futures[f], f.result())
-                    bar.update(len(futures[f][1]))
+                try:
+                    for f in as_completed(futures):
+                        _store(out, futures[f], f.result())
+                        bar.update(len(futures[f][1]))
+                except BrokenProcessPool:
+                    raise ColonbenchError("a worker process died (out of memory?); what was finished is kept, "
+                                          "rerun the same command (with fewer --workers) to resume") from None
     finally:
         bar.close()
     for name in loaded:

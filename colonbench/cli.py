@@ -270,7 +270,10 @@ def cmd_evaluate(args):
     for name, g in errors.groupby("method"):
         print(f"colonbench: warning: {name} failed on {len(g)} segment(s); first: {g['error'].iloc[0]}",
               file=sys.stderr)
-    print(f"wrote {run}/results/ in {time.perf_counter() - t:.0f} s; tables: colonbench leaderboard {run} --out DIR")
+    session = meta["sessions"][-1]
+    print(f"wrote {run}/results/: {session['segments']} segment evaluations in {time.perf_counter() - t:.0f} s "
+          f"with {session['workers']} worker(s), peak memory {session['peak_process_mib']} MiB per process; "
+          f"tables: colonbench leaderboard {run} --out DIR")
 
 
 def cmd_leaderboard(args):
