@@ -55,7 +55,7 @@ def _import(spec: str):
     return obj
 
 
-def _instantiate(obj, spec: str, options: dict):
+def _instantiate(obj, options: dict):
     if not callable(obj) or (not inspect.isclass(obj) and hasattr(obj, "estimate")):
         return obj  # an instance
     try:
@@ -93,7 +93,7 @@ def load_method(spec: str, **options):
                              "(or give package.module:Class)")
         obj = _import(registered[spec])
         default_name = spec
-    method = _instantiate(obj, spec, options)
+    method = _instantiate(obj, options)
     if not callable(getattr(method, "estimate", None)):
         raise InputError(f"method {spec!r}: {type(method).__name__} has no estimate(points) method")
     if not isinstance(getattr(method, "name", None), str) or not method.name:

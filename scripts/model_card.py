@@ -10,6 +10,7 @@ import argparse
 import csv
 import json
 import sys
+from pathlib import Path
 
 from colonbench.completion.network import load_model
 
@@ -19,6 +20,7 @@ def main(argv=None):
     ap.add_argument("model")
     ap.add_argument("--log", required=True)
     ap.add_argument("--eval", nargs="*", default=[], help="JSON files of scripts/bench_completion.py --json")
+    ap.add_argument("--leaderboard", help="leaderboard.json of colonbench leaderboard over a run of this model")
     ap.add_argument("--hardware", required=True)
     ap.add_argument("--data-manifest", default="data_manifests/train-cpu.yaml")
     ap.add_argument("--note", default="")
@@ -63,8 +65,36 @@ def main(argv=None):
                        f"{m['holes_recall_2mm']:.2f} | {m['centerline_precision_2mm']:.2f} / "
                        f"{m['centerline_recall_2mm']:.2f} | {e['wall_per_segment']:.2f} | "
                        + (f"{e['constant_guess_mae_points']:.2f} |" if e.get("constant_guess_mae_points") else "- |"))
+    if args.leaderboard:
+        out += leaderboard_rows(args.leaderboard, f"{Path(args.model).stem}@{meta.get('steps')}")
     print("\n".join(out))
     return 0
+
+
+def leaderboard_rows(path, version: str) -> list[str]:
+    """The leaderboard's rows of this model's methods and of the references, as a Markdown table."""
+    lb = json.load(open(path))
+    rows = [r for r in lb["rows"] if r["reference"] or r["version"].split(",")[0] == version]
+    if not any(r["method"] == "completion" for r in rows):
+        raise SystemExit(f"{path} has no completion row of version {version}")
+    d = lb["data"]
+    out = ["", "## Benchmark", "",
+           f"`colonbench evaluate` on manifest `{d['manifest_name']}`, split `{d['split']}`, all {d['samples']} "
+           "segments, then `colonbench leaderboard` (docs/benchmark.md). Coverage errors in points; P / R are "
+           "means at 2 mm; * = reference rows given ground truth, or the constant guess.", "",
+           "| noise mm | method | MAE | median | bias | q95 | holes P / R | centerline P / R | s per segment |",
+           "|---|---|---|---|---|---|---|---|---|"]
+
+    def f(x, fmt):
+        return "n/a" if x is None else format(x, fmt)
+
+    for r in rows:
+        out.append(f"| {r['noise_mm']:g} | {r['method']}{' *' if r['reference'] else ''} | "
+                   f"{f(r['coverage_mae'], '.2f')} | {f(r['coverage_median'], '.2f')} | {f(r['coverage_bias'], '+.2f')} | "
+                   f"{f(r['coverage_q95'], '.1f')} | {f(r['holes_precision_2mm_mean'], '.2f')} / "
+                   f"{f(r['holes_recall_2mm_mean'], '.2f')} | {f(r['centerline_precision_2mm_mean'], '.2f')} / "
+                   f"{f(r['centerline_recall_2mm_mean'], '.2f')} | {f(r['seconds'], '.2f')} |")
+    return out
 
 
 if __name__ == "__main__":
