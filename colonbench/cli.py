@@ -178,7 +178,8 @@ def cmd_train(args):
                       checkpoint_minutes=args.checkpoint_minutes, max_minutes=args.max_minutes)
     command = "colonbench train " + " ".join(sys.argv[2:]) if len(sys.argv) > 2 else ""
     result = train(args.data, args.out, cfg, device=args.device, progress=not args.quiet, command=command)
-    how = "time budget reached; run the same command to resume" if result["stopped"] == "time" else "done"
+    how = {"time": "time budget reached; run the same command to resume",
+           "signal": "stopped on request; run the same command to resume"}.get(result["stopped"], "done")
     print(f"{result['epochs']} epochs, {result['steps']} steps, best validation L2 {result['best_val_l2']:.5f}, "
           f"{result['seconds'] / 60:.1f} min in all: {how}. Model: {Path(args.out) / 'best.safetensors'}")
 

@@ -20,7 +20,9 @@ epoch and writes into ``RUN``:
 Running the same command again resumes from ``last.pt`` exactly where it
 stopped (the epoch's sample order is drawn from the seed, so the remaining
 batches are the same ones). ``max_minutes`` stops cleanly after a time budget,
-which is how a long CPU training is spread over several sessions.
+which is how a long CPU training is spread over several sessions; so does
+Ctrl-C or SIGTERM in a single-process run (the batch is finished and
+``last.pt`` written first).
 
 Several GPUs: launch with ``torchrun --nproc_per_node N -m colonbench.cli
 train ...``; each process takes every N-th sample of the epoch's order and
@@ -32,6 +34,8 @@ from __future__ import annotations
 import csv
 import json
 import os
+import signal
+import threading
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -223,6 +227,13 @@ def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "a
 
     from tqdm.auto import tqdm
 
+    # Ctrl-C or SIGTERM: finish the batch, write last.pt, stop (one process only: under DDP the ranks
+    # would stop after different batches and hang in the next all-reduce, so torchrun keeps the default)
+    stop_signal = []
+    previous = {}
+    if world == 1 and threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            previous[sig] = signal.signal(sig, lambda signum, frame: stop_signal.append(signum))
     start = time.perf_counter()
     base_seconds = state["seconds"]
     last_ckpt = start
@@ -258,11 +269,14 @@ def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "a
             if cfg.max_minutes is not None and now - start > cfg.max_minutes * 60:
                 stopped = "time"
                 break
+            if stop_signal:
+                stopped = "signal"
+                break
             if now - last_ckpt > cfg.checkpoint_minutes * 60:
                 save_checkpoint()
                 last_ckpt = now
         bar.close()
-        if stopped == "time":
+        if stopped != "done":
             break
         val = evaluate_l2(net, val_ds, dev, cfg.batch_size, rank, world)
         sched.step(val)
@@ -284,8 +298,10 @@ def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "a
                 save_model(out / "best.safetensors", net, net_cfg, meta)
         save_checkpoint()
         last_ckpt = time.perf_counter()
-    if stopped == "time":
+    if stopped != "done":
         save_checkpoint()
+    for sig, handler in previous.items():
+        signal.signal(sig, handler)
     if world > 1:
         torch.distributed.barrier()
         torch.distributed.destroy_process_group()
