@@ -50,6 +50,26 @@ def test_centerline_of_a_tube_heatmap_is_within_one_voxel(shape):
     assert distance_to_polyline(gt, est).max() < 1.5  # and the whole true line covered, ends included
 
 
+def test_a_ridge_broken_into_pieces_still_gives_the_whole_centerline():
+    # a weak prediction: the ridge dips below 1 - delta in two places, and specks lie off the line (between
+    # the ends: past an end, a speck is indistinguishable from the ridge going on)
+    colon, grid, _, hm = tube_heatmaps(arc(60.0, 1.0), radius=15.0)
+    h = hm.target.copy()
+    gt = grid.to_voxel(colon.centerline.points)
+    k = np.rint(gt[[len(gt) // 3, 2 * len(gt) // 3]]).astype(int)
+    for x in k:
+        h[x[0] - 2:x[0] + 3, x[1] - 2:x[1] + 3, x[2] - 2:x[2] + 3] *= 0.85  # three pieces above 1 - delta
+    rng = np.random.default_rng(0)
+    inside = np.argwhere((h > 0.6) & (h < 0.8))
+    _, nearest = cKDTree(gt).query(inside)
+    inside = inside[(nearest > 0.15 * len(gt)) & (nearest < 0.85 * len(gt))]
+    specks = inside[rng.choice(len(inside), 30, replace=False)]
+    h[tuple(specks.T)] = 0.97  # single voxels, not on the ridge
+    est = extract_centerline(h)
+    assert distance_to_polyline(gt, est).max() < 1.5  # the whole line, not its largest piece
+    assert np.quantile(distance_to_polyline(est, gt), 0.9) < 1.0
+
+
 def test_marching_cubes_on_a_cylinder_heatmap_gives_its_area():
     colon, grid, pts, hm = tube_heatmaps(straight(63.0), UNIT)
     comp = complete(hm.target, extract_centerline(hm.target), grid.to_voxel(pts))
