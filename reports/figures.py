@@ -144,7 +144,7 @@ def triplets(example_files, path, title: str = "") -> Path:
         ax = _axes(fig, (len(files), 3, 3 * r + 2), "completed mesh, holes red")
         draw_surface(ax, v, faces[~hole_face], (0.78, 0.78, 0.8), 20000)
         draw_surface(ax, v, faces[hole_face], (0.9, 0.1, 0.1), 20000)
-        _equal(ax, v if len(v) else p)
+        _equal(ax, p)  # the input cloud sets the scale of all three panels
         ax = _axes(fig, (len(files), 3, 3 * r + 3), "completed mesh, centerline red (GT black)")
         draw_surface(ax, v, faces, (0.8, 0.8, 0.82), 20000, alpha=0.25)
         gt, cl = frame(e["true_centerline"]), frame(e["centerline"])
@@ -152,7 +152,7 @@ def triplets(example_files, path, title: str = "") -> Path:
             ax.plot(*gt.T, color="k", lw=1.2, ls="--")
         if len(cl):
             ax.plot(*cl.T, color="#d62728", lw=2)
-        _equal(ax, v if len(v) else p)
+        _equal(ax, p)  # the input cloud sets the scale of all three panels
     if title:
         fig.suptitle(title, fontsize=10)
     fig.tight_layout()
