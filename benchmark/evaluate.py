@@ -46,6 +46,10 @@ from colonbench.benchmark.registry import as_estimate, load_method
 from colonbench.benchmark.summary import metric_columns, summarize
 from colonbench.errors import ColonbenchError, InputError
 
+class RunMismatch(InputError):
+    """The run folder holds a run with other data, settings or method versions."""
+
+
 RUN_FILE = "run.json"
 RUN_FORMAT = "colonbench-run"
 RUN_FORMAT_VERSION = 1
@@ -283,12 +287,12 @@ def _open_run(out: Path, settings: dict, methods: dict[str, dict]) -> dict:
             raise InputError(f"{path}: not a colonbench run")
         for key, value in settings.items():
             if json.dumps(run.get(key), sort_keys=True) != json.dumps(value, sort_keys=True, default=_json_default):
-                raise InputError(f"{out} is a run with other {key} ({run.get(key)!r}, now {value!r}); "
+                raise RunMismatch(f"{out} is a run with other {key} ({run.get(key)!r}, now {value!r}); "
                                  "evaluate into a new run folder")
         for name, rec in methods.items():
             old = run["methods"].get(name)
             if old is not None and old["version"] != rec["version"]:
-                raise InputError(f"{out}: method {name!r} was evaluated as version {old['version']!r}, it is now "
+                raise RunMismatch(f"{out}: method {name!r} was evaluated as version {old['version']!r}, it is now "
                                  f"{rec['version']!r}; evaluate into a new run folder")
             run["methods"].setdefault(name, rec)
     else:

@@ -296,7 +296,9 @@ def cmd_methods(args):
 
 def cmd_demo(args):
     """The main job on demo.yaml: generate its test split, evaluate every method at both noise levels, report."""
-    from colonbench.benchmark.evaluate import evaluate
+    import shutil
+
+    from colonbench.benchmark.evaluate import RunMismatch, evaluate
     from colonbench.benchmark.registry import DEFAULT_METHODS
     from colonbench.reports.leaderboard import write_leaderboard
     from colonbench.shards.dataset import generate
@@ -311,8 +313,13 @@ def cmd_demo(args):
     n = lock["splits"]["test"]["samples"]
     t1 = time.perf_counter()
     print(f"data: {n} test segments of {manifest.name} in {out / 'data'} ({t1 - t0:.0f} s)")
-    evaluate(out / "data", list(DEFAULT_METHODS), out / "run", noise=(0.0, 0.5), workers=args.workers,
-             model=args.model, progress=not args.quiet)
+    kwargs = {"noise": (0.0, 0.5), "workers": args.workers, "model": args.model, "progress": not args.quiet}
+    try:
+        evaluate(out / "data", list(DEFAULT_METHODS), out / "run", **kwargs)
+    except RunMismatch:  # the demo's own run, made with another model or version: make it again
+        print(f"({out / 'run'} was made with another model or other settings; starting it again)")
+        shutil.rmtree(out / "run")
+        evaluate(out / "data", list(DEFAULT_METHODS), out / "run", **kwargs)
     t2 = time.perf_counter()
     print(f"evaluated {len(DEFAULT_METHODS)} methods at noise 0 and 0.5 mm ({t2 - t1:.0f} s)")
     result = write_leaderboard([out / "run"], out / "report")
