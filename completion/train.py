@@ -148,6 +148,12 @@ def _data_lock(data_dir: Path) -> dict:
     return lock
 
 
+def _ignore_stop_signals(worker_id: int):
+    """DataLoader workers leave Ctrl-C and SIGTERM (sent to the whole process group) to the main process."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+
+
 def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "auto", progress: bool = True,
           command: str | None = None) -> dict:
     """Train (or resume training) the completion network on a generated dataset.
@@ -239,7 +245,7 @@ def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "a
     last_ckpt = start
     stopped = "done"
     loader_kwargs = {"batch_size": cfg.batch_size, "collate_fn": _collate, "num_workers": cfg.workers,
-                     "persistent_workers": False}
+                     "persistent_workers": False, "worker_init_fn": _ignore_stop_signals}
     net.train()
     while state["epoch"] < cfg.epochs:
         epoch = state["epoch"]

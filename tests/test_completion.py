@@ -238,6 +238,7 @@ def test_network_shapes():
 
 
 def test_sigterm_stops_training_cleanly_and_it_resumes(smoke_dataset, tmp_path):
+    import os
     import signal
     import subprocess
     import sys
@@ -248,19 +249,19 @@ def test_sigterm_stops_training_cleanly_and_it_resumes(smoke_dataset, tmp_path):
     out, _ = smoke_dataset
     run = tmp_path / "run"
     cmd = [sys.executable, "-m", "colonbench.cli", "train", str(out), "--out", str(run), "--epochs", "50",
-           "--batch-size", "1", "--workers", "0", "--device", "cpu", "--quiet"]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+           "--batch-size", "1", "--workers", "1", "--device", "cpu", "--quiet"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
     deadline = time.time() + 120
     while not (run / "log.csv").exists() and time.time() < deadline and proc.poll() is None:
         time.sleep(0.2)
-    time.sleep(3)  # into the first epoch
-    proc.send_signal(signal.SIGTERM)
+    time.sleep(3)  # into the first epochs, a DataLoader worker running
+    os.killpg(proc.pid, signal.SIGTERM)  # to the whole process group, as a shell's Ctrl-C or a scheduler does
     stdout, stderr = proc.communicate(timeout=120)
     assert proc.returncode == 0, stderr[-2000:]
     assert "stopped on request" in stdout
     saved = torch.load(run / "last.pt", weights_only=False)
     assert saved["state"]["steps"] > 0 and saved["state"]["epoch"] < 50
     # and it goes on from there
-    more = train(out, run, TrainConfig(epochs=saved["state"]["epoch"] + 2, batch_size=1, workers=0), device="cpu",
+    more = train(out, run, TrainConfig(epochs=saved["state"]["epoch"] + 2, batch_size=1, workers=1), device="cpu",
                  progress=False)
     assert more["steps"] > saved["state"]["steps"] and more["stopped"] == "done"
