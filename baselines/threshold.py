@@ -76,14 +76,7 @@ class ThresholdMethod:
 
     def estimate(self, points) -> Estimate:
         """Coverage, holes and centerline of one partial segment (mm)."""
-        import time
+        from colonbench.completion.method import on_prediction
 
-        from colonbench.completion.method import check_cloud
-
-        pts = check_cloud(points)
-        p = self.predictor(pts)
-        cl = p.centerline_vox
-        t = time.perf_counter()
-        est = threshold_coverage(p.heatmap, p.grid, pts, self.threshold, self.name, cl)
-        est.seconds = {**p.seconds, "threshold": time.perf_counter() - t}
-        return est
+        return on_prediction(self.predictor, points, "threshold", lambda pts, p: threshold_coverage(
+            p.heatmap, p.grid, pts, self.threshold, self.name, p.centerline_vox))

@@ -144,17 +144,13 @@ class UnwrapMethod:
 
     def estimate(self, points) -> Estimate:
         """Coverage, holes and centerline of one partial segment (mm)."""
-        import time
+        from colonbench.completion.method import on_prediction
 
-        from colonbench.completion.method import check_cloud
+        def unwrap_learned(pts, p):
+            cl = p.centerline_vox
+            return unwrap_coverage(pts, p.grid.to_mm(cl) if len(cl) else np.zeros((0, 3)), self.name)
 
-        pts = check_cloud(points)
-        p = self.predictor(pts)
-        cl = p.centerline_vox
-        t = time.perf_counter()
-        est = unwrap_coverage(pts, p.grid.to_mm(cl) if len(cl) else np.zeros((0, 3)), self.name)
-        est.seconds = {**p.seconds, "unwrap": time.perf_counter() - t}
-        return est
+        return on_prediction(self.predictor, points, "unwrap", unwrap_learned)
 
 
 class UnwrapPCAMethod:

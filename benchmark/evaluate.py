@@ -24,7 +24,6 @@ is refused (start a new run folder).
 
 from __future__ import annotations
 
-import fcntl
 import hashlib
 import json
 import multiprocessing
@@ -45,6 +44,7 @@ from colonbench.benchmark.metrics import THRESHOLDS_MM, segment_metrics
 from colonbench.benchmark.registry import as_estimate, load_method
 from colonbench.benchmark.summary import metric_columns, summarize
 from colonbench.errors import ColonbenchError, InputError
+from colonbench.folderlock import folder_lock
 
 class RunMismatch(InputError):
     """The run folder holds a run with other data, settings or method versions."""
@@ -369,11 +369,7 @@ def evaluate(data, methods, out, noise=(0.0, 0.5), split: str = "test", limit: i
     if out.is_dir() and not (out / RUN_FILE).exists() and any(not p.name.startswith(".") for p in out.iterdir()):
         raise InputError(f"{out} is not empty and holds no {RUN_FILE}; give a new or empty run folder")
     out.mkdir(parents=True, exist_ok=True)
-    with open(out / ".evaluate.lock", "w") as guard:
-        try:
-            fcntl.flock(guard, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            raise InputError(f"{out}: another evaluation is running in this folder") from None
+    with folder_lock(out, "evaluate", "evaluation"):
         run = _open_run(out, settings, records)
         run["versions"] = run.get("versions") or versions()
         run["data_path"] = str(data)

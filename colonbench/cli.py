@@ -55,6 +55,11 @@ def _positive(kind):
     return parse
 
 
+def _add_model_args(p, model_help):
+    p.add_argument("--model", help=model_help)
+    p.add_argument("--device", default="cpu", help="cpu, cuda, auto (default cpu)")
+
+
 def _add_segment_args(p, segment_help):
     from colonbench.datagen.holes import HOLE_MODELS
 
@@ -397,8 +402,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("files", nargs="+", help="partial point clouds (.ply, .npy, .xyz; mm), one segment each")
     p.add_argument("--out-dir", required=True, help="folder for <name>.json per input")
     p.add_argument("--method", default="completion", help="method (default completion: the paper's)")
-    p.add_argument("--model", help="model .safetensors from colonbench train (default: the shipped model)")
-    p.add_argument("--device", default="cpu", help="cpu, cuda, auto (default cpu)")
+    _add_model_args(p, "model .safetensors from colonbench train (default: the shipped model)")
     p.add_argument("--mesh", action="store_true",
                    help="also write <name>_mesh.ply (completed mesh, holes red) and <name>_centerline.ply")
     p.set_defaults(func=cmd_estimate)
@@ -414,8 +418,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--split", default="test", help="split to evaluate (default test)")
     p.add_argument("--limit", type=_positive(int), help="only this many samples, spread evenly over the split")
     p.add_argument("--workers", type=_positive(int), default=1, help="processes (default 1)")
-    p.add_argument("--model", help="model .safetensors for the methods built on the network (default: shipped)")
-    p.add_argument("--device", default="cpu", help="cpu, cuda, auto (default cpu)")
+    _add_model_args(p, "model .safetensors for the methods built on the network (default: shipped)")
     p.add_argument("--examples", type=int, default=3, help="segments whose meshes are kept for figures (default 3)")
     p.add_argument("--noise-seed", type=int, default=0, help="root seed of the input noise (default 0)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")

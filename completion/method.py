@@ -162,6 +162,32 @@ def shared_predictor(model=None, device: str = "cpu") -> Predictor:
     return _PREDICTORS[key]
 
 
+def on_prediction(predictor: Predictor, points, step: str, fn) -> Estimate:
+    """A method built on the shared prediction: ``fn(points, prediction)`` timed as ``step``.
+
+    The cloud is checked, the (cached) prediction and its centerline are
+    taken from ``predictor``, and the result's ``seconds`` count those shared
+    steps in full, then ``step``.
+
+    Parameters
+    ----------
+    predictor : Predictor
+    points : (n, 3) float
+        Partial cloud, mm.
+    step : str
+        Name of the method's own step in ``seconds``.
+    fn : callable
+        ``fn(points, prediction) -> Estimate``; ``prediction.centerline_vox`` is ready.
+    """
+    pts = check_cloud(points)
+    p = predictor(pts)
+    p.centerline_vox  # noqa: B018 - extracted (and timed) before the method's own step
+    t = time.perf_counter()
+    est = fn(pts, p)
+    est.seconds = {**p.seconds, step: time.perf_counter() - t}
+    return est
+
+
 class CompletionMethod:
     """The learned completion method of the paper.
 

@@ -16,9 +16,11 @@ import sys
 import time
 
 import numpy as np
+import pandas as pd
 
 from colonbench import seeding
 from colonbench.benchmark.metrics import segment_metrics
+from colonbench.benchmark.summary import metric_columns, summarize
 from colonbench.shards.reader import ShardDataset
 
 
@@ -44,7 +46,7 @@ def main(argv=None):
     ds = ShardDataset(args.data, split=args.split, geometry=True)
     picks = np.unique(np.linspace(0, len(ds) - 1, min(args.limit, len(ds))).astype(int))
     method = None if args.gt else CompletionMethod(args.model)
-    rows, stages = [], {}
+    rows, stages, true = [], {}, []
     t_all = time.perf_counter()
     for k in picks:
         item = ds[int(k)]
@@ -59,24 +61,25 @@ def main(argv=None):
             est = method.estimate(pts)
         for s, v in est.seconds.items():
             stages[s] = stages.get(s, 0.0) + v
-        rows.append(segment_metrics(est.coverage, est.holes, est.centerline, item))
+        true.append(item["coverage"])
+        rows.append({"method": "bench", "noise_mm": args.noise, "seconds": sum(est.seconds.values()), "error": "",
+                     **segment_metrics(est.coverage, est.holes, est.centerline, item)})
     wall = time.perf_counter() - t_all
     n = len(rows)
-    err = np.array([r["coverage_error"] for r in rows])
+    s = summarize(pd.DataFrame(rows)).iloc[0]
     print(f"{'GT heatmap' if args.gt else method.version} on {n} {args.split} samples of {args.data}, "
           f"noise {args.noise} mm")
-    print(f"  coverage MAE {100 * np.nanmean(np.abs(err)):.2f} points, median {100 * np.nanmedian(np.abs(err)):.2f}, "
-          f"bias {100 * np.nanmean(err):+.2f}, q95 {100 * np.nanquantile(np.abs(err), 0.95):.2f}, "
-          f"undefined {int(np.isnan(err).sum())}")
-    true = np.array([ds[int(k)]["coverage"] for k in picks]) if args.constant is not None else None
-    if true is not None:
-        print(f"  constant guess {args.constant:.3f}: MAE {100 * np.mean(np.abs(args.constant - true)):.2f} points")
-    for key in rows[0]:
-        if key == "coverage_error":
-            continue
-        v = np.array([r[key] for r in rows])
-        print(f"  {key:<28} mean {np.nanmean(v):.3f}  median {np.nanmedian(v):.3f}  undefined {int(np.isnan(v).sum())}")
-    print("  seconds per segment by stage: " + ", ".join(f"{s} {v / n:.3f}" for s, v in stages.items())
+    print(f"  coverage MAE {s['coverage_mae']:.2f} points, median {s['coverage_median']:.2f}, "
+          f"bias {s['coverage_bias']:+.2f}, q95 {s['coverage_q95']:.2f}, undefined {s['coverage_undefined']}")
+    constant_mae = None
+    if args.constant is not None:
+        constant_mae = 100 * float(np.mean(np.abs(args.constant - np.asarray(true))))
+        print(f"  constant guess {args.constant:.3f}: MAE {constant_mae:.2f} points")
+    metrics = metric_columns()
+    for key in metrics:
+        print(f"  {key:<28} mean {s[key + '_mean']:.3f}  median {s[key + '_median']:.3f}  "
+              f"undefined {s[key + '_undefined']}")
+    print("  seconds per segment by stage: " + ", ".join(f"{st} {v / n:.3f}" for st, v in stages.items())
           + f"; total {wall / n:.3f} (threads: {args.threads})")
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     print(f"  peak memory {peak:.0f} MiB")
@@ -85,16 +88,13 @@ def main(argv=None):
 
         summary = {"data": str(args.data), "split": args.split, "samples": n, "noise_mm": args.noise,
                    "model": "GT heatmap" if args.gt else method.version, "threads": args.threads,
-                   "coverage_mae_points": 100 * float(np.nanmean(np.abs(err))),
-                   "coverage_median_abs_points": 100 * float(np.nanmedian(np.abs(err))),
-                   "coverage_bias_points": 100 * float(np.nanmean(err)),
-                   "seconds_per_segment": {s: v / n for s, v in stages.items()}, "wall_per_segment": wall / n,
-                   "peak_mib": peak,
-                   "constant_guess": args.constant,
-                   "constant_guess_mae_points": None if true is None else 100 * float(np.mean(np.abs(args.constant - true))),
-                   "metrics_mean": {k: float(np.nanmean([r[k] for r in rows])) for k in rows[0] if k != "coverage_error"},
-                   "metrics_median": {k: float(np.nanmedian([r[k] for r in rows])) for k in rows[0]
-                                      if k != "coverage_error"}}
+                   "coverage_mae_points": float(s["coverage_mae"]),
+                   "coverage_median_abs_points": float(s["coverage_median"]),
+                   "coverage_bias_points": float(s["coverage_bias"]),
+                   "seconds_per_segment": {st: v / n for st, v in stages.items()}, "wall_per_segment": wall / n,
+                   "peak_mib": peak, "constant_guess": args.constant, "constant_guess_mae_points": constant_mae,
+                   "metrics_mean": {k: float(s[k + "_mean"]) for k in metrics},
+                   "metrics_median": {k: float(s[k + "_median"]) for k in metrics}}
         with open(args.json, "w") as fh:
             json.dump(summary, fh, indent=1)
     return 0

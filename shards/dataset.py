@@ -15,7 +15,6 @@ Dask cluster give the same files.
 
 from __future__ import annotations
 
-import fcntl
 import functools
 import hashlib
 import json
@@ -29,6 +28,7 @@ import yaml
 
 from colonbench._version import __version__
 from colonbench.errors import ColonbenchError, InputError
+from colonbench.folderlock import folder_lock
 from colonbench.shards import schema, stats
 from colonbench.shards.build import build_shard
 from colonbench.shards.writer import TMP_SUFFIX
@@ -149,11 +149,7 @@ def generate(manifest, out_dir, workers: int = 1, scheduler=None, splits=None, p
     digest = manifest_hash(resolved)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    with open(out / ".generate.lock", "w") as guard:
-        try:
-            fcntl.flock(guard, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            raise InputError(f"{out}: another generation is running in this folder") from None
+    with folder_lock(out, "generate", "generation"):
         return _generate_locked(resolved, digest, out, workers, scheduler, splits, progress)
 
 

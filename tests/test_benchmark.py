@@ -202,3 +202,16 @@ def test_estimate_runs_any_registered_method_but_not_references(smoke_dataset, t
     assert json.loads((tmp_path / "o" / "seg.json").read_text())["method"] == "unwrap-pca"
     assert main(["estimate", str(tmp_path / "seg.npy"), "--method", "gt-heatmap", "--out-dir", str(tmp_path / "o")]) == 2
     assert "needs ground truth" in capsys.readouterr().err
+
+
+def test_two_evaluations_never_share_a_run_folder(smoke_dataset, tmp_path):
+    from colonbench.folderlock import folder_lock
+
+    data, _ = smoke_dataset
+    out = tmp_path / "run"
+    out.mkdir()
+    with folder_lock(out, "evaluate", "evaluation"):  # as a running evaluation holds it
+        with pytest.raises(InputError, match="another evaluation is running"):
+            evaluate(data, ["constant"], out, progress=False)
+    evaluate(data, ["constant"], out, progress=False)  # released with its holder
+    assert (out / "results" / "constant.csv").exists()
