@@ -138,16 +138,25 @@ def voxelize_polyline(grid: Grid, points) -> tuple[np.ndarray, int]:
     return occupancy(grid, idx), outside
 
 
-def input_heatmap(d_partial: np.ndarray) -> np.ndarray:
-    """``tanh(0.2 d(v, S0))`` from the distance (voxels) to the partial surface."""
-    return np.tanh(np.float32(HEATMAP_SCALE) * d_partial)
+def input_heatmap(d_partial):
+    """``tanh(0.2 d(v, S0))`` from the distance (voxels) to the partial surface.
+
+    ``d_partial`` is a float32 numpy array or torch tensor (any shape); the
+    result is of the same kind, so training on a GPU uses this same formula.
+    """
+    return (d_partial * HEATMAP_SCALE).tanh() if hasattr(d_partial, "tanh") else np.tanh(
+        np.float32(HEATMAP_SCALE) * d_partial)
 
 
-def target_heatmap(d_surface: np.ndarray, d_centerline: np.ndarray) -> np.ndarray:
-    """``t_S / (t_S + t_C)`` with ``t = tanh(0.2 d)``, from distances (voxels) to the complete surface and centerline."""
-    ts = np.tanh(np.float32(HEATMAP_SCALE) * d_surface)
-    tc = np.tanh(np.float32(HEATMAP_SCALE) * d_centerline)
+def target_heatmap(d_surface, d_centerline):
+    """``t_S / (t_S + t_C)`` with ``t = tanh(0.2 d)``, from distances (voxels) to the complete surface and centerline.
+
+    Numpy arrays or torch tensors of one shape (float32); 0 where both distances are 0.
+    """
+    ts, tc = input_heatmap(d_surface), input_heatmap(d_centerline)
     den = ts + tc
+    if hasattr(den, "tanh"):  # torch
+        return (ts / den.clamp_min(1e-30)).masked_fill(den <= 0, 0.0)
     out = np.zeros_like(ts)
     np.divide(ts, den, out=out, where=den > 0)
     return out

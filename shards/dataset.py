@@ -33,8 +33,8 @@ from colonbench.shards import schema, stats
 from colonbench.shards.build import build_shard
 from colonbench.shards.writer import TMP_SUFFIX
 from colonbench.shards.manifest import SPLITS, config_hash, dumps, load, manifest_hash, resolve, units
+from colonbench.shards.schema import LOCK_NAME
 
-LOCK_NAME = "dataset.lock.json"
 MANIFEST_NAME = "manifest.yaml"
 STATS_NAME = "stats.png"
 LOCK_FORMAT = "colonbench-dataset-lock"

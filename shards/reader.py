@@ -26,7 +26,7 @@ from colonbench import seeding
 from colonbench.errors import InputError
 from colonbench.grid import Grid
 from colonbench.shards import schema
-from colonbench.shards.dataset import LOCK_NAME
+from colonbench.shards.schema import LOCK_NAME
 
 _NAMES = {v: k for k, v in schema.HOLE_MODEL_CODES.items()}
 

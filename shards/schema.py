@@ -33,6 +33,9 @@ from dataclasses import dataclass
 import h5py
 import numpy as np
 
+#: The lock file of a generated dataset folder (what it holds: :mod:`colonbench.shards.dataset`).
+LOCK_NAME = "dataset.lock.json"
+
 #: Value of the file attribute ``format``.
 FORMAT = "colonbench-shard"
 #: Bumped whenever a field is added, removed or changes meaning.
