@@ -179,7 +179,7 @@ def cmd_train(args):
     from colonbench.completion.train import TrainConfig, train
 
     cfg = TrainConfig(network=args.network, batch_size=args.batch_size, lr=args.lr, epochs=args.epochs,
-                      augment_prob=args.augment_prob, seed=args.seed, workers=args.workers,
+                      augment_prob=args.augment_prob, seed=args.seed, workers=args.workers, flips=args.flips,
                       checkpoint_minutes=args.checkpoint_minutes, max_minutes=args.max_minutes)
     command = "colonbench train " + " ".join(sys.argv[2:]) if len(sys.argv) > 2 else ""
     result = train(args.data, args.out, cfg, device=args.device, progress=not args.quiet, command=command)
@@ -187,6 +187,19 @@ def cmd_train(args):
            "signal": "stopped on request; run the same command to resume"}.get(result["stopped"], "done")
     print(f"{result['epochs']} epochs, {result['steps']} steps, best validation L2 {result['best_val_l2']:.5f}, "
           f"{result['seconds'] / 60:.1f} min in all: {how}. Model: {Path(args.out) / 'best.safetensors'}")
+
+
+def cmd_pack(args):
+    """Write a dataset's samples as compact voxel occupancies (a pack) for training on another machine."""
+    from colonbench.shards.pack import write_pack
+
+    splits = [s.strip() for s in args.splits.split(",") if s.strip()]
+    info = write_pack(args.data, args.out, splits, workers=args.workers, progress=not args.quiet)
+    for split, meta in info["splits"].items():
+        print(f"{split}: {meta['samples']} samples, {meta['bytes'] / 2**20:.1f} MiB "
+              f"({meta['bytes'] / meta['samples'] / 1024:.1f} KiB/sample), heatmaps remade from the occupancies "
+              f"within {meta['max_heatmap_difference']:.1e} of the stored ones")
+    print(f"wrote {Path(args.out)}; train on it with colonbench train {args.out} --augment-prob 0 --flips ...")
 
 
 def estimate_name(path: Path) -> str:
@@ -380,8 +393,18 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quick", action="store_true", help="checksums and counts only, skip reading every heatmap")
     p.set_defaults(func=cmd_verify)
 
-    p = sub.add_parser("train", help="train (or resume) the completion network on generated shards")
-    p.add_argument("data", help="dataset folder with train and validation splits (colonbench generate)")
+    p = sub.add_parser("pack", help="write a dataset's samples as compact voxel occupancies (~6 KiB/sample) "
+                                    "to train elsewhere")
+    p.add_argument("data", help="dataset folder (colonbench generate)")
+    p.add_argument("--out", required=True, help="pack folder to write")
+    p.add_argument("--splits", default="train,validation", help="splits to pack (default train,validation)")
+    p.add_argument("--workers", type=int, default=1, help="processes reading and checking shards (default 1)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=cmd_pack)
+
+    p = sub.add_parser("train", help="train (or resume) the completion network on generated shards or a pack")
+    p.add_argument("data", help="dataset folder with train and validation splits (colonbench generate), "
+                                "or a pack of one (colonbench pack)")
     p.add_argument("--out", required=True, help="run folder: log.csv, last.pt, best.safetensors; rerun to resume")
     p.add_argument("--network", default="small", help="network configuration: small (CPU) or large (GPU)")
     p.add_argument("--epochs", type=_positive(int), default=100, help="epochs in all (default 100)")
@@ -389,6 +412,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--lr", type=_positive(float), default=1e-3, help="Adam learning rate (default 1e-3)")
     p.add_argument("--augment-prob", type=float, default=0.3,
                    help="share of samples augmented on the fly (default 0.3)")
+    p.add_argument("--flips", action="store_true",
+                   help="flip each sample's grid axes at random (exact augmentation; the only one for a pack)")
     p.add_argument("--seed", type=int, default=0, help="seed of weights, sample order and augmentations")
     p.add_argument("--workers", type=int, default=1, help="DataLoader worker processes (default 1)")
     p.add_argument("--device", default="auto", help="auto, cpu, cuda, cuda:1, ... (default auto)")

@@ -46,11 +46,11 @@ import torch
 from colonbench import seeding
 from colonbench._version import __version__
 from colonbench.augment import AugmentConfig
+from colonbench.completion.packdata import apply_flips, flips
 from colonbench.completion.network import (NETWORKS, build_network, network_config, resolve_device,
                                            save_model)
 from colonbench.errors import InputError
-from colonbench.shards.dataset import LOCK_NAME
-from colonbench.shards.reader import ShardDataset
+from colonbench.shards.schema import LOCK_NAME
 
 
 @dataclass(frozen=True)
@@ -70,6 +70,7 @@ class TrainConfig:
     checkpoint_minutes: float = 10.0
     max_minutes: float | None = None
     augment: dict = field(default_factory=dict)
+    flips: bool = False
 
     def check(self):
         if self.network not in NETWORKS:
@@ -111,16 +112,24 @@ def _collate(items):
             torch.from_numpy(np.stack([it["target"] for it in items])))
 
 
+def _batch(dataset, indices, device) -> tuple[torch.Tensor, torch.Tensor]:
+    """(input, target) (n, 1, S, S, S) on ``device`` of items ``indices`` of shards or a pack split."""
+    if hasattr(dataset, "batch"):  # a PackSplit makes its heatmaps on the device
+        return dataset.batch(indices)
+    x, y = _collate([dataset[int(k)] for k in indices])
+    return x.to(device), y.to(device)
+
+
 def evaluate_l2(net, dataset, device, batch_size: int = 4, rank: int = 0, world: int = 1) -> float:
-    """Mean squared error of the network's prediction over a dataset (all ranks combined)."""
+    """Mean squared error of the network's prediction over a dataset or pack split (all ranks combined)."""
     net.eval()
     total = torch.zeros(2, dtype=torch.float64, device=device)
     idx = np.arange(len(dataset))[rank::world]
     with torch.no_grad():
         for b in range(0, len(idx), batch_size):
-            x, y = _collate([dataset[int(k)] for k in idx[b:b + batch_size]])
-            pred = net(x.to(device))
-            total[0] += torch.sum((pred - y.to(device)) ** 2).double()
+            x, y = _batch(dataset, idx[b:b + batch_size], device)
+            pred = net(x)
+            total[0] += torch.sum((pred - y) ** 2).double()
             total[1] += y.numel()
     if world > 1:
         torch.distributed.all_reduce(total)
@@ -133,19 +142,26 @@ _RUN_LENGTH = ("max_minutes", "epochs", "checkpoint_minutes")
 
 
 def _fixed_settings(train_config: dict) -> dict:
-    """The settings a resumed run must share with the stored one."""
-    return {k: v for k, v in train_config.items() if k not in _RUN_LENGTH}
+    """The settings a resumed run must share with the stored one (settings added since: their defaults)."""
+    full = {**asdict(TrainConfig()), **train_config}
+    return {k: v for k, v in full.items() if k not in _RUN_LENGTH}
 
 
 def _data_lock(data_dir: Path) -> dict:
-    lock = data_dir / LOCK_NAME
+    """What the run needs to know of its data: ``manifest_sha256``, ``train_coverage_mean``, ``pack``."""
+    from colonbench.shards.pack import PACK_NAME, is_pack
+    pack = is_pack(data_dir)
+    lock = data_dir / (PACK_NAME if pack else LOCK_NAME)
     if not lock.exists():
-        raise InputError(f"{data_dir}: no {LOCK_NAME}; generate the dataset first (colonbench generate)")
+        raise InputError(f"{data_dir}: neither {LOCK_NAME} nor {PACK_NAME}; generate the dataset first "
+                         "(colonbench generate)")
     lock = json.loads(lock.read_text())
     missing = [s for s in ("train", "validation") if s not in lock.get("splits", {})]
     if missing:
-        raise InputError(f"{data_dir}: the dataset has no {' and no '.join(missing)} split; generate it with them")
-    return lock
+        raise InputError(f"{data_dir}: the {'pack' if pack else 'dataset'} has no {' and no '.join(missing)} split; "
+                         "make it with them")
+    coverage = lock["train_coverage_mean"] if pack else lock["splits"]["train"]["statistics"]["coverage"]["mean"]
+    return {"manifest_sha256": lock["manifest_sha256"], "train_coverage_mean": coverage, "pack": pack}
 
 
 def _ignore_stop_signals(worker_id: int):
@@ -161,7 +177,9 @@ def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "a
     Parameters
     ----------
     data_dir : path
-        Dataset folder with ``train`` and ``validation`` splits.
+        Dataset folder with ``train`` and ``validation`` splits, or a pack of
+        one (:mod:`colonbench.shards.pack`; heatmaps are then made on the
+        training device, and only flips augment).
     out_dir : path
         Run folder (log, checkpoints, best model). If it holds ``last.pt`` the
         run resumes; its settings must then match.
@@ -182,17 +200,28 @@ def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "a
     data_dir, out = Path(data_dir), Path(out_dir)
     lock = _data_lock(data_dir)
     data_hash = lock["manifest_sha256"]
-    train_coverage = lock["splits"]["train"]["statistics"]["coverage"]["mean"]
+    train_coverage = lock["train_coverage_mean"]
     rank, world = _dist()
     dev = resolve_device(device)
     if dev.type == "cuda" and world > 1:
         dev = torch.device("cuda", int(os.environ.get("LOCAL_RANK", "0")))
         torch.cuda.set_device(dev)
     out.mkdir(parents=True, exist_ok=True)
-    aug = AugmentConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in cfg.augment.items()})
-    train_ds = ShardDataset(data_dir, split="train", augment=aug if cfg.augment_prob > 0 else None,
-                            seed=cfg.seed, augment_prob=cfg.augment_prob)
-    val_ds = ShardDataset(data_dir, split="validation")
+    if lock["pack"]:
+        if cfg.augment_prob > 0:
+            raise InputError(f"{data_dir} is a pack: it holds voxel occupancies, not the geometry the augmentations "
+                             "deform, so train on it with --augment-prob 0 (and --flips, its exact augmentation), "
+                             "or on the dataset's shards")
+        from colonbench.completion.packdata import PackSplit
+        train_ds, val_ds = PackSplit(data_dir, "train", dev), PackSplit(data_dir, "validation", dev)
+        grid_options = train_ds.info["grid_options"]
+    else:
+        from colonbench.shards.reader import ShardDataset
+        aug = AugmentConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in cfg.augment.items()})
+        train_ds = ShardDataset(data_dir, split="train", augment=aug if cfg.augment_prob > 0 else None,
+                                seed=cfg.seed, augment_prob=cfg.augment_prob)
+        val_ds = ShardDataset(data_dir, split="validation")
+        grid_options = train_ds.shards[0].grid_options
 
     torch.manual_seed(cfg.seed)
     net_cfg = network_config(cfg.network)
@@ -247,18 +276,26 @@ def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "a
     loader_kwargs = {"batch_size": cfg.batch_size, "collate_fn": _collate, "num_workers": cfg.workers,
                      "persistent_workers": False, "worker_init_fn": _ignore_stop_signals}
     net.train()
+    bs = cfg.batch_size
     while state["epoch"] < cfg.epochs:
         epoch = state["epoch"]
-        train_ds.set_epoch(epoch)
         order = epoch_order(len(train_ds), cfg.seed, epoch)
-        n_batches = len(order) // (cfg.batch_size * world)
-        mine = order[: n_batches * cfg.batch_size * world][rank::world]
-        todo = mine[state["position"] * cfg.batch_size:]
-        loader = torch.utils.data.DataLoader(torch.utils.data.Subset(train_ds, todo.tolist()), **loader_kwargs)
+        n_batches = len(order) // (bs * world)
+        if n_batches == 0:
+            raise InputError(f"{data_dir}: {len(order)} training samples, fewer than one batch of {bs} per process")
+        mine = order[: n_batches * bs * world][rank::world]
+        todo = mine[state["position"] * bs:]
+        if lock["pack"]:
+            batches = (train_ds.batch(todo[b:b + bs]) for b in range(0, len(todo), bs))
+        else:
+            train_ds.set_epoch(epoch)
+            batches = torch.utils.data.DataLoader(torch.utils.data.Subset(train_ds, todo.tolist()), **loader_kwargs)
         bar = tqdm(total=n_batches, initial=state["position"], desc=f"epoch {epoch}", unit="batch",
                    disable=None if (progress and rank == 0) else True, dynamic_ncols=True)
-        for x, y in loader:
+        for k, (x, y) in enumerate(batches):
             x, y = x.to(dev, non_blocking=True), y.to(dev, non_blocking=True)
+            if cfg.flips:
+                x, y = apply_flips(x, y, [flips(cfg.seed, epoch, int(i)) for i in todo[k * bs:(k + 1) * bs]])
             opt.zero_grad(set_to_none=True)
             loss = torch.mean((net(x) - y) ** 2)
             loss.backward()
@@ -295,11 +332,12 @@ def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "a
                                          f"{opt.param_groups[0]['lr']:.3g}", f"{state['seconds']:.1f}"])
             if val < state["best_val"]:
                 state["best_val"] = val
-                meta = {"data_manifest_sha256": data_hash, "data_dir": data_dir.name, "train_config": asdict(cfg),
+                meta = {"data_manifest_sha256": data_hash, "data_dir": data_dir.name,
+                        "data_format": "pack" if lock["pack"] else "shards", "train_config": asdict(cfg),
                         "epoch": epoch, "steps": state["steps"], "samples_seen": state["samples"],
                         "val_l2": val, "train_seconds": round(state["seconds"], 1), "device": str(dev),
                         "world_size": world, "torch": torch.__version__, "colonbench": __version__,
-                        "grid_options": train_ds.shards[0].grid_options, "command": command or "",
+                        "grid_options": grid_options, "command": command or "",
                         "train_coverage_mean": train_coverage}
                 save_model(out / "best.safetensors", net, net_cfg, meta)
         save_checkpoint()

@@ -45,6 +45,11 @@ dump("train-cpu", "Training data of the shipped small model, sized for CPU train
      "paper.yaml's train colons) and 5 validation colons (a subset of its validation colons), so paper.yaml's test "
      "colons stay unseen.", 20210901,
      {"train": split(0, 40, 10, 3, NOISY), "validation": split(340, 5, 4, 2, NOISY)})
+dump("train-gpu", "Training data of the shipped model when a GPU trains it: 100 train colons (a subset of paper.yaml's "
+     "train colons, holding train-cpu.yaml's) and 10 validation colons (a subset of its validation colons), so "
+     "paper.yaml's test colons stay unseen. Sized so that its packed occupancies (colonbench pack) fit one upload "
+     "to a GPU machine of about 50 MiB.", 20210901,
+     {"train": split(0, 100, 10, 3, NOISY), "validation": split(340, 10, 4, 2, NOISY)})
 dump("smoke", "Seconds of data for tests: short coarse colons, one 6 cm segment length, 1-2 segments per colon.", 7,
      {"train": split(0, 1, 2, 2, NOISY), "validation": split(1, 1, 1, 2, CLEAN), "test": split(2, 1, 2, 1, CLEAN)},
      {"colon": {"length_mm": [450, 550], "ring_spacing_mm": 1.0, "edge_mm": 1.5}, "segments": {"lengths_mm": [60.0]}})

@@ -170,7 +170,7 @@ def test_training_needs_train_and_validation_splits(tmp_path):
         train(tmp_path / "d", tmp_path / "run", TrainConfig(epochs=1), device="cpu", progress=False)
     with pytest.raises(InputError, match="seed and workers"):
         train(tmp_path / "d", tmp_path / "run", TrainConfig(seed=-1), device="cpu", progress=False)
-    with pytest.raises(InputError, match="no dataset.lock.json"):
+    with pytest.raises(InputError, match="neither dataset.lock.json nor pack.json"):
         train(tmp_path / "nothing", tmp_path / "run", TrainConfig(epochs=1), device="cpu", progress=False)
 
 

@@ -1,0 +1,157 @@
+"""Training batches from a pack (:mod:`colonbench.shards.pack`): heatmaps made on the training device.
+
+A pack holds per sample the occupancy grids of the partial surface, the
+complete surface and the centerline. A batch is unpacked on the device, its
+three exact Euclidean distance transforms are taken there, and the input and
+target heatmaps follow from :func:`colonbench.heatmaps.input_heatmap` and
+:func:`colonbench.heatmaps.target_heatmap`, the formulas data generation uses.
+
+Distance transform
+------------------
+On a CUDA device the squared distance is computed separably and exactly,
+``d^2(x, y, z) = min_x' [(x - x')^2 + min_y' [(y - y')^2 + min_z' [(z - z')^2 + F]]]``
+with ``F`` 0 on occupied voxels and infinite elsewhere, one brute-force
+min-plus product per axis (``S^4`` operations per axis and grid: trivial
+work for a GPU, and all integers in float32, so exact). On the CPU the
+``edt`` package does the same job faster. Both equal
+:func:`colonbench.heatmaps.distance_to` (a test checks it).
+
+Augmentation
+------------
+Flipping a grid axis maps the occupancies, and with them both heatmaps, onto
+another valid sample (the grid's principal axes have no preferred sign), so
+flips are exact augmentations. They are the only ones a pack allows.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from colonbench import seeding
+from colonbench.heatmaps import input_heatmap, target_heatmap
+from colonbench.shards.pack import GRIDS, read_pack
+
+#: Elements of the broadcast (n, S, S, S, S) tensor of one min-plus step, at most.
+_CHUNK_ELEMENTS = 1 << 28
+
+
+def _min_plus_last(f: torch.Tensor, sq: torch.Tensor) -> torch.Tensor:
+    """``out[..., i] = min_j f[..., j] + sq[i, j]`` over the last axis, in chunks of the first."""
+    per_item = f[0].numel() * f.shape[-1]
+    step = max(1, _CHUNK_ELEMENTS // per_item)
+    return torch.cat([torch.amin(f[a:a + step].unsqueeze(-2) + sq, dim=-1) for a in range(0, len(f), step)])
+
+
+def distance_to(occupied: torch.Tensor, method: str = "auto") -> torch.Tensor:
+    """Exact Euclidean distance (voxels) from every voxel to the nearest occupied voxel of the same grid.
+
+    Parameters
+    ----------
+    occupied : (n, S, S, S) bool tensor
+        Each grid must hold an occupied voxel.
+    method : {"auto", "edt", "min-plus"}
+        ``auto``: the ``edt`` package on the CPU, min-plus products elsewhere.
+
+    Returns
+    -------
+    (n, S, S, S) float32 tensor
+        On the same device; 0 on occupied voxels.
+    """
+    if method == "auto":
+        method = "edt" if occupied.device.type == "cpu" else "min-plus"
+    if method == "edt":
+        import edt
+        return torch.from_numpy(np.stack([edt.edt(np.ascontiguousarray(~g), black_border=False, parallel=1)
+                                          for g in occupied.numpy()]).astype(np.float32, copy=False))
+    if method != "min-plus":
+        raise ValueError(f"unknown distance transform method {method!r}")
+    size = occupied.shape[-1]
+    r = torch.arange(size, device=occupied.device, dtype=torch.float32)
+    sq = (r[:, None] - r[None, :]) ** 2
+    f = torch.where(occupied, 0.0, float("inf")).to(torch.float32)
+    for _ in range(3):
+        # transform the last axis, then rotate the axes so that each one comes last once
+        f = _min_plus_last(f, sq).permute(0, 3, 1, 2).contiguous()
+    return f.sqrt()
+
+
+def heatmaps(s0: torch.Tensor, s1: torch.Tensor, c: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Input and target heatmaps, (n, S, S, S) float32, from the partial-surface, surface and centerline grids."""
+    return input_heatmap(distance_to(s0)), target_heatmap(distance_to(s1), distance_to(c))
+
+
+def flips(seed: int, epoch: int, index: int) -> tuple[int, ...]:
+    """The grid axes (of 0, 1, 2) flipped for sample ``index`` in ``epoch``: each with probability 1/2.
+
+    Drawn from stream ``("flip", epoch, index)`` under ``seed``, so a resumed
+    run and every worker draw the same ones.
+    """
+    draw = seeding.rng(seed, "flip", epoch, index).random(3) < 0.5
+    return tuple(int(a) for a in np.flatnonzero(draw))
+
+
+def apply_flips(x: torch.Tensor, y: torch.Tensor, axes: list) -> tuple[torch.Tensor, torch.Tensor]:
+    """Flip the grid axes ``axes[k]`` of item ``k`` of (n, 1, S, S, S) input and target batches."""
+    if not any(axes):
+        return x, y
+    x, y = x.clone(), y.clone()
+    for k, ax in enumerate(axes):
+        if ax:
+            dims = [a + 1 for a in ax]
+            x[k] = torch.flip(x[k], dims)
+            y[k] = torch.flip(y[k], dims)
+    return x, y
+
+
+class PackSplit:
+    """One split of a pack, held packed on the training device.
+
+    Parameters
+    ----------
+    pack_dir : path
+    split : str
+    device : torch.device
+    cache : bool, optional
+        Make every sample's heatmaps once and keep them on the device
+        (8 MiB per sample at S = 64): flips act on finished heatmaps, so
+        they need not be made again each epoch. Default: on a CUDA device
+        when they take under half of its free memory.
+
+    Attributes
+    ----------
+    info : dict
+        The pack's ``pack.json``.
+    size : int
+        Grid side S.
+    """
+
+    def __init__(self, pack_dir, split: str, device, cache: bool | None = None):
+        self.info, bits = read_pack(pack_dir, split)
+        self.size = int(self.info["grid_options"]["size"])
+        self.device = torch.device(device)
+        self.bits = torch.from_numpy(np.stack([bits[g] for g in GRIDS], axis=1)).to(self.device)
+        self._shifts = torch.arange(7, -1, -1, dtype=torch.uint8, device=self.device)
+        self._cache = None
+        if cache is None:
+            need = len(self.bits) * 2 * 4 * self.size ** 3
+            cache = self.device.type == "cuda" and need < 0.5 * torch.cuda.mem_get_info(self.device)[0]
+        if cache:
+            parts = [self._make(np.arange(a, min(a + 64, len(self)))) for a in range(0, len(self), 64)]
+            self._cache = (torch.cat([p[0] for p in parts]), torch.cat([p[1] for p in parts]))
+
+    def __len__(self) -> int:
+        return len(self.bits)
+
+    def _make(self, indices) -> tuple[torch.Tensor, torch.Tensor]:
+        rows = self.bits[torch.as_tensor(np.asarray(indices, dtype=np.int64), device=self.device)]
+        grids = ((rows.unsqueeze(-1) >> self._shifts) & 1).bool().reshape(len(rows), 3, *(self.size,) * 3)
+        h_in, h_t = heatmaps(grids[:, 0], grids[:, 1], grids[:, 2])
+        return h_in.unsqueeze(1), h_t.unsqueeze(1)
+
+    def batch(self, indices) -> tuple[torch.Tensor, torch.Tensor]:
+        """(input, target) heatmaps of samples ``indices``: (n, 1, S, S, S) float32 on the device."""
+        if self._cache is None:
+            return self._make(indices)
+        at = torch.as_tensor(np.asarray(indices, dtype=np.int64), device=self.device)
+        return self._cache[0][at], self._cache[1][at]

@@ -1,0 +1,82 @@
+"""Training throughput on a pack: heatmap making and training step per batch, samples/s, peak memory.
+
+Usage::
+
+    python scripts/bench_train.py PACK [--device cuda] [--network small] [--batch-sizes 8,32,64] [--steps 10]
+
+Uses the pack's validation split (its samples are only read). On a CUDA
+device it first checks that the min-plus distance transform used there
+equals the ``edt`` package's on one batch.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+import torch
+
+from colonbench.completion import packdata
+from colonbench.completion.network import build_network, network_config, resolve_device
+
+
+def sync(dev):
+    if dev.type == "cuda":
+        torch.cuda.synchronize(dev)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("pack")
+    ap.add_argument("--device", default="auto")
+    ap.add_argument("--network", default="small")
+    ap.add_argument("--batch-sizes", default="4,16,32,64")
+    ap.add_argument("--steps", type=int, default=10)
+    ap.add_argument("--split", default="validation")
+    args = ap.parse_args()
+    dev = resolve_device(args.device)
+    t = time.perf_counter()
+    split = packdata.PackSplit(args.pack, args.split, dev, cache=False)
+    print(f"{len(split)} samples of {args.pack}:{args.split} on {dev} "
+          f"({torch.cuda.get_device_name(dev) if dev.type == 'cuda' else 'CPU'}), loaded in "
+          f"{time.perf_counter() - t:.1f} s")
+    if dev.type == "cuda":
+        rows = split.bits[:8]
+        grids = ((rows.unsqueeze(-1) >> split._shifts) & 1).bool().reshape(len(rows), 3, *(split.size,) * 3)
+        occ = grids.reshape(-1, *(split.size,) * 3)
+        fast = packdata.distance_to(occ, "min-plus").cpu()
+        ref = packdata.distance_to(occ.cpu(), "edt")
+        print(f"min-plus vs edt on {len(occ)} grids: max |difference| {float((fast - ref).abs().max()):.2e} voxels")
+    net = build_network(network_config(args.network)).to(dev)
+    opt = torch.optim.Adam(net.parameters(), lr=1e-3)
+    print(f"network {args.network}: {sum(p.numel() for p in net.parameters()) / 1e6:.2f} M parameters")
+    print(f"{'batch':>5} {'heatmaps ms':>12} {'step ms':>9} {'samples/s':>10} {'peak MiB':>9}")
+    rng = np.random.default_rng(0)
+    for bs in [int(b) for b in args.batch_sizes.split(",")]:
+        if dev.type == "cuda":
+            torch.cuda.reset_peak_memory_stats(dev)
+        t_h = t_s = 0.0
+        for step in range(args.steps + 2):
+            idx = rng.choice(len(split), size=bs, replace=len(split) < bs)
+            sync(dev)
+            a = time.perf_counter()
+            x, y = split.batch(idx)
+            sync(dev)
+            b = time.perf_counter()
+            opt.zero_grad(set_to_none=True)
+            loss = torch.mean((net(x) - y) ** 2)
+            loss.backward()
+            opt.step()
+            sync(dev)
+            c = time.perf_counter()
+            if step >= 2:  # two warm-up steps
+                t_h += b - a
+                t_s += c - b
+        n = args.steps
+        peak = torch.cuda.max_memory_allocated(dev) / 2**20 if dev.type == "cuda" else float("nan")
+        print(f"{bs:>5} {1e3 * t_h / n:>12.1f} {1e3 * t_s / n:>9.1f} {bs * n / (t_h + t_s):>10.1f} {peak:>9.0f}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,265 @@
+"""Packs: a generated dataset's training samples as compact voxel occupancies, for training elsewhere.
+
+A shard sample holds two float heatmaps and its geometry (about 413 KiB). The
+heatmaps are functions of three occupancy grids (:mod:`colonbench.heatmaps`):
+
+``s0``
+    voxels holding a partial point (where the input heatmap is 0);
+``s1``
+    voxels the complete surface passes through (where the target is 0);
+``c``
+    voxels the GT centerline passes through (where the target is 1).
+
+A pack stores just these, bit-packed and compressed (about 6 KiB per
+sample), so that tens of thousands of samples travel to a GPU machine in one
+upload and the heatmaps are made again there with exact distance transforms
+(:mod:`colonbench.completion.packdata`). It cannot hold the geometry, so the
+geometric augmentations (:mod:`colonbench.augment`) need shards; a pack
+supports only the exact symmetries of the grid (axis flips).
+
+Layout of a pack folder::
+
+    pack.json          what it was made from (manifest sha256, grid options,
+                       train coverage mean), per split its sample count and
+                       its file's sha256
+    <split>.h5         datasets s0, s1, c: (n, S^3 / 8) uint8, numpy.packbits
+                       of the (S, S, S) bool grid in C order; gzip level 9,
+                       one chunk per sample
+
+``colonbench pack DATA --out PACK`` writes one. Every written sample is
+checked: the heatmaps recomputed from the occupancies must equal the stored
+ones to float16 rounding.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from colonbench._version import __version__
+from colonbench.errors import InputError
+from colonbench.shards.schema import LOCK_NAME
+
+#: The description file of a pack folder.
+PACK_NAME = "pack.json"
+#: Value of ``format`` in it.
+PACK_FORMAT = "colonbench-pack"
+#: Bumped whenever the layout changes.
+PACK_VERSION = 1
+#: The occupancy grids a pack stores per sample, in this order.
+GRIDS = ("s0", "s1", "c")
+#: Largest difference between a stored (float16) heatmap and the one recomputed from the occupancies.
+CHECK_TOLERANCE = 2e-3
+
+
+def is_pack(path) -> bool:
+    """Whether ``path`` is a pack folder."""
+    return (Path(path) / PACK_NAME).is_file()
+
+
+def occupancies(input_heatmap: np.ndarray, target_heatmap: np.ndarray) -> dict:
+    """The three occupancy grids of a sample from its stored heatmaps.
+
+    Parameters
+    ----------
+    input_heatmap, target_heatmap : (S, S, S) float
+        As stored in a shard.
+
+    Returns
+    -------
+    dict
+        ``s0``, ``s1``, ``c``: (S, S, S) bool.
+
+    Notes
+    -----
+    A centerline voxel that is also a surface voxel (only a degenerate
+    segment has one) has target 0 and is read as surface only.
+    """
+    return {"s0": input_heatmap == 0, "s1": target_heatmap == 0, "c": target_heatmap == 1}
+
+
+def _heatmaps_cpu(occ: dict) -> tuple[np.ndarray, np.ndarray]:
+    from colonbench.heatmaps import distance_to, input_heatmap, target_heatmap
+    return (input_heatmap(distance_to(occ["s0"])),
+            target_heatmap(distance_to(occ["s1"]), distance_to(occ["c"])))
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _pack_shard(path) -> tuple[dict, float]:
+    """Packed occupancies (``GRIDS`` -> (n, S^3 / 8) uint8) of one shard, and the largest heatmap difference."""
+    from colonbench.shards.reader import Shard
+
+    rows = {g: [] for g in GRIDS}
+    worst = 0.0
+    with Shard(path) as shard:
+        for i in range(len(shard)):
+            x, y = shard.heatmaps(i)
+            occ = occupancies(x, y)
+            if not occ["s0"].any() or not occ["s1"].any() or not occ["c"].any():
+                raise InputError(f"{path}: sample {i} has an empty partial surface, surface or centerline grid; "
+                                 "the dataset is damaged (run colonbench verify)")
+            h_in, h_t = _heatmaps_cpu(occ)
+            worst = max(worst, float(np.abs(h_in - x).max()), float(np.abs(h_t - y).max()))
+            for g in GRIDS:
+                rows[g].append(np.packbits(occ[g].ravel()))
+    return {g: np.stack(r) for g, r in rows.items()}, worst
+
+
+def write_pack(data_dir, out_dir, splits=("train", "validation"), workers: int = 1, progress: bool = True) -> dict:
+    """Write the pack of a generated dataset's splits.
+
+    Parameters
+    ----------
+    data_dir : path
+        A dataset folder made by ``colonbench generate``.
+    out_dir : path
+        The pack folder to write (created; an existing pack of other data is refused).
+    splits : sequence of str
+    workers : int
+        Processes reading and checking shards (spawn pool; 1 = this process).
+    progress : bool
+        tqdm progress bar.
+
+    Returns
+    -------
+    dict
+        The contents of ``pack.json``.
+    """
+    from tqdm.auto import tqdm
+
+    from colonbench.shards.reader import ShardDataset
+
+    data_dir, out = Path(data_dir), Path(out_dir)
+    lock_path = data_dir / LOCK_NAME
+    if not lock_path.is_file():
+        raise InputError(f"{data_dir}: no {LOCK_NAME}; generate the dataset first (colonbench generate)")
+    lock = json.loads(lock_path.read_text())
+    missing = [s for s in splits if s not in lock.get("splits", {})]
+    if missing:
+        raise InputError(f"{data_dir}: the dataset has no split {', '.join(missing)} "
+                         f"(it has {', '.join(lock.get('splits', {})) or 'none'})")
+    info = {"format": PACK_FORMAT, "format_version": PACK_VERSION, "colonbench": __version__,
+            "manifest_name": lock.get("manifest_name"), "manifest_sha256": lock["manifest_sha256"],
+            "source": data_dir.name, "splits": {}}
+    if is_pack(out):  # add to it: the splits packed before stay
+        old = json.loads((out / PACK_NAME).read_text())
+        if old.get("manifest_sha256") != lock["manifest_sha256"] or old.get("format_version") != PACK_VERSION:
+            raise InputError(f"{out} holds a pack of other data ({old.get('manifest_name')}); use another --out")
+        info["splits"] = old.get("splits", {})
+        info.update({k: old[k] for k in ("grid_options", "train_coverage_mean") if k in old})
+    out.mkdir(parents=True, exist_ok=True)
+    for split in splits:
+        ds = ShardDataset(data_dir, split=split)
+        n = len(ds)
+        if n == 0:
+            raise InputError(f"{data_dir}: split {split} has no samples")
+        size = ds.shards[0].grid_options["size"]
+        info["grid_options"] = ds.shards[0].grid_options
+        if split == "train":
+            info["train_coverage_mean"] = lock["splits"]["train"]["statistics"]["coverage"]["mean"]
+        row = size ** 3 // 8
+        final = out / f"{split}.h5"
+        tmp = out / f"{split}.h5.tmp-{os.getpid()}"
+        worst = 0.0
+        files = [sh.path for sh in ds.shards]
+        bar = tqdm(total=n, desc=f"pack {split}", unit="sample", disable=None if progress else True)
+        try:
+            with h5py.File(tmp, "w", track_order=True) as h5, _pool(workers) as pool:
+                h5.attrs["grid_size"] = size
+                sets = {g: h5.create_dataset(g, (n, row), dtype=np.uint8, chunks=(1, row), compression="gzip",
+                                             compression_opts=9) for g in GRIDS}
+                at = 0
+                for path, (rows, diff) in zip(files, pool.map(_pack_shard, files)):
+                    worst = max(worst, diff)
+                    if diff > CHECK_TOLERANCE:
+                        raise InputError(f"{path}: the heatmaps made from its occupancies differ from the stored "
+                                         f"ones by {diff:.3g}; the shards were not made by this heatmap definition, "
+                                         "so a pack of them would train on other targets")
+                    k = len(rows["s0"])
+                    for g in GRIDS:
+                        sets[g][at:at + k] = rows[g]
+                    at += k
+                    bar.update(k)
+        except BaseException:
+            tmp.unlink(missing_ok=True)
+            raise
+        finally:
+            bar.close()
+        with open(tmp, "rb+") as fh:
+            os.fsync(fh.fileno())
+        os.replace(tmp, final)
+        info["splits"][split] = {"samples": n, "file": final.name, "sha256": _sha256(final),
+                                 "bytes": final.stat().st_size, "max_heatmap_difference": worst}
+    tmp = out / (PACK_NAME + ".tmp")
+    tmp.write_text(json.dumps(info, indent=1) + "\n")
+    os.replace(tmp, out / PACK_NAME)
+    return info
+
+
+class _Serial:
+    def map(self, fn, items):
+        return map(fn, items)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        return False
+
+
+def _pool(workers: int):
+    if workers <= 1:
+        return _Serial()
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+    return ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"))
+
+
+def read_pack(pack_dir, split: str) -> tuple[dict, dict]:
+    """Load one split of a pack into memory, checking it against ``pack.json``.
+
+    Returns
+    -------
+    info : dict
+        ``pack.json``.
+    bits : dict
+        ``s0``, ``s1``, ``c``: (n, S^3 / 8) uint8 packed occupancies.
+    """
+    pack = Path(pack_dir)
+    if not is_pack(pack):
+        raise InputError(f"{pack}: not a pack (no {PACK_NAME}); write one with colonbench pack")
+    info = json.loads((pack / PACK_NAME).read_text())
+    if info.get("format") != PACK_FORMAT or info.get("format_version") != PACK_VERSION:
+        raise InputError(f"{pack}: pack format {info.get('format')} version {info.get('format_version')}; "
+                         f"this colonbench reads {PACK_FORMAT} version {PACK_VERSION}")
+    if split not in info["splits"]:
+        raise InputError(f"{pack}: the pack has no {split} split (it has {', '.join(info['splits'])})")
+    meta = info["splits"][split]
+    path = pack / meta["file"]
+    if not path.is_file():
+        raise InputError(f"{path}: missing; the pack is incomplete")
+    if _sha256(path) != meta["sha256"]:
+        raise InputError(f"{path}: its sha256 differs from the one in {PACK_NAME}; the file is damaged or "
+                         "from another pack")
+    with h5py.File(path, "r") as h5:
+        bits = {g: h5[g][()] for g in GRIDS}
+    if any(len(b) != meta["samples"] for b in bits.values()):
+        raise InputError(f"{path}: sample counts disagree with {PACK_NAME}")
+    return info, bits
+
+
+def unpack(bits: np.ndarray, size: int) -> np.ndarray:
+    """(n, S^3 / 8) packed rows to (n, S, S, S) bool grids."""
+    return np.unpackbits(bits, axis=-1).reshape(len(bits), size, size, size).astype(bool)

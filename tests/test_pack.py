@@ -1,0 +1,124 @@
+"""Packs: occupancies written from real shards, heatmaps made again from them (CPU and min-plus), training on them."""
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+pytest.importorskip("monai")
+
+from colonbench.cli import main  # noqa: E402
+from colonbench.completion import packdata  # noqa: E402
+from colonbench.completion.network import build_network, load_model, network_config  # noqa: E402
+from colonbench.completion.train import TrainConfig, evaluate_l2, train  # noqa: E402
+from colonbench.errors import InputError  # noqa: E402
+from colonbench.heatmaps import distance_to as distance_np  # noqa: E402
+from colonbench.shards.pack import read_pack, write_pack  # noqa: E402
+from colonbench.shards.reader import ShardDataset  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def smoke_pack(smoke_dataset, tmp_path_factory):
+    data, lock = smoke_dataset
+    out = tmp_path_factory.mktemp("pack") / "pack"
+    info = write_pack(data, out, workers=1, progress=False)
+    return data, lock, out, info
+
+
+def test_a_pack_remakes_every_stored_heatmap(smoke_pack):
+    data, lock, out, info = smoke_pack
+    assert info["manifest_sha256"] == lock["manifest_sha256"]
+    for split in ("train", "validation"):
+        ds = ShardDataset(data, split=split)
+        assert info["splits"][split]["samples"] == len(ds) > 0
+        x, y = packdata.PackSplit(out, split, "cpu").batch(np.arange(len(ds)))
+        for k in range(len(ds)):
+            item = ds[k]
+            # stored as float16: equal to its rounding, never more
+            np.testing.assert_allclose(x[k].numpy(), item["input"], atol=1e-3)
+            np.testing.assert_allclose(y[k].numpy(), item["target"], atol=1e-3)
+    assert info["splits"]["train"]["bytes"] / info["splits"]["train"]["samples"] < 12 * 1024
+    cached = packdata.PackSplit(out, "validation", "cpu", cache=True)
+    plain = packdata.PackSplit(out, "validation", "cpu", cache=False)
+    for a, b in zip(cached.batch([1, 0, 1]), plain.batch([1, 0, 1])):
+        assert torch.equal(a, b)
+
+
+def test_min_plus_distance_transform_is_exact():
+    rng = np.random.default_rng(3)
+    occ = torch.from_numpy(rng.random((3, 32, 32, 32)) < 0.002)
+    occ[2] = False
+    occ[2, 5, 30, 0] = True  # one voxel: the distance is known in closed form
+    fast = packdata.distance_to(occ, method="min-plus")
+    ref = torch.from_numpy(np.stack([distance_np(g) for g in occ.numpy()]))
+    assert torch.allclose(fast, ref, atol=1e-5)
+    i, j, k = np.indices((32, 32, 32))
+    exact = np.sqrt((i - 5) ** 2 + (j - 30) ** 2 + (k - 0) ** 2)
+    np.testing.assert_allclose(fast[2].numpy(), exact, atol=1e-5)
+    assert torch.equal(packdata.distance_to(occ), ref)  # the CPU path is the edt package itself
+    with pytest.raises(ValueError, match="unknown"):
+        packdata.distance_to(occ, method="scipy")
+
+
+def test_flips_are_exact_and_reproducible(smoke_pack):
+    *_, out, _ = smoke_pack
+    split = packdata.PackSplit(out, "train", "cpu")
+    rows = split.bits[:1]
+    grids = ((rows.unsqueeze(-1) >> split._shifts) & 1).bool().reshape(1, 3, 64, 64, 64)
+    # flipping the occupancies and remaking the heatmaps = flipping the heatmaps
+    x, y = packdata.heatmaps(grids[:, 0], grids[:, 1], grids[:, 2])
+    g = torch.flip(grids, [2, 4])
+    fx, fy = packdata.heatmaps(g[:, 0], g[:, 1], g[:, 2])
+    ax, ay = packdata.apply_flips(x.unsqueeze(1), y.unsqueeze(1), [(0, 2)])
+    assert torch.allclose(ax[0, 0], fx[0], atol=1e-6) and torch.allclose(ay[0, 0], fy[0], atol=1e-6)
+    draws = [packdata.flips(0, e, i) for e in range(4) for i in range(16)]
+    assert draws == [packdata.flips(0, e, i) for e in range(4) for i in range(16)]
+    assert len(set(draws)) > 4 and () in draws and (0, 1, 2) in draws
+
+
+def test_training_on_a_pack_matches_the_shards_and_resumes(smoke_pack, tmp_path):
+    data, _, out, _ = smoke_pack
+    net = build_network(network_config("small"))
+    pack_l2 = evaluate_l2(net, packdata.PackSplit(out, "validation", "cpu"), "cpu")
+    shard_l2 = evaluate_l2(net, ShardDataset(data, split="validation"), "cpu")
+    assert pack_l2 == pytest.approx(shard_l2, rel=1e-3)
+
+    run = tmp_path / "run"
+    cfg = TrainConfig(epochs=1, batch_size=2, workers=0, augment_prob=0.0, flips=True)
+    first = train(out, run, cfg, device="cpu", progress=False)
+    assert first["epochs"] == 1 and first["steps"] == 2
+    more = train(out, run, dataclasses.replace(cfg, epochs=2), device="cpu", progress=False)
+    assert more["epochs"] == 2 and more["steps"] == 4
+    _, _, meta = load_model(run / "best.safetensors")
+    assert meta["data_format"] == "pack" and meta["train_config"]["flips"] is True
+    assert meta["grid_options"]["size"] == 64 and 0 < meta["train_coverage_mean"] < 1
+    with pytest.raises(InputError, match="other settings"):
+        train(out, run, dataclasses.replace(cfg, epochs=3, flips=False), device="cpu", progress=False)
+    with pytest.raises(InputError, match="--augment-prob 0"):
+        train(out, tmp_path / "aug", dataclasses.replace(cfg, augment_prob=0.3), device="cpu", progress=False)
+
+
+def test_pack_refuses_bad_input_and_damage(smoke_dataset, smoke_pack, tmp_path, capsys):
+    data, *_ = smoke_dataset
+    *_, out, _ = smoke_pack
+    assert main(["pack", str(tmp_path / "nothing"), "--out", str(tmp_path / "p")]) == 2
+    assert "generate the dataset first" in capsys.readouterr().err
+    assert main(["pack", str(data), "--out", str(tmp_path / "p"), "--splits", "train,bogus"]) == 2
+    assert "no split bogus" in capsys.readouterr().err
+    with pytest.raises(InputError, match="not a pack"):
+        read_pack(tmp_path, "train")
+    copy = tmp_path / "copy"
+    copy.mkdir()
+    for f in out.iterdir():
+        copy.joinpath(f.name).write_bytes(f.read_bytes())
+    raw = bytearray((copy / "train.h5").read_bytes())
+    raw[-100] ^= 0xFF
+    (copy / "train.h5").write_bytes(bytes(raw))
+    with pytest.raises(InputError, match="sha256"):
+        read_pack(copy, "train")
+    info = json.loads((copy / "pack.json").read_text())
+    assert main(["pack", str(data), "--out", str(copy), "--splits", "validation", "--quiet"]) == 0
+    again = json.loads((copy / "pack.json").read_text())
+    assert again["manifest_sha256"] == info["manifest_sha256"] and set(again["splits"]) == {"train", "validation"}
