@@ -114,7 +114,7 @@ class PackSplit:
     device : torch.device
     cache : bool, optional
         Make every sample's heatmaps once and keep them on the device
-        (8 MiB per sample at S = 64): flips act on finished heatmaps, so
+        (2 MiB per sample at S = 64): flips act on finished heatmaps, so
         they need not be made again each epoch. Default: on a CUDA device
         when they take under half of its free memory.
 

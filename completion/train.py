@@ -203,6 +203,8 @@ def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "a
     train_coverage = lock["train_coverage_mean"]
     rank, world = _dist()
     dev = resolve_device(device)
+    if dev.type == "cuda":
+        torch.backends.cudnn.benchmark = True  # fixed input shapes: let cuDNN pick its fastest 3D convolutions
     if dev.type == "cuda" and world > 1:
         dev = torch.device("cuda", int(os.environ.get("LOCAL_RANK", "0")))
         torch.cuda.set_device(dev)
