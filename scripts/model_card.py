@@ -15,6 +15,17 @@ from pathlib import Path
 from colonbench.completion.network import load_model
 
 
+def _commands(manifest: str, meta: dict) -> str:
+    """The commands that made the model, from the data it was trained on."""
+    name = Path(manifest).stem
+    steps = [f"`colonbench generate {manifest} --out data/{name} --workers 2`"]
+    if meta.get("data_format") == "pack":
+        steps.append(f"`colonbench pack data/{name} --out {meta.get('data_dir') and 'packs/' + meta['data_dir']} "
+                     "--workers 2`")
+    steps.append(f"`{meta.get('command') or 'colonbench train'}`")
+    return ", then ".join(steps)
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("model")
@@ -36,10 +47,9 @@ def main(argv=None):
             f"{config.num_res_units} residual unit(s), {config.norm} norm; 64^3 input heatmap -> 64^3 target heatmap |",
             f"| training data | `{args.data_manifest}` (manifest sha256 `{meta.get('data_manifest_sha256', '?')}`), "
             "its train split; validation split for model selection |",
-            f"| command | `colonbench generate {args.data_manifest} --out data/train-cpu --workers 2` then "
-            f"`{meta.get('command') or 'colonbench train'}` (resumed with the same command) |",
-            f"| settings | batch {tc.get('batch_size')}, Adam lr {tc.get('lr')}, L2 loss, augmentation share "
-            f"{tc.get('augment_prob')}, seed {tc.get('seed')} |",
+            f"| command | {_commands(args.data_manifest, meta)} (resumed with the same command) |",
+            f"| settings | batch {tc.get('batch_size')}, Adam lr {tc.get('lr')}, L2 loss, geometric augmentation "
+            f"share {tc.get('augment_prob')}, axis flips {'on' if tc.get('flips') else 'off'}, seed {tc.get('seed')} |",
             f"| selected | epoch {meta.get('epoch')}, {meta.get('steps')} steps, {meta.get('samples_seen')} samples seen, "
             f"validation L2 {meta.get('val_l2'):.5f} |",
             f"| hardware | {args.hardware} ({meta.get('device')}, {meta.get('world_size')} process(es)) |",
