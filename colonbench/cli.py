@@ -393,7 +393,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quick", action="store_true", help="checksums and counts only, skip reading every heatmap")
     p.set_defaults(func=cmd_verify)
 
-    p = sub.add_parser("pack", help="write a dataset's samples as compact voxel occupancies (~6 KiB/sample) "
+    p = sub.add_parser("pack", help="write a dataset's samples as compact voxel occupancies (~5 KiB/sample) "
                                     "to train elsewhere")
     p.add_argument("data", help="dataset folder (colonbench generate)")
     p.add_argument("--out", required=True, help="pack folder to write")

@@ -10,7 +10,7 @@ heatmaps are functions of three occupancy grids (:mod:`colonbench.heatmaps`):
 ``c``
     voxels the GT centerline passes through (where the target is 1).
 
-A pack stores just these, bit-packed and compressed (about 6 KiB per
+A pack stores just these, bit-packed and compressed (about 5 KiB per
 sample), so that tens of thousands of samples travel to a GPU machine in one
 upload and the heatmaps are made again there with exact distance transforms
 (:mod:`colonbench.completion.packdata`). It cannot hold the geometry, so the

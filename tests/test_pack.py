@@ -100,6 +100,14 @@ def test_training_on_a_pack_matches_the_shards_and_resumes(smoke_pack, tmp_path)
         train(out, tmp_path / "aug", dataclasses.replace(cfg, augment_prob=0.3), device="cpu", progress=False)
 
 
+def test_flips_also_augment_training_on_shards(smoke_dataset, tmp_path):
+    data, _ = smoke_dataset
+    cfg = TrainConfig(epochs=1, batch_size=2, workers=0, augment_prob=0.0, flips=True)
+    assert train(data, tmp_path / "run", cfg, device="cpu", progress=False)["steps"] == 2
+    _, _, meta = load_model(tmp_path / "run" / "best.safetensors")
+    assert meta["data_format"] == "shards" and meta["train_config"]["flips"] is True
+
+
 def test_pack_refuses_bad_input_and_damage(smoke_dataset, smoke_pack, tmp_path, capsys):
     data, *_ = smoke_dataset
     *_, out, _ = smoke_pack
