@@ -162,6 +162,27 @@ def target_heatmap(d_surface, d_centerline):
     return out
 
 
+def heatmaps_from_occupancy(s0, s1, c, distance=distance_to):
+    """Input and target heatmaps from the partial-surface, surface and centerline occupancy grids.
+
+    Parameters
+    ----------
+    s0, s1, c : bool arrays of one shape
+        Voxels holding a partial point, voxels the complete surface passes
+        through, voxels the centerline passes through.
+    distance : callable
+        Occupancy -> distance (voxels) to its nearest occupied voxel:
+        :func:`distance_to` here; training on a GPU passes its own
+        (:func:`colonbench.completion.packdata.distance_to`, torch tensors).
+
+    Returns
+    -------
+    input, target
+        float32, of the kind ``distance`` returns.
+    """
+    return input_heatmap(distance(s0)), target_heatmap(distance(s1), distance(c))
+
+
 @dataclass
 class Heatmaps:
     """Input and target heatmaps of one sample, and how much geometry fell outside the grid.
@@ -208,8 +229,8 @@ def sample_heatmaps(grid: Grid, partial, vertices, faces, centerline) -> Heatmap
     centerline : (m, 3) float
         GT centerline polyline inside the segment, mm.
     """
-    h_in, out_p = input_from_points(grid, partial)
+    occ_p, out_p = voxelize_points(grid, partial)
     occ_s, out_s = voxelize_mesh(grid, vertices, faces)
     occ_c, out_c = voxelize_polyline(grid, centerline)
-    h_t = target_heatmap(distance_to(occ_s), distance_to(occ_c))
+    h_in, h_t = heatmaps_from_occupancy(occ_p, occ_s, occ_c)
     return Heatmaps(h_in, h_t, {"partial": out_p, "complete": out_s, "centerline": out_c})

@@ -29,7 +29,7 @@ import numpy as np
 import torch
 
 from colonbench import seeding
-from colonbench.heatmaps import input_heatmap, target_heatmap
+from colonbench.heatmaps import heatmaps_from_occupancy
 from colonbench.shards.pack import GRIDS, read_pack
 
 #: Elements of the broadcast (n, S, S, S, S) tensor of one min-plus step, at most.
@@ -78,7 +78,7 @@ def distance_to(occupied: torch.Tensor, method: str = "auto") -> torch.Tensor:
 
 def heatmaps(s0: torch.Tensor, s1: torch.Tensor, c: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """Input and target heatmaps, (n, S, S, S) float32, from the partial-surface, surface and centerline grids."""
-    return input_heatmap(distance_to(s0)), target_heatmap(distance_to(s1), distance_to(c))
+    return heatmaps_from_occupancy(s0, s1, c, distance=distance_to)
 
 
 def flips(seed: int, epoch: int, index: int) -> tuple[int, ...]:
@@ -143,9 +143,13 @@ class PackSplit:
     def __len__(self) -> int:
         return len(self.bits)
 
-    def _make(self, indices) -> tuple[torch.Tensor, torch.Tensor]:
+    def grids(self, indices) -> torch.Tensor:
+        """(n, 3, S, S, S) bool occupancies (``s0``, ``s1``, ``c``) of samples ``indices``, on the device."""
         rows = self.bits[torch.as_tensor(np.asarray(indices, dtype=np.int64), device=self.device)]
-        grids = ((rows.unsqueeze(-1) >> self._shifts) & 1).bool().reshape(len(rows), 3, *(self.size,) * 3)
+        return ((rows.unsqueeze(-1) >> self._shifts) & 1).bool().reshape(len(rows), 3, *(self.size,) * 3)
+
+    def _make(self, indices) -> tuple[torch.Tensor, torch.Tensor]:
+        grids = self.grids(indices)
         h_in, h_t = heatmaps(grids[:, 0], grids[:, 1], grids[:, 2])
         return h_in.unsqueeze(1), h_t.unsqueeze(1)
 

@@ -42,9 +42,7 @@ def main():
           f"({torch.cuda.get_device_name(dev) if dev.type == 'cuda' else 'CPU'}), loaded in "
           f"{time.perf_counter() - t:.1f} s")
     if dev.type == "cuda":
-        rows = split.bits[:8]
-        grids = ((rows.unsqueeze(-1) >> split._shifts) & 1).bool().reshape(len(rows), 3, *(split.size,) * 3)
-        occ = grids.reshape(-1, *(split.size,) * 3)
+        occ = split.grids(range(min(8, len(split)))).reshape(-1, *(split.size,) * 3)
         fast = packdata.distance_to(occ, "min-plus").cpu()
         ref = packdata.distance_to(occ.cpu(), "edt")
         print(f"min-plus vs edt on {len(occ)} grids: max |difference| {float((fast - ref).abs().max()):.2e} voxels")

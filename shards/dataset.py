@@ -16,7 +16,6 @@ Dask cluster give the same files.
 from __future__ import annotations
 
 import functools
-import hashlib
 import json
 import multiprocessing
 import os
@@ -33,21 +32,12 @@ from colonbench.shards import schema, stats
 from colonbench.shards.build import build_shard
 from colonbench.shards.writer import TMP_SUFFIX
 from colonbench.shards.manifest import SPLITS, config_hash, dumps, load, manifest_hash, resolve, units
-from colonbench.shards.schema import LOCK_NAME
+from colonbench.shards.schema import LOCK_NAME, sha256_file
 
 MANIFEST_NAME = "manifest.yaml"
 STATS_NAME = "stats.png"
 LOCK_FORMAT = "colonbench-dataset-lock"
 LOCK_VERSION = 1
-
-
-def sha256_file(path, block: int = 1 << 22) -> str:
-    """SHA-256 (hex) of a file's bytes."""
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for chunk in iter(lambda: fh.read(block), b""):
-            h.update(chunk)
-    return h.hexdigest()
 
 
 def _job(resolved: dict, out_dir: str, unit):

@@ -33,7 +33,6 @@ ones to float16 rounding.
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 from pathlib import Path
@@ -43,7 +42,7 @@ import numpy as np
 
 from colonbench._version import __version__
 from colonbench.errors import InputError
-from colonbench.shards.schema import LOCK_NAME
+from colonbench.shards.schema import LOCK_NAME, sha256_file
 
 #: The description file of a pack folder.
 PACK_NAME = "pack.json"
@@ -83,22 +82,9 @@ def occupancies(input_heatmap: np.ndarray, target_heatmap: np.ndarray) -> dict:
     return {"s0": input_heatmap == 0, "s1": target_heatmap == 0, "c": target_heatmap == 1}
 
 
-def _heatmaps_cpu(occ: dict) -> tuple[np.ndarray, np.ndarray]:
-    from colonbench.heatmaps import distance_to, input_heatmap, target_heatmap
-    return (input_heatmap(distance_to(occ["s0"])),
-            target_heatmap(distance_to(occ["s1"]), distance_to(occ["c"])))
-
-
-def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
-
-
 def _pack_shard(path) -> tuple[dict, float]:
     """Packed occupancies (``GRIDS`` -> (n, S^3 / 8) uint8) of one shard, and the largest heatmap difference."""
+    from colonbench.heatmaps import heatmaps_from_occupancy
     from colonbench.shards.reader import Shard
 
     rows = {g: [] for g in GRIDS}
@@ -110,7 +96,7 @@ def _pack_shard(path) -> tuple[dict, float]:
             if not occ["s0"].any() or not occ["s1"].any() or not occ["c"].any():
                 raise InputError(f"{path}: sample {i} has an empty partial surface, surface or centerline grid; "
                                  "the dataset is damaged (run colonbench verify)")
-            h_in, h_t = _heatmaps_cpu(occ)
+            h_in, h_t = heatmaps_from_occupancy(occ["s0"], occ["s1"], occ["c"])
             worst = max(worst, float(np.abs(h_in - x).max()), float(np.abs(h_t - y).max()))
             for g in GRIDS:
                 rows[g].append(np.packbits(occ[g].ravel()))
@@ -200,7 +186,7 @@ def write_pack(data_dir, out_dir, splits=("train", "validation"), workers: int =
         with open(tmp, "rb+") as fh:
             os.fsync(fh.fileno())
         os.replace(tmp, final)
-        info["splits"][split] = {"samples": n, "file": final.name, "sha256": _sha256(final),
+        info["splits"][split] = {"samples": n, "file": final.name, "sha256": sha256_file(final),
                                  "bytes": final.stat().st_size, "max_heatmap_difference": worst}
     tmp = out / (PACK_NAME + ".tmp")
     tmp.write_text(json.dumps(info, indent=1) + "\n")
@@ -250,7 +236,7 @@ def read_pack(pack_dir, split: str) -> tuple[dict, dict]:
     path = pack / meta["file"]
     if not path.is_file():
         raise InputError(f"{path}: missing; the pack is incomplete")
-    if _sha256(path) != meta["sha256"]:
+    if sha256_file(path) != meta["sha256"]:
         raise InputError(f"{path}: its sha256 differs from the one in {PACK_NAME}; the file is damaged or "
                          "from another pack")
     with h5py.File(path, "r") as h5:
@@ -258,8 +244,3 @@ def read_pack(pack_dir, split: str) -> tuple[dict, dict]:
     if any(len(b) != meta["samples"] for b in bits.values()):
         raise InputError(f"{path}: sample counts disagree with {PACK_NAME}")
     return info, bits
-
-
-def unpack(bits: np.ndarray, size: int) -> np.ndarray:
-    """(n, S^3 / 8) packed rows to (n, S, S, S) bool grids."""
-    return np.unpackbits(bits, axis=-1).reshape(len(bits), size, size, size).astype(bool)

@@ -28,6 +28,7 @@ The docs table (``docs/shards.md``) is written from :data:`FIELDS` by
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass
 
 import h5py
@@ -35,6 +36,16 @@ import numpy as np
 
 #: The lock file of a generated dataset folder (what it holds: :mod:`colonbench.shards.dataset`).
 LOCK_NAME = "dataset.lock.json"
+
+
+def sha256_file(path, block: int = 1 << 22) -> str:
+    """SHA-256 (hex) of a file's bytes (the checksum dataset locks and pack descriptions record)."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for chunk in iter(lambda: fh.read(block), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
 
 #: Value of the file attribute ``format``.
 FORMAT = "colonbench-shard"

@@ -9,7 +9,8 @@ import h5py
 
 from colonbench.shards import schema
 from colonbench.shards.writer import TMP_SUFFIX
-from colonbench.shards.dataset import LOCK_FORMAT, LOCK_NAME, sha256_file
+from colonbench.shards.dataset import LOCK_FORMAT, LOCK_NAME
+from colonbench.shards.schema import sha256_file
 
 
 def check_shard(path) -> list[str]:

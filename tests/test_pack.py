@@ -65,8 +65,8 @@ def test_min_plus_distance_transform_is_exact():
 def test_flips_are_exact_and_reproducible(smoke_pack):
     *_, out, _ = smoke_pack
     split = packdata.PackSplit(out, "train", "cpu")
-    rows = split.bits[:1]
-    grids = ((rows.unsqueeze(-1) >> split._shifts) & 1).bool().reshape(1, 3, 64, 64, 64)
+    grids = split.grids([0])
+    assert grids.shape == (1, 3, 64, 64, 64) and grids.dtype == torch.bool
     # flipping the occupancies and remaking the heatmaps = flipping the heatmaps
     x, y = packdata.heatmaps(grids[:, 0], grids[:, 1], grids[:, 2])
     g = torch.flip(grids, [2, 4])
