@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from colonbench.datagen.config import _p, draw
-from colonbench.grid import Grid, fit_grid, principal_axes
+from colonbench.grid import Grid, fit_grid, grid_axes
 from colonbench.heatmaps import Heatmaps, sample_heatmaps
 
 
@@ -95,7 +95,7 @@ def augmented_heatmaps(rng, partial, vertices, faces, centerline, config: Augmen
         GT centerline, mm.
     config : AugmentConfig, optional
     grid_options : dict, optional
-        ``size``, ``margin`` and ``min_extent_mm`` for
+        ``size``, ``margin``, ``min_extent_mm`` and ``axes`` for
         :func:`colonbench.grid.fit_grid` (defaults: its own), e.g. from a
         shard's attributes so that no augmentation remakes its heatmaps.
 
@@ -113,6 +113,7 @@ def augmented_heatmaps(rng, partial, vertices, faces, centerline, config: Augmen
     sigma = draw(rng, cfg.noise_mm)
     if sigma > 0:
         partial = partial + rng.normal(0.0, sigma, partial.shape)
-    rotation = random_rotation(rng, cfg.rotation_deg) @ principal_axes(partial)
-    grid = fit_grid(partial, rotation=rotation, scale=draw(rng, cfg.scale), **(grid_options or {}))
+    options = dict(grid_options or {})
+    rotation = random_rotation(rng, cfg.rotation_deg) @ grid_axes(partial, options.pop("axes", "pca"))
+    grid = fit_grid(partial, rotation=rotation, scale=draw(rng, cfg.scale), **options)
     return grid, sample_heatmaps(grid, partial, vertices, faces, centerline)

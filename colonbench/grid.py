@@ -6,8 +6,11 @@ at integer indices) to a point in mm in the input's frame, as in NIfTI.
 
 :func:`fit_grid` computes it from the partial points alone, identically when
 training data is made and when a method estimates: the grid axes are the
-principal axes of the points (or a given rotation), the points' bounding box in
-that frame is centred in the grid, and the voxel size makes its longest side
+axes of the tube (:func:`tube_axes`: the axis is the direction the surface
+normals are most perpendicular to, so a short, wide segment gets its axis
+along the colon, not across it) or, for models trained before, the principal
+axes of the points (:func:`principal_axes`); the points' bounding box in that
+frame is centred in the grid, and the voxel size makes its longest side
 (at least ``min_extent_mm``) span ``size - 1 - 2 * margin`` voxels. A 6 cm
 segment of a 2 cm radius colon thus gets voxels of about 1.1-1.3 mm (the paper:
 about 1 mm); a cloud that covers only part of its segment still gets a grid
@@ -31,6 +34,15 @@ GRID_MARGIN = 4
 GRID_MIN_EXTENT_MM = 70.0
 #: Fewest points :func:`fit_grid` accepts.
 MIN_POINTS = 10
+#: How the grid axes are found: ``"tube"`` (:func:`tube_axes`) or ``"pca"`` (:func:`principal_axes`).
+AXES = ("tube", "pca")
+#: Neighbours of a point that its normal is estimated from (:func:`tube_axes`).
+NORMAL_NEIGHBOURS = 24
+#: Points :func:`tube_axes` estimates normals on at most (an even subsample of larger clouds).
+NORMAL_POINTS = 3000
+#: Below this ratio of the middle to the largest eigenvalue of the normals' scatter, the normals are
+#: too alike (a patch of wall) to tell the axis: the axis is then taken in the plane they leave free.
+FLAT_RATIO = 0.15
 
 
 @dataclass(frozen=True)
@@ -87,12 +99,95 @@ def principal_axes(points) -> np.ndarray:
     centred = pts - pts.mean(axis=0)
     cov = centred.T @ centred / max(len(pts), 1)
     _, vecs = np.linalg.eigh(cov)
-    axes = vecs[:, ::-1].T.copy()
+    return _oriented(vecs[:, ::-1].T, centred)
+
+
+def _oriented(axes: np.ndarray, centred: np.ndarray) -> np.ndarray:
+    """Rows of ``axes`` signed towards their larger third moment of ``centred``, made right-handed."""
+    axes = np.array(axes, dtype=float)
     skew = ((centred @ axes.T) ** 3).sum(axis=0)
     axes[skew < 0] *= -1
     if np.linalg.det(axes) < 0:
         axes[2] *= -1
     return axes
+
+
+def point_normals(points, neighbours: int = NORMAL_NEIGHBOURS) -> np.ndarray:
+    """Unit normals (sign arbitrary) of a surface point cloud by local PCA; (n, 3).
+
+    The normal of a point is the smallest principal axis of its ``neighbours``
+    nearest points.
+    """
+    from scipy.spatial import cKDTree
+
+    pts = np.asarray(points, dtype=float)
+    k = int(min(neighbours, len(pts)))
+    _, idx = cKDTree(pts).query(pts, k=k)
+    nb = pts[idx] - pts[idx].mean(axis=1, keepdims=True)          # (n, k, 3)
+    cov = np.einsum("nki,nkj->nij", nb, nb)
+    _, vecs = np.linalg.eigh(cov)
+    return vecs[:, :, 0]
+
+
+def tube_axes(points, neighbours: int = NORMAL_NEIGHBOURS, max_points: int = NORMAL_POINTS) -> np.ndarray:
+    """(3, 3) rotation whose first row is the axis of the tube a partial surface cloud lies on.
+
+    The wall of a tube has normals perpendicular to its axis, so the axis is
+    the direction that minimises the sum of squared projections of the point
+    normals: the smallest eigenvector of their scatter ``sum n n^T``. Unlike
+    the cloud's largest spread, this holds for a segment that is wider than it
+    is long, and for a cloud with one side missing. Fold flanks lean the
+    normals towards the axis on both sides alike, which leaves the eigenvector
+    where it is. When the normals are nearly all alike (a patch of wall, the
+    middle eigenvalue below :data:`FLAT_RATIO` of the largest) they do not
+    fix the axis, and it is taken as the direction of largest spread in the
+    plane they leave free. The other two rows are the principal axes of the
+    points across the axis, larger first. Signs follow :func:`principal_axes`.
+
+    Parameters
+    ----------
+    points : (n, 3) float
+        Surface points, mm.
+    neighbours : int
+        Points per local normal estimate.
+    max_points : int
+        Normals are estimated on an even subsample of at most this many points.
+
+    Returns
+    -------
+    (3, 3) float
+        Rows: tube axis, then the cross-section axes; determinant +1.
+    """
+    pts = np.asarray(points, dtype=float)
+    centred = pts - pts.mean(axis=0)
+    sub = pts[:: max(1, int(np.ceil(len(pts) / max_points)))]
+    if len(sub) < 2 * neighbours:
+        return principal_axes(pts)
+    normals = point_normals(sub, neighbours)
+    vals, vecs = np.linalg.eigh(normals.T @ normals)
+    if vals[1] < FLAT_RATIO * vals[2]:
+        # one dominant normal: the axis lies in the plane it is perpendicular to, along the cloud
+        free = vecs[:, :2].T
+        spread = np.linalg.eigh(np.cov((centred @ free.T).T))[1][:, -1]
+        axis = spread @ free
+    else:
+        axis = vecs[:, 0]
+    axis = axis / np.linalg.norm(axis)
+    # cross-section axes: principal axes of the points projected on the plane across the axis
+    across = centred - np.outer(centred @ axis, axis)
+    _, cv = np.linalg.eigh(across.T @ across)
+    second = cv[:, 2] - (cv[:, 2] @ axis) * axis
+    second /= np.linalg.norm(second)
+    return _oriented(np.stack([axis, second, np.cross(axis, second)]), centred)
+
+
+def grid_axes(points, axes: str = "pca") -> np.ndarray:
+    """The grid rotation of a cloud by method ``axes`` (one of :data:`AXES`)."""
+    if axes == "tube":
+        return tube_axes(points)
+    if axes == "pca":
+        return principal_axes(points)
+    raise InputError(f"unknown grid axes {axes!r}; choose one of {list(AXES)}")
 
 
 def check_points(points, what: str = "point cloud", min_points: int = MIN_POINTS) -> np.ndarray:
@@ -111,7 +206,7 @@ def check_points(points, what: str = "point cloud", min_points: int = MIN_POINTS
 
 
 def fit_grid(points, size: int = GRID_SIZE, margin: int = GRID_MARGIN, rotation=None,
-             scale: float = 1.0, min_extent_mm: float = GRID_MIN_EXTENT_MM) -> Grid:
+             scale: float = 1.0, min_extent_mm: float = GRID_MIN_EXTENT_MM, axes: str = "pca") -> Grid:
     """The grid of a partial segment, from its points alone.
 
     Parameters
@@ -123,12 +218,16 @@ def fit_grid(points, size: int = GRID_SIZE, margin: int = GRID_MARGIN, rotation=
     margin : int
         Voxels left free on each side of the points' bounding box.
     rotation : (3, 3) float, optional
-        Grid axes as rows (default: :func:`principal_axes` of the points).
+        Grid axes as rows (default: :func:`grid_axes` of the points by ``axes``).
     scale : float
         Multiplies the voxel size (1 = fitted; > 1 leaves more room; used by
         scale augmentation).
     min_extent_mm : float
         The longest side of the points' box counts as at least this much.
+    axes : {"pca", "tube"}
+        How the rotation is found when none is given: ``"tube"`` (the tube's
+        own axis, :func:`tube_axes`) or ``"pca"`` (the points' principal axes,
+        what models trained before version 0.2 saw).
 
     Returns
     -------
@@ -137,7 +236,7 @@ def fit_grid(points, size: int = GRID_SIZE, margin: int = GRID_MARGIN, rotation=
     pts = check_points(points)
     if size < 2 * margin + 2:
         raise InputError(f"grid size {size} leaves no room inside a margin of {margin} voxels")
-    rot = principal_axes(pts) if rotation is None else np.asarray(rotation, dtype=float)
+    rot = grid_axes(pts, axes) if rotation is None else np.asarray(rotation, dtype=float)
     if rot.shape != (3, 3) or not np.allclose(rot @ rot.T, np.eye(3), atol=1e-9):
         raise InputError("rotation must be a 3x3 orthonormal matrix")
     centre = pts.mean(axis=0)

@@ -97,9 +97,10 @@ class Shard:
 
     @property
     def grid_options(self) -> dict:
-        """``size``, ``margin`` and ``min_extent_mm`` the grids of this shard were fitted with."""
+        """``size``, ``margin``, ``min_extent_mm`` and ``axes`` the grids of this shard were fitted with."""
         return {"size": int(self.attrs["grid_size"]), "margin": int(self.attrs["grid_margin"]),
-                "min_extent_mm": float(self.attrs["grid_min_extent_mm"])}
+                "min_extent_mm": float(self.attrs["grid_min_extent_mm"]),
+                "axes": str(self.attrs.get("grid_axes", "pca"))}
 
     def heatmaps(self, i: int) -> tuple[np.ndarray, np.ndarray]:
         """(input, target), each (S, S, S) float32, of sample ``i``."""
