@@ -108,7 +108,7 @@ def generate_colon(config: ColonConfig | None = None, seed: int = 0, colon_id: i
         rng = seeding.rng(seed, "colon", colon_id, attempt)
         centerline, params = _centerline(config, rng)
         base = _base_radius(config, params, centerline.arclength)
-        max_radius = base + 3.0 * params["roughness_mm"]
+        max_radius = base * (1.0 + params.get("ellipticity", 0.0)) + 3.0 * params["roughness_mm"] + _pouch_reach(config)
         clash = self_intersections(centerline, max_radius, config.clearance_mm)
         if len(clash) == 0:
             params["attempt"] = attempt
@@ -130,6 +130,13 @@ def _centerline(config: ColonConfig, rng: np.random.Generator) -> tuple[Centerli
     for name in ("caecum", "transverse", "sigmoid", "rectum"):
         params[f"radius_{name}_mm"] = draw(rng, getattr(config, f"radius_{name}_mm"))
     params["roughness_mm"] = draw(rng, config.roughness_mm)
+    # ranges added in 0.2 draw only when set, so that colons without them stay as they were
+    if config.fold_free_share > 0:
+        params["fold_free"] = bool(rng.random() < config.fold_free_share)
+    if config.ellipticity[1] > 0:
+        params["ellipticity"] = draw(rng, config.ellipticity)
+    if config.flattening[1] > 0:
+        params["flattening"] = draw(rng, config.flattening)
 
     pts = _TEMPLATE[:, :3].copy()
     region = _TEMPLATE[:, 3].astype(int)
@@ -157,6 +164,7 @@ def _centerline(config: ColonConfig, rng: np.random.Generator) -> tuple[Centerli
     for _ in range(4):
         cl = Centerline.from_points(points)
         r = _base_radius(config, params, cl.arclength, length=cl.length)
+        r = r * (1.0 + params.get("ellipticity", 0.0)) + _pouch_reach(config)
         points = _limit_curvature(cl, r + 3.0 * params["roughness_mm"] + config.clearance_mm, max_iter=60)
         cl = Centerline.from_points(points)
         points = cl.points * (target / cl.length)
@@ -226,7 +234,7 @@ def _build(config: ColonConfig, rng, centerline: Centerline, base: np.ndarray, p
     fold_weight = gaussian_filter1d(_FOLD_WEIGHT[region], 15.0 / config.ring_spacing_mm, mode="nearest")
     fold_profile = np.zeros((3, n_rings))
     n_folds = 0
-    for m in range(3):
+    for m in range(0 if params.get("fold_free") else 3):
         pos = rng.uniform(0.0, config.fold_spacing_mm[1])
         while pos < L:
             depth = draw(rng, config.fold_depth)
@@ -255,6 +263,10 @@ def _build(config: ColonConfig, rng, centerline: Centerline, base: np.ndarray, p
         polyps.append({"arclength_mm": float(s_p), "angle_rad": float(th_p), "diameter_mm": float(size),
                        "height_mm": float(height)})
 
+    # elliptic and flattened cross-sections, turning slowly along the colon
+    if params.get("ellipticity", 0.0) > 0 or params.get("flattening", 0.0) > 0:
+        rho *= cross_section_shape(rng, theta, s, params.get("ellipticity", 0.0), params.get("flattening", 0.0))
+
     # smooth roughness
     if params["roughness_mm"] > 0:
         noise = rng.standard_normal(rho.shape)
@@ -270,6 +282,12 @@ def _build(config: ColonConfig, rng, centerline: Centerline, base: np.ndarray, p
         j = int(np.round(p["angle_rad"] / (2 * np.pi) * n_around)) % n_around
         p["position_mm"] = mesh.vertices[k * n_around + j].tolist()
     max_radius = np.interp(centerline.arclength, s, rho.max(axis=1))
+    irregular = {}
+    if config.diverticula[1] > 0 or config.pedunculated_polyps[1] > 0:
+        # drawn from a stream split off only here, so colons without them stay as they were
+        extra = np.random.default_rng(rng.integers(2**63))
+        mesh, irregular = _irregularities(config, extra, mesh, rings, n_around, margin)
+        max_radius = max_radius + _pouch_reach(config)
 
     region_bounds = {}
     for code, name in enumerate(REGIONS):
@@ -278,9 +296,79 @@ def _build(config: ColonConfig, rng, centerline: Centerline, base: np.ndarray, p
             region_bounds[name] = [float(where.min()), float(where.max())]
     info = {k: v for k, v in params.items() if k != "region_knots"}
     info.update(n_folds=n_folds, polyps=polyps, regions=region_bounds, n_around=n_around,
-                ring_spacing_mm=float(s[1] - s[0]))
-    return Colon(mesh=mesh, centerline=centerline, radius=max_radius, ring_arclength=s,
-                 n_around=n_around, info=info)
+                ring_spacing_mm=float(s[1] - s[0]), **irregular)
+    swept = not irregular  # after CSG the vertices no longer lie on rings
+    return Colon(mesh=mesh, centerline=centerline, radius=max_radius, ring_arclength=s if swept else None,
+                 n_around=n_around if swept else None, info=info)
+
+
+def _pouch_reach(config: ColonConfig) -> float:
+    """How far a diverticulum can reach beyond the wall, mm (0 without diverticula)."""
+    if config.diverticula[1] == 0:
+        return 0.0
+    return config.diverticulum_radius_mm[1] * (1.0 + config.diverticulum_neck[1])
+
+
+def _irregularities(config: ColonConfig, rng, mesh, rings: Centerline, n_around: int, margin: float):
+    """Diverticula and pedunculated polyps at random places of the wall (:mod:`colonbench.datagen.irregular`)."""
+    from colonbench.datagen import irregular
+
+    s = rings.arclength
+    V = mesh.vertices
+
+    def wall_point():
+        k = int(np.clip(np.searchsorted(s, rng.uniform(margin, s[-1] - margin)), 0, len(s) - 1))
+        j = int(rng.integers(n_around))
+        p = V[k * n_around + j]
+        normal = p - rings.points[k]
+        return p, normal / np.linalg.norm(normal), float(s[k])
+
+    pouches, stalked, info = [], [], {"diverticula": [], "pedunculated_polyps": []}
+    for _ in range(draw(rng, config.diverticula, integer=True)):
+        p, n, at = wall_point()
+        r, neck = draw(rng, config.diverticulum_radius_mm), draw(rng, config.diverticulum_neck)
+        pouches.append((p, n, r, neck))
+        info["diverticula"].append({"arclength_mm": at, "radius_mm": r, "neck": neck, "position_mm": p.tolist()})
+    for _ in range(draw(rng, config.pedunculated_polyps, integer=True)):
+        p, n, at = wall_point()
+        head, stalk = draw(rng, config.polyp_head_mm), draw(rng, config.polyp_stalk_mm)
+        stalk_radius = max(0.5, rng.uniform(0.15, 0.3) * head)
+        stalked.append((p, n, head / 2.0, stalk, stalk_radius))
+        info["pedunculated_polyps"].append({"arclength_mm": at, "head_mm": head, "stalk_mm": stalk,
+                                            "stalk_radius_mm": stalk_radius, "position_mm": p.tolist()})
+    if not pouches and not stalked:
+        return mesh, info
+    ends = rings.point_at([0.0, rings.length])
+    tangents = rings.tangent_at([0.0, rings.length])
+    return irregular.apply(V, mesh.faces, n_around, ends, tangents, pouches, stalked), info
+
+
+def cross_section_shape(rng, theta: np.ndarray, s: np.ndarray, ellipticity: float, flattening: float) -> np.ndarray:
+    """Radius factors of an elliptic, partly flattened cross-section; (K, n).
+
+    The ellipse has semi-axes ``1 + e`` and ``1 - e`` (times the local radius);
+    flattening presses one side onto the chord at ``1 - f`` from the axis. Both
+    orientations turn by a drawn rate of up to one turn per metre.
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+    theta : (n,) float
+        Ring angles, rad.
+    s : (K,) float
+        Ring arc lengths, mm.
+    ellipticity, flattening : float
+    """
+    phase = rng.uniform(0, 2 * np.pi) + rng.uniform(-1.0, 1.0) * 2 * np.pi / 1000.0 * s[:, None]
+    rel = theta[None, :] - phase
+    a, b = 1.0 + ellipticity, 1.0 - ellipticity
+    factor = a * b / np.sqrt((b * np.cos(rel)) ** 2 + (a * np.sin(rel)) ** 2)
+    if flattening > 0:
+        c = np.cos(rel - rng.uniform(0, 2 * np.pi))
+        with np.errstate(divide="ignore"):
+            chord = np.where(c > 1e-9, (1.0 - flattening) / np.maximum(c, 1e-9), np.inf)
+        factor = np.minimum(factor, chord)
+    return factor
 
 
 def tube_colon(centerline: Centerline, radius, ring_spacing_mm: float = 0.5, n_around: int = 256) -> Colon:

@@ -43,8 +43,22 @@ class ColonConfig:
     taenia_depth: tuple = _p((0.04, 0.10), 0.0, 0.4, "fraction of radius", "indentation along the three taeniae coli")
     taenia_depth_transverse: tuple = _p((0.12, 0.22), 0.0, 0.4, "fraction of radius",
                                         "taenia indentation in the transverse colon (triangular section)")
+    fold_free_share: float = _p(0.0, 0.0, 1.0, "fraction of colons", "colons drawn smooth, without haustral folds")
+    ellipticity: tuple = _p((0.0, 0.0), 0.0, 0.5, "fraction of radius",
+                            "elliptic cross-section: semi-axes (1 + e) and (1 - e) times the radius, turning slowly")
+    flattening: tuple = _p((0.0, 0.0), 0.0, 0.5, "fraction of radius",
+                           "one side of the cross-section pressed flat, at (1 - f) times the radius from the axis")
     polyps: tuple = _p((0, 4), 0, 50, "count", "number of polyps per colon")
     polyp_size_mm: tuple = _p((2.0, 15.0), 0.5, 40.0, "mm", "polyp diameter")
+    pedunculated_polyps: tuple = _p((0, 0), 0, 20, "count",
+                                    "polyps on a stalk per colon (CSG with manifold3d), beside the sessile ones")
+    polyp_head_mm: tuple = _p((6.0, 16.0), 1.0, 40.0, "mm", "head diameter of a pedunculated polyp")
+    polyp_stalk_mm: tuple = _p((3.0, 12.0), 0.5, 40.0, "mm", "stalk length of a pedunculated polyp")
+    diverticula: tuple = _p((0, 0), 0, 50, "count", "outpouchings of the wall per colon (CSG with manifold3d)")
+    diverticulum_radius_mm: tuple = _p((2.0, 7.0), 0.5, 20.0, "mm", "radius of a diverticulum's ball")
+    diverticulum_neck: tuple = _p((0.0, 0.6), 0.0, 0.9, "fraction of its radius",
+                                  "how far a diverticulum's centre lies outside the wall (0 = hemisphere; more = "
+                                  "narrower neck, deeper pouch)")
     roughness_mm: tuple = _p((0.0, 0.4), 0.0, 3.0, "mm", "standard deviation of smooth surface roughness")
     ring_spacing_mm: float = _p(0.75, 0.1, 5.0, "mm", "mesh resolution along the centerline")
     edge_mm: float = _p(1.0, 0.1, 5.0, "mm", "mesh edge length around the lumen at the widest point")
@@ -88,6 +102,19 @@ class SegmentConfig:
     noise_mm: float = _p(0.0, 0.0, 10.0, "mm", "Gaussian noise on partial points (0.5 = the paper's noisy condition)")
     min_coverage: float = _p(0.2, 0.0, 0.99, "fraction",
                              "holes are redrawn (up to 20 times) until a segment is at least this much covered")
+    point_density_scale: tuple = _p((1.0, 1.0), 0.01, 100.0, "factor",
+                                    "multiplies point_density, drawn per sample (log-uniform)")
+    density_falloff: tuple = _p((0.0, 0.0), 0.0, 4.0, "exponent",
+                                "points thin out as (d_min / d)^falloff with the distance d to the nearest camera "
+                                "(or, for sphere holes, to random centerline viewpoints); 0 = uniform")
+    outlier_share: tuple = _p((0.0, 0.0), 0.0, 0.5, "fraction of points",
+                              "stray points added, each off a partial point in a random direction")
+    outlier_distance_mm: tuple = _p((1.0, 10.0), 0.0, 100.0, "mm", "how far an outlier lies from the surface")
+    double_layer_share: tuple = _p((0.0, 0.0), 0.0, 1.0, "fraction of points",
+                                   "share of the cloud (one patch) repeated as a misregistered second layer")
+    double_layer_offset_mm: tuple = _p((0.5, 3.0), 0.0, 20.0, "mm", "shift of the second layer (random direction)")
+    unseen_end: tuple = _p((0.15, 0.5), 0.01, 0.95, "fraction of length",
+                           "share of the segment's arc length never seen by the 'end' hole model")
 
 
 CONFIG_CLASSES = {"colon": ColonConfig, "camera": CameraConfig, "spheres": SphereConfig, "segments": SegmentConfig}

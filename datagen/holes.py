@@ -9,6 +9,10 @@ use keeps it):
   segment surface are cut out. A face is removed when its centroid lies inside
   a sphere: faces are at most about 1 mm across, so the decision is exact to
   the mesh resolution and the area that remains is summed exactly.
+- ``end`` (only with one of the others): one end of the segment was never
+  seen, as after a withdrawal that never looked back. The faces within a drawn
+  share (``SegmentConfig.unseen_end``) of the segment's arc length from one
+  end, drawn too, are removed.
 """
 
 from __future__ import annotations
@@ -19,7 +23,7 @@ from scipy.spatial import cKDTree
 from colonbench.datagen.config import SphereConfig, draw
 from colonbench.errors import InputError
 
-HOLE_MODELS = ("camera", "spheres", "camera+spheres")
+HOLE_MODELS = ("camera", "spheres", "camera+spheres", "camera+end", "spheres+end", "camera+spheres+end")
 
 
 def check_hole_model(name: str) -> tuple[str, ...]:
@@ -43,6 +47,35 @@ def sample_spheres(rng: np.random.Generator, vertices, faces, config: SphereConf
     centers = sample_surface(rng, vertices, faces, count=n, areas=areas)
     radii = rng.uniform(config.radius_mm[0], config.radius_mm[1], n)
     return centers, radii
+
+
+def unseen_end(rng: np.random.Generator, points, centerline, share) -> tuple[np.ndarray, dict]:
+    """Which points lie in the unseen end of a segment.
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+    points : (n, 3) float
+        Face centroids, mm.
+    centerline : (m, 3) float
+        The segment's centerline, first point at the segment's start, mm.
+    share : (float, float)
+        Range of the unseen share of the segment's arc length.
+
+    Returns
+    -------
+    unseen : (n,) bool
+    info : dict
+        ``end`` ("start" or "end") and ``share``.
+    """
+    cl = np.asarray(centerline, float)
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(cl, axis=0), axis=1))])
+    _, nearest = cKDTree(cl).query(np.asarray(points, float))
+    frac = s[nearest] / max(s[-1], 1e-12)
+    at_start = bool(rng.random() < 0.5)
+    cut = float(rng.uniform(*share))
+    unseen = frac < cut if at_start else frac > 1.0 - cut
+    return unseen, {"end": "start" if at_start else "end", "share": cut}
 
 
 def inside_spheres(points, centers, radii) -> np.ndarray:

@@ -14,7 +14,9 @@ import trimesh
 
 from colonbench.datagen import camera as cam
 from colonbench.datagen.config import CameraConfig, SegmentConfig, SphereConfig
-from colonbench.datagen.holes import check_hole_model, inside_spheres, sample_spheres, sample_surface
+from colonbench.datagen.config import draw
+from colonbench.datagen.holes import (check_hole_model, inside_spheres, sample_spheres, sample_surface,
+                                      unseen_end)
 from colonbench.datagen.segments import SegmentSurface, _components
 
 
@@ -64,7 +66,7 @@ class Sample:
 
 
 def observe(rng, scene: cam.SurfaceScene, centerline, surface: SegmentSurface, hole_model: str,
-            camera: CameraConfig, spheres: SphereConfig):
+            camera: CameraConfig, spheres: SphereConfig, segments: SegmentConfig | None = None):
     """Draw one permutation of holes for a segment.
 
     Returns
@@ -72,9 +74,10 @@ def observe(rng, scene: cam.SurfaceScene, centerline, surface: SegmentSurface, h
     observed : (f,) bool
         Per face of ``surface.mesh``.
     info : dict
-        The poses and/or spheres drawn.
+        The poses, spheres and/or unseen end drawn.
     """
     parts = check_hole_model(hole_model)
+    segments = segments or SegmentConfig()
     mesh = surface.mesh
     observed = np.ones(len(mesh.faces), dtype=bool)
     info = {}
@@ -90,11 +93,14 @@ def observe(rng, scene: cam.SurfaceScene, centerline, surface: SegmentSurface, h
         centers, radii = sample_spheres(rng, mesh.vertices, mesh.faces, spheres, areas=areas)
         observed &= ~inside_spheres(mesh.triangles_center, centers, radii)
         info["spheres"] = {"centers": centers.tolist(), "radii": radii.tolist()}
+    if "end" in parts:
+        unseen, info["end"] = unseen_end(rng, mesh.triangles_center, surface.centerline, segments.unseen_end)
+        observed &= ~unseen
     return observed, info
 
 
 def observe_covered(rng, scene, centerline, surface: SegmentSurface, hole_model: str, camera: CameraConfig,
-                    spheres: SphereConfig, min_coverage: float):
+                    spheres: SphereConfig, min_coverage: float, segments: SegmentConfig | None = None):
     """:func:`observe`, redrawn until the coverage reaches ``min_coverage`` (at most ``MAX_HOLE_DRAWS`` draws).
 
     A segment nobody looked at has no reconstruction to estimate from. The
@@ -111,7 +117,7 @@ def observe_covered(rng, scene, centerline, surface: SegmentSurface, hole_model:
     areas = surface.mesh.area_faces
     total = areas.sum()
     for attempt in range(MAX_HOLE_DRAWS):
-        observed, info = observe(rng, scene, centerline, surface, hole_model, camera, spheres)
+        observed, info = observe(rng, scene, centerline, surface, hole_model, camera, spheres, segments)
         coverage = float(areas[observed].sum() / total) if total > 0 else float("nan")
         if coverage >= min_coverage:
             break
@@ -128,6 +134,89 @@ def hole_areas(mesh: trimesh.Trimesh, observed: np.ndarray) -> np.ndarray:
     _, inv = np.unique(label, return_inverse=True)
     areas = np.bincount(inv, weights=mesh.area_faces[holes])
     return np.sort(areas)[::-1]
+
+
+def _realistic(segments: SegmentConfig) -> bool:
+    """Whether any of the reconstruction flaws of :func:`reconstruction_cloud` is switched on."""
+    return (tuple(segments.point_density_scale) != (1.0, 1.0) or segments.density_falloff[1] > 0
+            or segments.outlier_share[1] > 0 or segments.double_layer_share[1] > 0)
+
+
+def _log_uniform(rng, lo_hi) -> float:
+    lo, hi = lo_hi
+    return float(np.exp(rng.uniform(np.log(lo), np.log(hi)))) if hi > lo else float(lo)
+
+
+def reconstruction_cloud(rng, mesh: trimesh.Trimesh, observed: np.ndarray, surface: SegmentSurface,
+                         segments: SegmentConfig, info: dict) -> tuple[np.ndarray, dict]:
+    """A partial cloud with the flaws of real reconstructions (before Gaussian noise).
+
+    1. density: ``point_density`` times a log-uniform draw of ``point_density_scale``;
+    2. non-uniform density: each observed face is sampled in proportion to its
+       area times ``(d_min / d)^falloff``, ``d`` its distance to the nearest
+       camera position (sphere holes: to three random points of the segment's
+       centerline), as a camera's pixels spread with depth; the expected count
+       stays density x observed area;
+    3. a second layer: the ``double_layer_share`` of the points nearest to a
+       random point, moved by ``double_layer_offset_mm`` in a random direction
+       and turned by up to 2 degrees about the patch's centre (a drifted
+       revisit fused twice);
+    4. outliers: ``outlier_share`` of the count, each a random point moved
+       ``outlier_distance_mm`` in a random direction.
+
+    Returns
+    -------
+    points : (n, 3) float, mm
+    info : dict
+        What was drawn.
+    """
+    V, F = mesh.vertices, mesh.faces[observed]
+    areas = mesh.area_faces[observed]
+    density = segments.point_density * _log_uniform(rng, segments.point_density_scale)
+    falloff = draw(rng, segments.density_falloff)
+    weights = areas
+    if falloff > 0 and len(F):
+        if "poses" in info:
+            views = np.asarray(info["poses"]["positions"], float)
+        else:
+            cl = np.asarray(surface.centerline, float)
+            views = cl[rng.integers(0, len(cl), 3)]
+        cent = V[F].mean(axis=1)
+        d = np.min(np.linalg.norm(cent[:, None, :] - views[None, :, :], axis=2), axis=1)
+        d = np.maximum(d, 2.0)
+        weights = areas * (d.min() / d) ** falloff
+    count = int(round(density * areas.sum()))
+    pts = sample_surface(rng, V, F, count=count, areas=weights) if count > 0 else np.zeros((0, 3))
+    out = {"density": density, "falloff": falloff, "points": int(len(pts))}
+    share = draw(rng, segments.double_layer_share)
+    if share > 0 and len(pts) > 10:
+        from scipy.spatial import cKDTree
+
+        k = max(1, int(round(share * len(pts))))
+        centre = pts[rng.integers(len(pts))]
+        _, idx = cKDTree(pts).query(centre, k=k)
+        patch = pts[np.atleast_1d(idx)]
+        shift = _unit(rng) * draw(rng, segments.double_layer_offset_mm)
+        angle = np.radians(rng.uniform(-2.0, 2.0))
+        rot = trimesh.transformations.rotation_matrix(angle, _unit(rng))[:3, :3]
+        mid = patch.mean(axis=0)
+        pts = np.concatenate([pts, (patch - mid) @ rot.T + mid + shift])
+        out.update(double_layer_points=int(k), double_layer_shift_mm=float(np.linalg.norm(shift)))
+    share = draw(rng, segments.outlier_share)
+    if share > 0 and len(pts):
+        k = int(round(share * len(pts)))
+        base = pts[rng.integers(0, len(pts), k)]
+        dist = rng.uniform(*segments.outlier_distance_mm, k)
+        pts = np.concatenate([pts, base + _unit(rng, k) * dist[:, None]])
+        out["outliers"] = k
+    return pts, out
+
+
+def _unit(rng, n: int | None = None) -> np.ndarray:
+    """Random unit vector(s), uniform on the sphere; (3,) or (n, 3)."""
+    v = rng.normal(size=(1 if n is None else n, 3))
+    v /= np.linalg.norm(v, axis=1, keepdims=True)
+    return v[0] if n is None else v
 
 
 def make_sample(rng, scene, centerline, surface: SegmentSurface, hole_model: str = "camera",
@@ -156,9 +245,15 @@ def make_sample(rng, scene, centerline, surface: SegmentSurface, hole_model: str
     mesh = surface.mesh
     areas = mesh.area_faces
     observed, coverage, info = observe_covered(rng, scene, centerline, surface, hole_model, camera, spheres,
-                                               segments.min_coverage)
-    partial = sample_surface(rng, mesh.vertices, mesh.faces[observed], segments.point_density,
-                             areas=areas[observed])
+                                               segments.min_coverage, segments)
+    if _realistic(segments):
+        # the reconstruction's flaws draw from a stream of their own, split off only when one is set, so
+        # that a config without them gives the samples it gave before they existed
+        partial, info["cloud"] = reconstruction_cloud(np.random.default_rng(rng.integers(2**63)), mesh, observed,
+                                                      surface, segments, info)
+    else:
+        partial = sample_surface(rng, mesh.vertices, mesh.faces[observed], segments.point_density,
+                                 areas=areas[observed])
     holes = sample_surface(rng, mesh.vertices, mesh.faces[~observed], segments.hole_point_density,
                            areas=areas[~observed])
     if noise > 0:
