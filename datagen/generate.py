@@ -71,6 +71,30 @@ class PreparedColon:
         """Consecutive windows of ``length_mm`` along this colon."""
         return windows(self.colon.centerline.length, length_mm, end_margin_mm)
 
+    def usable_windows(self, length_mm: float, end_margin_mm: float = 0.0):
+        """The windows of :meth:`windows` that have a lumen, and those left out with why.
+
+        A window that overlaps a collapsed (or open) stretch of an imported
+        colon (``colon.info["collapsed_mm"]``, :mod:`colonbench.datagen.lumen`)
+        has no lumen to see and is left out.
+
+        Returns
+        -------
+        windows : list of (float, float)
+        skipped : list of dict
+            ``{"window_mm": [s0, s1], "reason": str}`` per window left out.
+        """
+        keep, skipped = [], []
+        collapsed = self.colon.info.get("collapsed_mm", [])
+        for w in self.windows(length_mm, end_margin_mm):
+            hit = [c for c in collapsed if c[0] < w[1] and c[1] > w[0]]
+            if hit:
+                skipped.append({"window_mm": [round(w[0], 2), round(w[1], 2)],
+                                "reason": f"lumen collapsed or open to the outside at {hit[0][0]:.0f}-{hit[0][1]:.0f} mm"})
+            else:
+                keep.append(w)
+        return keep, skipped
+
 
 def colon_samples(colon: Colon, config: GeneratorConfig, seed: int, colon_id: int, length_mm: float,
                   permutations: int = 1, hole_model: str = "camera", segments=None):
@@ -99,7 +123,7 @@ def colon_samples(colon: Colon, config: GeneratorConfig, seed: int, colon_id: in
     """
     check_hole_model(hole_model)
     prepared = PreparedColon(colon)
-    wins = prepared.windows(length_mm, config.segments.end_margin_mm)
+    wins, _ = prepared.usable_windows(length_mm, config.segments.end_margin_mm)
     wanted = range(len(wins)) if segments is None else segments
     for k in wanted:
         if not 0 <= k < len(wins):

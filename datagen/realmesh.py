@@ -180,7 +180,8 @@ def compute_centerline(mesh: trimesh.Trimesh, voxel_mm: float = 1.0, smooth_mm: 
     return Centerline.from_points(pts).resample(0.5)
 
 
-def import_colon(mesh_path, centerline_path=None, voxel_mm: float = 1.0, check: bool = True) -> Colon:
+def import_colon(mesh_path, centerline_path=None, voxel_mm: float = 1.0, check: bool = True,
+                 lumen: bool = False) -> Colon:
     """A :class:`Colon` from a user's surface mesh (mm) and, optionally, its centerline.
 
     Parameters
@@ -192,8 +193,23 @@ def import_colon(mesh_path, centerline_path=None, voxel_mm: float = 1.0, check: 
     check : bool
         Verify that the centerline lies inside the lumen (by ray parity; for
         an open mesh up to a quarter of the points may read as outside).
+    lumen : bool
+        Keep only what colonoscopy sees (:func:`colonbench.datagen.lumen.import_lumen`):
+        the lumen surface, remeshed at about ``voxel_mm``, with shells,
+        duplicates and small gaps resolved, and the centerline (which must be
+        given, as a rough midline) re-centred in the lumen. Collapsed
+        stretches are listed in ``info["collapsed_mm"]``.
     """
     mesh = load_mesh(mesh_path)
+    if lumen:
+        from colonbench.datagen.lumen import import_lumen
+
+        if centerline_path is None:
+            raise InputError("importing the lumen needs a midline (centerline_path): it tells the lumen from the "
+                             "space outside the colon")
+        imported = import_lumen(mesh, load_centerline(centerline_path).points, voxel_mm=voxel_mm)
+        return Colon(mesh=imported.mesh, centerline=imported.centerline, radius=imported.radius,
+                     info={"source": Path(mesh_path).name, "centerline": "re-centred", **imported.info})
     scene = SurfaceScene(mesh.vertices, mesh.faces)
     if centerline_path is not None:
         centerline = load_centerline(centerline_path).resample(0.5)

@@ -10,7 +10,12 @@ to ``t(s1)``. Its surface is found in three steps:
    the planes is a piece of its own, because it enters and leaves through the
    planes. Rays cast from this segment's own centerline, perpendicular to it,
    meet this segment's wall first; only the pieces they hit are kept;
-3. *exact areas*: the kept faces are clipped at both planes (triangles split
+3. *nearest stretch*: at a strong bend the two planes form a wedge whose far
+   side can hold wall of a neighbouring stretch that is connected to this
+   segment's wall (a caecum pole, the outer side of a flexure). A kept face
+   whose nearest centerline point lies more than ``margin_mm`` outside the
+   window belongs to that other stretch and is dropped;
+4. *exact areas*: the kept faces are clipped at both planes (triangles split
    along the planes), so the segment area is exact for the mesh.
 
 Each clipped face remembers its parent face of the colon mesh, so any per-face
@@ -143,8 +148,14 @@ def _components(faces, n_vertices):
     return label[faces[:, 0]]
 
 
+#: A face between the planes whose nearest centerline point is farther than this outside the window is
+#: another stretch's wall, mm.
+STRETCH_MARGIN_MM = 20.0
+
+
 def segment_surface(scene, centerline: Centerline, s0: float, s1: float,
-                    n_ray_rings: int = 24, n_ray_dirs: int = 16, min_hit_share: float = 0.02) -> SegmentSurface:
+                    n_ray_rings: int = 24, n_ray_dirs: int = 16, min_hit_share: float = 0.02,
+                    margin_mm: float = STRETCH_MARGIN_MM) -> SegmentSurface:
     """Cut the surface of the segment ``[s0, s1]`` out of a colon.
 
     Parameters
@@ -159,6 +170,8 @@ def segment_surface(scene, centerline: Centerline, s0: float, s1: float,
         ``n_ray_dirs`` directions each, to recognise this segment's own wall.
     min_hit_share : float
         A connected piece is kept when it receives at least this share of the rays.
+    margin_mm : float
+        Faces nearest to the centerline more than this outside the window are dropped (step 3).
 
     Returns
     -------
@@ -192,6 +205,9 @@ def segment_surface(scene, centerline: Centerline, s0: float, s1: float,
     counts = np.bincount(label[hit_local], minlength=label.max() + 1 if len(label) else 0)
     keep_labels = np.flatnonzero(counts >= max(1, min_hit_share * len(dirs)))
     kept = cand[np.isin(label, keep_labels)]
+    if len(kept):
+        _, s_near = centerline.closest(scene.centroids[kept])
+        kept = kept[(s_near >= s0 - margin_mm) & (s_near <= s1 + margin_mm)]
 
     if len(kept) == 0:
         raise ColonbenchError(
