@@ -14,6 +14,7 @@ killed run never leaves a partial file under a shard's name.
 
 from __future__ import annotations
 
+import json
 import time
 from pathlib import Path
 
@@ -28,18 +29,40 @@ from colonbench.grid import fit_grid
 from colonbench.heatmaps import HEATMAP_SCALE, sample_heatmaps
 from colonbench.shards import schema
 from colonbench.shards.manifest import Unit, config_hash, draw_mix, manifest_hash, pick_segments
+from colonbench.shards.schema import sha256_file
 from colonbench.shards.writer import ShardWriter
 
 _COLON_CACHE: dict = {}
 
 
-def _prepared_colon(config: GeneratorConfig, seed: int, colon_id: int, key: str) -> PreparedColon:
+def _prepared_colon(config: GeneratorConfig, seed: int, unit: Unit, key: str) -> PreparedColon:
     """The colon of a unit, kept for the next unit of the same colon in this process (one at a time)."""
-    ck = (key, seed, colon_id)
+    ck = (key, seed, unit.colon_id, unit.source)
+    if unit.mesh is not None:
+        _check_mesh_files(unit)  # every time: the files may have changed since the colon was cached
     if ck not in _COLON_CACHE:
         _COLON_CACHE.clear()
-        _COLON_CACHE[ck] = PreparedColon(procedural_colon(config, seed, colon_id))
+        _COLON_CACHE[ck] = PreparedColon(_mesh_colon(unit) if unit.mesh is not None
+                                         else procedural_colon(config, seed, unit.colon_id))
     return _COLON_CACHE[ck]
+
+
+def _check_mesh_files(unit: Unit) -> None:
+    """Raise unless a mesh unit's files exist and are the ones the manifest names (by sha256)."""
+    name, mesh, mesh_sha, centerline, centerline_sha = unit.source
+    for path, digest in ((mesh, mesh_sha), (centerline, centerline_sha)):
+        if not Path(path).is_file():
+            raise ColonbenchError(f"mesh {name!r}: {path} does not exist (paths are relative to the manifest)")
+        if sha256_file(path) != digest:
+            raise ColonbenchError(f"mesh {name!r}: {path} is not the file the manifest names (sha256 differs)")
+
+
+def _mesh_colon(unit: Unit):
+    """The imported colon of a mesh unit: its lumen as colonoscopy sees it."""
+    from colonbench.datagen.realmesh import import_colon
+
+    _, mesh, _, centerline, _ = unit.source
+    return import_colon(mesh, centerline, lumen=True)
 
 
 class _Stages:
@@ -75,10 +98,11 @@ def build_shard(resolved: dict, unit: Unit, out_dir) -> dict:
     seed = resolved["seed"]
     split = resolved["splits"][unit.split]
     size, margin, min_extent = (resolved["grid"][k] for k in ("size", "margin", "min_extent_mm"))
+    axes = resolved["grid"].get("axes", "pca")
     config = GeneratorConfig.from_dict(resolved["config"])
-    prepared = _prepared_colon(config, seed, unit.colon_id, config_hash(resolved))
+    prepared = _prepared_colon(config, seed, unit, config_hash(resolved))
     t = stages.add("colon", t)
-    wins = prepared.windows(unit.length_mm, config.segments.end_margin_mm)
+    wins, skipped = prepared.usable_windows(unit.length_mm, config.segments.end_margin_mm)
     picks = pick_segments(len(wins), split["segments_per_length"])
     if not picks:
         raise ColonbenchError(f"{unit.name}: colon {unit.colon_id} is too short for one {unit.length_mm:g} mm segment")
@@ -92,6 +116,11 @@ def build_shard(resolved: dict, unit: Unit, out_dir) -> dict:
              "length_mm": unit.length_mm, "grid_size": size, "grid_margin": margin,
              "grid_min_extent_mm": min_extent, "heatmap_scale": HEATMAP_SCALE,
              "n_samples": n, "n_segments": len(picks)}
+    if axes != "pca":
+        attrs["grid_axes"] = axes
+    if unit.mesh is not None:
+        attrs["colon_source"] = unit.mesh
+        attrs["skipped_segments"] = json.dumps(skipped)
     with ShardWriter(Path(out_dir) / unit.name, n, size) as writer:
         for k in picks:
             surface = prepared.segment(*wins[k])
@@ -112,7 +141,7 @@ def build_shard(resolved: dict, unit: Unit, out_dir) -> dict:
                 partial = s.partial_points.astype(np.float32)
                 partial64 = partial.astype(float)
                 t = stages.add("sample", t)
-                grid = fit_grid(partial64, size=size, margin=margin, min_extent_mm=min_extent)
+                grid = fit_grid(partial64, size=size, margin=margin, min_extent_mm=min_extent, axes=axes)
                 hm = sample_heatmaps(grid, partial64, verts64, faces, centerline64)
                 t = stages.add("heatmaps", t)
                 writer.add_sample(hm.input, hm.target, grid_affine=grid.affine, segment=row, permutation=p,

@@ -102,7 +102,8 @@ def generate(manifest, out_dir, workers: int = 1, scheduler=None, splits=None, p
     Parameters
     ----------
     manifest : path or dict
-        A manifest YAML file, or a manifest dict.
+        A manifest YAML file, or a manifest dict (its mesh paths then relative
+        to the current folder).
     out_dir : path
         Dataset folder; created if needed. It may already hold part of this
         same dataset, never another one.
@@ -124,6 +125,7 @@ def generate(manifest, out_dir, workers: int = 1, scheduler=None, splits=None, p
         The lock (also written to ``out_dir/dataset.lock.json``).
     """
     resolved = load(manifest) if not isinstance(manifest, dict) else resolve(manifest)
+    base = Path(manifest).parent if not isinstance(manifest, dict) else Path.cwd()  # mesh paths are relative to it
     if resolved["generator_version"] != __version__ and not allow_version_mismatch:
         raise InputError(f"manifest {resolved['name']!r} was written for colonbench {resolved['generator_version']}, "
                          f"this is {__version__}: the data would differ. Install that version, or pass "
@@ -140,10 +142,10 @@ def generate(manifest, out_dir, workers: int = 1, scheduler=None, splits=None, p
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     with folder_lock(out, "generate", "generation"):
-        return _generate_locked(resolved, digest, out, workers, scheduler, splits, progress)
+        return _generate_locked(resolved, digest, out, workers, scheduler, splits, progress, base)
 
 
-def _generate_locked(resolved, digest, out: Path, workers, scheduler, splits, progress) -> dict:
+def _generate_locked(resolved, digest, out: Path, workers, scheduler, splits, progress, base) -> dict:
     saved = out / MANIFEST_NAME
     if saved.exists():
         try:
@@ -158,7 +160,7 @@ def _generate_locked(resolved, digest, out: Path, workers, scheduler, splits, pr
     for tmp in out.rglob(f"*.h5{TMP_SUFFIX}*"):
         tmp.unlink()  # left by a killed run; never a finished shard
 
-    todo_all = units(resolved, splits)
+    todo_all = units(resolved, splits, base)
     todo = [u for u in todo_all if not ((out / u.name).exists() and _shard_ok(out / u.name, digest))]
     hashes = _locked_shards(out)  # finished shards keep the hash of the last lock; write_lock hashes the others
     failures = []

@@ -6,7 +6,8 @@ A manifest is a YAML file (see ``data_manifests/``)::
     description: a few seconds of data for tests
     generator_version: 0.1.0      # the colonbench version whose generator it was written for
     seed: 7                       # root seed of every random stream
-    grid: {size: 64, margin: 4, min_extent_mm: 70}   # heatmap grid (colonbench.grid.fit_grid)
+    grid: {size: 64, margin: 4, min_extent_mm: 70, axes: tube}   # heatmap grid (colonbench.grid.fit_grid);
+                                  # axes: tube (the tube's own axis) or pca (the default, as before 0.2)
     config:                       # the full generator config (colonbench.datagen.generate.GeneratorConfig)
       colon: {...}
       camera: {...}
@@ -20,8 +21,24 @@ A manifest is a YAML file (see ``data_manifests/``)::
         hole_models: {camera: 0.5, spheres: 0.5}   # mix, drawn per sample
         noise_mm: {0.0: 1.0}              # sigma mix, drawn per sample
 
-Colon ranges of different splits may not overlap, so test colons never appear
-in training or validation. A *shard* is the samples of one colon at one
+Real (or a user's own) colons are a second colon source: a top-level
+``meshes`` section names each mesh once, and a split lists the names it takes::
+
+    meshes:
+      gca00090: {id: 90090, mesh: meshes/gca00090_large_intestine_mm.ply, mesh_sha256: ...,
+                 centerline: meshes/gca00090_path_mm.npy, centerline_sha256: ...}
+    splits:
+      train: {colons: {first: 0, count: 100}, meshes: [gca00090], ...}
+
+Paths are relative to the manifest file's folder; the sha256 of each file is
+part of the manifest (and of its hash), and a file that differs is refused
+when the data are made. The mesh is imported as colonoscopy sees it
+(:func:`colonbench.datagen.lumen.import_lumen`); ``id`` addresses its random
+streams as a procedural colon index would, and must not fall in any split's
+procedural range.
+
+Colon ranges of different splits may not overlap, and a mesh may belong to
+one split only, so test colons never appear in training or validation. A *shard* is the samples of one colon at one
 segment length for one split; it is the unit of work and of storage.
 
 The resolved manifest (defaults filled in, mixes normalised) has a SHA-256,
@@ -44,12 +61,13 @@ from colonbench.datagen.config import read_yaml
 from colonbench.datagen.generate import GeneratorConfig
 from colonbench.datagen.holes import HOLE_MODELS
 from colonbench.errors import InputError
-from colonbench.grid import GRID_MARGIN, GRID_MIN_EXTENT_MM, GRID_SIZE
+from colonbench.grid import AXES, GRID_MARGIN, GRID_MIN_EXTENT_MM, GRID_SIZE
 
 #: The names a split may have.
 SPLITS = ("train", "validation", "test")
-_SPLIT_KEYS = {"colons", "segments_per_length", "permutations", "hole_models", "noise_mm"}
-_TOP_KEYS = {"name", "description", "generator_version", "seed", "grid", "config", "splits"}
+_SPLIT_KEYS = {"colons", "meshes", "segments_per_length", "permutations", "hole_models", "noise_mm"}
+_TOP_KEYS = {"name", "description", "generator_version", "seed", "grid", "config", "splits", "meshes"}
+_MESH_KEYS = {"id", "mesh", "mesh_sha256", "centerline", "centerline_sha256"}
 
 
 @dataclass(frozen=True)
@@ -59,15 +77,20 @@ class Unit:
     split: str
     colon_id: int
     length_mm: float
+    #: For an imported colon: its name in the manifest's ``meshes``, and the entry with absolute paths.
+    mesh: str | None = None
+    source: tuple | None = None
 
     @property
     def name(self) -> str:
-        """Path of the shard below the dataset folder, e.g. ``train/colon-00012-60mm.h5``."""
+        """Path of the shard below the dataset folder, e.g. ``train/colon-00012-60mm.h5``, ``test/mesh-x-60mm.h5``."""
+        if self.mesh is not None:
+            return f"{self.split}/mesh-{self.mesh}-{self.length_mm:g}mm.h5"
         return f"{self.split}/colon-{self.colon_id:05d}-{self.length_mm:g}mm.h5"
 
 
 def _mix(value, what: str, cast) -> dict:
-    """A ``{choice: weight}`` mapping with positive weights, normalised to sum 1, keys sorted."""
+    """A ``{choice: weight}`` mapping with positive weights, normalised to sum 1 (12 decimals), keys sorted."""
     if not isinstance(value, dict) or not value:
         raise InputError(f"{what}: expected a mapping of choice -> weight, got {value!r}")
     out = {}
@@ -83,7 +106,8 @@ def _mix(value, what: str, cast) -> dict:
     total = sum(out.values())
     if total <= 0:
         raise InputError(f"{what}: weights sum to 0")
-    return {k: out[k] / total for k in sorted(out)}
+    # rounded, so that resolving a resolved mix gives it back bit for bit (its hash is the data's identity)
+    return {k: round(out[k] / total, 12) for k in sorted(out)}
 
 
 def _hole_model(name):
@@ -108,6 +132,33 @@ def _int(value, what: str, lo: int) -> int:
     return int(value)
 
 
+def _meshes(value, source: str) -> dict:
+    """The ``meshes`` section, checked: name -> {id, mesh, mesh_sha256, centerline, centerline_sha256}."""
+    if value is None:
+        return {}
+    if not isinstance(value, dict):
+        raise InputError(f"{source}: meshes must map a name to {{id, mesh, mesh_sha256, centerline, "
+                         "centerline_sha256}}")
+    out = {}
+    for name, entry in value.items():
+        where = f"{source}: meshes.{name}"
+        if not isinstance(name, str) or not name.replace("-", "").replace("_", "").isalnum():
+            raise InputError(f"{where}: a mesh name is letters, digits, '-' and '_'")
+        if not isinstance(entry, dict) or set(entry) != _MESH_KEYS:
+            raise InputError(f"{where}: expected the keys {sorted(_MESH_KEYS)}, got {entry!r}")
+        for key in ("mesh_sha256", "centerline_sha256"):
+            digest = str(entry[key])
+            if len(digest) != 64 or any(c not in "0123456789abcdef" for c in digest):
+                raise InputError(f"{where}.{key}: expected the file's sha256 (64 hex digits), got {digest!r}")
+        out[name] = {"id": _int(entry["id"], f"{where}.id", 0), "mesh": str(entry["mesh"]),
+                     "mesh_sha256": str(entry["mesh_sha256"]), "centerline": str(entry["centerline"]),
+                     "centerline_sha256": str(entry["centerline_sha256"])}
+    ids = [m["id"] for m in out.values()]
+    if len(set(ids)) != len(ids):
+        raise InputError(f"{source}: two meshes share an id")
+    return out
+
+
 def resolve(data: dict, source: str = "manifest") -> dict:
     """Validate a manifest dict and fill in every default; the result is what gets hashed.
 
@@ -128,9 +179,12 @@ def resolve(data: dict, source: str = "manifest") -> dict:
     seed = _int(data["seed"], f"{source}: seed", 0)
     config = GeneratorConfig.from_dict(data.get("config"))
     grid = dict(data.get("grid") or {})
-    bad = sorted(set(grid) - {"size", "margin", "min_extent_mm"})
+    bad = sorted(set(grid) - {"size", "margin", "min_extent_mm", "axes"})
     if bad:
-        raise InputError(f"{source}: unknown grid key(s) {bad}; known: ['margin', 'min_extent_mm', 'size']")
+        raise InputError(f"{source}: unknown grid key(s) {bad}; known: ['axes', 'margin', 'min_extent_mm', 'size']")
+    axes = grid.get("axes", "pca")
+    if axes not in AXES:
+        raise InputError(f"{source}: grid.axes {axes!r} is not one of {list(AXES)}")
     size = _int(grid.get("size", GRID_SIZE), f"{source}: grid.size", 8)
     margin = _int(grid.get("margin", GRID_MARGIN), f"{source}: grid.margin", 0)
     try:
@@ -141,6 +195,7 @@ def resolve(data: dict, source: str = "manifest") -> dict:
         raise InputError(f"{source}: grid.min_extent_mm {min_extent} is outside [0, 1000] mm")
     if size < 2 * margin + 4:
         raise InputError(f"{source}: grid.size {size} leaves no room inside a margin of {margin}")
+    meshes = _meshes(data.get("meshes"), source)
     splits_in = data["splits"]
     if not isinstance(splits_in, dict) or not splits_in:
         raise InputError(f"{source}: splits must map split names ({', '.join(SPLITS)}) to their settings")
@@ -153,15 +208,20 @@ def resolve(data: dict, source: str = "manifest") -> dict:
         unknown = sorted(set(s) - _SPLIT_KEYS)
         if unknown:
             raise InputError(f"{where}: unknown key(s) {unknown}; known: {sorted(_SPLIT_KEYS)}")
-        colons = s.get("colons")
+        names = s.get("meshes") or []
+        if not isinstance(names, list) or any(n not in meshes for n in names) or len(set(names)) != len(names):
+            raise InputError(f"{where}.meshes: expected a list of distinct names from the manifest's meshes "
+                             f"({sorted(meshes)}), got {names!r}")
+        colons = s.get("colons", {"first": 0, "count": 0} if names else None)
         if not isinstance(colons, dict) or set(colons) != {"first", "count"}:
             raise InputError(f"{where}.colons: expected {{first: ID, count: N}}, got {colons!r}")
         first = _int(colons["first"], f"{where}.colons.first", 0)
-        count = _int(colons["count"], f"{where}.colons.count", 1)
+        count = _int(colons["count"], f"{where}.colons.count", 0 if names else 1)
         per_length = s.get("segments_per_length")
         per_length = None if per_length is None else _int(per_length, f"{where}.segments_per_length", 1)
         splits[split] = {
             "colons": {"first": first, "count": count},
+            **({"meshes": list(names)} if names else {}),
             "segments_per_length": per_length,
             "permutations": _int(s.get("permutations", 1), f"{where}.permutations", 1),
             "hole_models": _mix(s.get("hole_models", {"camera": 1.0}), f"{where}.hole_models", _hole_model),
@@ -170,19 +230,49 @@ def resolve(data: dict, source: str = "manifest") -> dict:
     extra = sorted(set(splits_in) - set(SPLITS))
     if extra:
         raise InputError(f"{source}: unknown split(s) {extra}; splits are {list(SPLITS)}")
-    ranges = sorted((v["colons"]["first"], v["colons"]["first"] + v["colons"]["count"], k) for k, v in splits.items())
+    owner = {}
+    for k, v in splits.items():
+        for n in v.get("meshes", []):
+            if n in owner:
+                raise InputError(f"{source}: mesh {n!r} is in splits {owner[n]} and {k}; test colons must never be "
+                                 "seen in training or validation")
+            owner[n] = k
+    for n, m in meshes.items():
+        for k, v in splits.items():
+            c = v["colons"]
+            if c["first"] <= m["id"] < c["first"] + c["count"]:
+                raise InputError(f"{source}: mesh {n!r} has id {m['id']}, a procedural colon of split {k}; "
+                                 "give it an id outside every split's colons")
+    ranges = sorted((v["colons"]["first"], v["colons"]["first"] + v["colons"]["count"], k) for k, v in splits.items()
+                    if v["colons"]["count"] > 0)
     for (a0, a1, ka), (b0, b1, kb) in zip(ranges, ranges[1:]):
         if b0 < a1:
             raise InputError(f"{source}: the colons of splits {ka} [{a0}, {a1}) and {kb} [{b0}, {b1}) overlap; "
                              "test colons must never be seen in training or validation")
-    return {"name": name, "description": str(data.get("description", "")),
-            "generator_version": str(data.get("generator_version", __version__)), "seed": seed,
-            "grid": {"size": size, "margin": margin, "min_extent_mm": min_extent}, "config": config.to_dict(), "splits": splits}
+    grid = {"size": size, "margin": margin, "min_extent_mm": min_extent}
+    if axes != "pca":  # written only when set, so that manifests from before keep their hash
+        grid["axes"] = axes
+    out = {"name": name, "description": str(data.get("description", "")),
+           "generator_version": str(data.get("generator_version", __version__)), "seed": seed,
+           "grid": grid, "config": config.to_dict(), "splits": splits}
+    if meshes:  # only when used, so that manifests from before keep their hash
+        out["meshes"] = meshes
+    return out
 
 
 def load(path) -> dict:
     """Read and :func:`resolve` a manifest YAML file."""
     return resolve(read_yaml(path, "manifest"), str(path))
+
+
+def mesh_source(resolved: dict, name: str, base) -> tuple:
+    """``(name, mesh path, mesh sha256, centerline path, centerline sha256)`` of a manifest mesh, paths under ``base``."""
+    from pathlib import Path
+
+    m = resolved["meshes"][name]
+    base = Path(base)
+    return (name, str((base / m["mesh"]).resolve()), m["mesh_sha256"], str((base / m["centerline"]).resolve()),
+            m["centerline_sha256"])
 
 
 class _NoAliases(yaml.SafeDumper):
@@ -209,8 +299,11 @@ def config_hash(resolved: dict) -> str:
     return hashlib.sha256(_canonical({"config": resolved["config"], "grid": resolved["grid"]})).hexdigest()
 
 
-def units(resolved: dict, splits=None) -> list[Unit]:
-    """The shards of a manifest, split by split, colon by colon, length by length."""
+def units(resolved: dict, splits=None, base=".") -> list[Unit]:
+    """The shards of a manifest, split by split, colon by colon (procedural, then meshes), length by length.
+
+    ``base`` is the folder that the manifest's mesh paths are relative to (the manifest file's).
+    """
     lengths = resolved["config"]["segments"]["lengths_mm"]
     out = []
     for split, s in resolved["splits"].items():
@@ -218,6 +311,9 @@ def units(resolved: dict, splits=None) -> list[Unit]:
             continue
         first, count = s["colons"]["first"], s["colons"]["count"]
         out += [Unit(split, c, float(length)) for c in range(first, first + count) for length in lengths]
+        for name in s.get("meshes", []):
+            src = mesh_source(resolved, name, base)
+            out += [Unit(split, resolved["meshes"][name]["id"], float(length), name, src) for length in lengths]
     return out
 
 

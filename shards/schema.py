@@ -53,7 +53,8 @@ FORMAT = "colonbench-shard"
 FORMAT_VERSION = 1
 
 #: Hole models, as stored in the enum ``samples/hole_model``.
-HOLE_MODEL_CODES = {"camera": 0, "spheres": 1, "camera+spheres": 2}
+HOLE_MODEL_CODES = {"camera": 0, "spheres": 1, "camera+spheres": 2, "camera+end": 3, "spheres+end": 4,
+                    "camera+spheres+end": 5}
 
 
 @dataclass(frozen=True)
@@ -145,6 +146,14 @@ ATTRIBUTES = {
     "heatmap_scale": "the 0.2 in tanh(0.2 d)",
     "n_samples": "rows of samples/",
     "n_segments": "rows of segments/",
+}
+
+#: Attributes a shard carries only where they apply; absent means the value in brackets.
+OPTIONAL_ATTRIBUTES = {
+    "grid_axes": "how the grid axes were found: 'tube' (colonbench.grid.tube_axes) or 'pca' [pca]",
+    "colon_source": "the imported colon mesh a shard was cut from, by its manifest name; procedural colons have "
+                    "none ['']",
+    "skipped_segments": "JSON list of the segments left out, each with its window and the reason ('[]')",
 }
 
 #: Options of every dataset: per-sample heatmap chunks, gzip level 4 with shuffle, no timestamps.
