@@ -27,9 +27,9 @@ def _colon_from_args(args, config):
     if args.mesh:
         from colonbench.datagen.realmesh import import_colon
 
-        return import_colon(args.mesh, args.centerline)
-    if args.centerline:
-        raise ColonbenchError("--centerline goes with --mesh")
+        return import_colon(args.mesh, args.centerline, lumen=args.lumen)
+    if args.centerline or args.lumen:
+        raise ColonbenchError("--centerline and --lumen go with --mesh")
     from colonbench.datagen.generate import procedural_colon
 
     return procedural_colon(config, args.seed, args.colon_id)
@@ -40,6 +40,9 @@ def _add_colon_source(p):
     p.add_argument("--colon-id", type=int, default=0, help="which colon under the seed (default 0)")
     p.add_argument("--mesh", help="use a real colon surface (PLY/STL/OBJ/OFF, mm) instead of a procedural one")
     p.add_argument("--centerline", help="centerline of --mesh (.npy or text, (n, 3) mm); computed if omitted")
+    p.add_argument("--lumen", action="store_true",
+                   help="keep only what colonoscopy sees of --mesh: its lumen surface, remeshed at 1 mm, shells and "
+                        "duplicates resolved, the --centerline (needed) re-centred; collapsed stretches are reported")
     p.add_argument("--config", help="generator config YAML (sections colon, camera, spheres, segments)")
 
 
@@ -180,13 +183,21 @@ def cmd_train(args):
 
     cfg = TrainConfig(network=args.network, batch_size=args.batch_size, lr=args.lr, epochs=args.epochs,
                       augment_prob=args.augment_prob, seed=args.seed, workers=args.workers, flips=args.flips,
-                      checkpoint_minutes=args.checkpoint_minutes, max_minutes=args.max_minutes)
+                      checkpoint_minutes=args.checkpoint_minutes, max_minutes=args.max_minutes,
+                      init=args.init, init_sha256=_file_sha256(args.init))
     command = "colonbench train " + " ".join(sys.argv[2:]) if len(sys.argv) > 2 else ""
     result = train(args.data, args.out, cfg, device=args.device, progress=not args.quiet, command=command)
     how = {"time": "time budget reached; run the same command to resume",
            "signal": "stopped on request; run the same command to resume"}.get(result["stopped"], "done")
     print(f"{result['epochs']} epochs, {result['steps']} steps, best validation L2 {result['best_val_l2']:.5f}, "
           f"{result['seconds'] / 60:.1f} min in all: {how}. Model: {Path(args.out) / 'best.safetensors'}")
+
+
+def _file_sha256(path):
+    """sha256 of a file, None for None; a missing file is left for the command itself to report."""
+    from colonbench.shards.schema import sha256_file
+
+    return sha256_file(path) if path is not None and Path(path).is_file() else None
 
 
 def cmd_pack(args):
@@ -415,6 +426,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--flips", action="store_true",
                    help="flip each sample's grid axes at random (exact augmentation; the only one for a pack)")
     p.add_argument("--seed", type=int, default=0, help="seed of weights, sample order and augmentations")
+    p.add_argument("--init", help="start from this model's weights (.safetensors, same network) instead of random "
+                                  "ones: fine-tuning; its sha256 is recorded")
     p.add_argument("--workers", type=int, default=1, help="DataLoader worker processes (default 1)")
     p.add_argument("--device", default="auto", help="auto, cpu, cuda, cuda:1, ... (default auto)")
     p.add_argument("--max-minutes", type=_positive(float), help="stop cleanly after this long (resume later)")

@@ -71,6 +71,8 @@ class TrainConfig:
     max_minutes: float | None = None
     augment: dict = field(default_factory=dict)
     flips: bool = False
+    init: str | None = None
+    init_sha256: str | None = None
 
     def check(self):
         if self.network not in NETWORKS:
@@ -228,6 +230,13 @@ def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "a
     torch.manual_seed(cfg.seed)
     net_cfg = network_config(cfg.network)
     net = build_network(net_cfg).to(dev)
+    if cfg.init is not None and not (out / "last.pt").exists():
+        from colonbench.completion.network import load_model
+
+        start, start_cfg, _ = load_model(cfg.init, "cpu")
+        if start_cfg != net_cfg:
+            raise InputError(f"{cfg.init}: a {start_cfg} network, not the {cfg.network!r} network this run trains")
+        net.load_state_dict(start.state_dict())
     opt = torch.optim.Adam(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
     sched = torch.optim.lr_scheduler.ReduceLROnPlateau(opt, factor=cfg.lr_factor, patience=cfg.lr_patience)
     state = {"epoch": 0, "position": 0, "steps": 0, "samples": 0, "best_val": float("inf"), "seconds": 0.0,
