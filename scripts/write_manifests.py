@@ -10,20 +10,42 @@ from pathlib import Path
 from colonbench._version import __version__
 from colonbench.datagen.generate import GeneratorConfig
 from colonbench.shards.manifest import dumps
+from colonbench.shards.schema import sha256_file
 
 OUT = Path(__file__).resolve().parents[1] / "data_manifests"
 
 
-def split(first, count, per_length, permutations, noise, mix=None):
-    return {"colons": {"first": first, "count": count}, "segments_per_length": per_length,
-            "permutations": permutations, "hole_models": dict(mix or {"camera": 0.5, "spheres": 0.5}),
-            "noise_mm": dict(noise)}
+def split(first, count, per_length, permutations, noise, mix=None, meshes=None):
+    out = {"colons": {"first": first, "count": count}, "segments_per_length": per_length,
+           "permutations": permutations, "hole_models": dict(mix or {"camera": 0.5, "spheres": 0.5}),
+           "noise_mm": dict(noise)}
+    if meshes:
+        out["meshes"] = list(meshes)
+    return out
 
 
-def dump(name, description, seed, splits, overrides=None):
+#: The real colons the project carries (data_manifests/meshes/, CC BY 4.0, see its README), by manifest name.
+REAL = {name: {"id": 900000 + int(name[3:]), "mesh": f"meshes/{name}_large_intestine_mm.ply",
+               "centerline": f"meshes/{name}_path_mm.npy"} for name in ("gca00090", "gca00080", "gca00060")}
+
+
+def meshes(*names):
+    out = {}
+    for n in names:
+        m = REAL[n]
+        out[n] = {"id": m["id"], "mesh": m["mesh"], "mesh_sha256": sha256_file(OUT / m["mesh"]),
+                  "centerline": m["centerline"], "centerline_sha256": sha256_file(OUT / m["centerline"])}
+    return out
+
+
+def dump(name, description, seed, splits, overrides=None, axes="pca", mesh_names=()):
+    grid = {"size": 64, "margin": 4, "min_extent_mm": 70.0}
+    if axes != "pca":
+        grid["axes"] = axes
     manifest = {"name": name, "description": description, "generator_version": __version__, "seed": seed,
-                "grid": {"size": 64, "margin": 4, "min_extent_mm": 70.0}, "config": GeneratorConfig.from_dict(overrides or {}).to_dict(),
-                "splits": splits}
+                "grid": grid, "config": GeneratorConfig.from_dict(overrides or {}).to_dict(), "splits": splits}
+    if mesh_names:
+        manifest["meshes"] = meshes(*mesh_names)
     head = (f"# colonbench dataset manifest: {name}\n"
             f"# Generate with: colonbench generate data_manifests/{name}.yaml --out data/{name} --workers N\n"
             "# Written by scripts/write_manifests.py; every generator parameter is spelled out\n"
@@ -53,3 +75,34 @@ dump("train-gpu", "Training data of the shipped model when a GPU trains it: 100 
 dump("smoke", "Seconds of data for tests: short coarse colons, one 6 cm segment length, 1-2 segments per colon.", 7,
      {"train": split(0, 1, 2, 2, NOISY), "validation": split(1, 1, 1, 2, CLEAN), "test": split(2, 1, 2, 1, CLEAN)},
      {"colon": {"length_mm": [450, 550], "ring_spacing_mm": 1.0, "edge_mm": 1.5}, "segments": {"lengths_mm": [60.0]}})
+
+# ------------------------------------------------------------------ 0.2: generalization (issue 11)
+#: The widened generator: each range answers a failure seen on colons we did not make (docs/datagen.md).
+WIDE = {
+    "colon": {"length_mm": [1300.0, 2000.0], "radius_caecum_mm": [25.0, 40.0], "radius_transverse_mm": [18.0, 38.0],
+              "radius_sigmoid_mm": [10.0, 25.0], "radius_rectum_mm": [15.0, 35.0], "fold_spacing_mm": [10.0, 50.0],
+              "fold_depth": [0.0, 0.5], "fold_width_mm": [1.5, 6.0], "fold_free_share": 0.15,
+              "ellipticity": [0.0, 0.3], "flattening": [0.0, 0.3], "roughness_mm": [0.0, 0.6], "max_attempts": 200,
+              "diverticula": [0, 4], "pedunculated_polyps": [0, 2]},
+    "segments": {"lengths_mm": [40.0, 55.0, 70.0], "point_density_scale": [0.25, 4.0], "density_falloff": [0.0, 2.0],
+                 "outlier_share": [0.0, 0.03], "double_layer_share": [0.0, 0.3]},
+}
+WIDE_HOLES = {"camera": 0.3, "spheres": 0.3, "camera+spheres": 0.1, "camera+end": 0.15, "spheres+end": 0.15}
+WIDE_NOISE = {0.0: 0.4, 0.25: 0.15, 0.5: 0.2, 0.75: 0.1, 1.0: 0.15}
+dump("wide", "The widened generator (0.2): radii 10-40 mm, segments of 40-70 mm (as short as their diameter), folds "
+     "from none to deep pockets, smooth colons, elliptic and flattened sections, clouds of 0.5-8 points/mm^2 thinning "
+     "away from the camera, outliers, a misregistered second layer, noise up to 1 mm, an unseen end, diverticula and "
+     "pedunculated polyps. Its test split "
+     "is the widened suite of the benchmark.", 20261122,
+     {"train": split(0, 200, 10, 3, WIDE_NOISE, WIDE_HOLES), "validation": split(200, 20, 4, 2, WIDE_NOISE, WIDE_HOLES),
+      "test": split(220, 12, 4, 1, CLEAN, WIDE_HOLES)}, WIDE, axes="tube")
+dump("real-test", "The real held-out suite: every usable segment of the real CT colon gca00060, which no shipped model "
+     "is trained on, with camera and sphere holes at 2 points/mm^2 (the paper's protocol on a colon we did not make).",
+     20261123, {"test": split(0, 0, None, 2, CLEAN, {"camera": 0.5, "spheres": 0.5}, meshes=["gca00060"])},
+     {"segments": {"lengths_mm": [50.0, 60.0, 70.0], "end_margin_mm": 10.0}}, axes="tube", mesh_names=["gca00060"])
+dump("train-wide", "Training data of the 0.2 model: 24 colons of the widened generator and the real colons gca00090 "
+     "and gca00080, validated on 8 other widened colons. wide.yaml's and real-test.yaml's test "
+     "colons are never seen. Sized for a fine-tune on a 2-core CPU; grow the colon count on a GPU.", 20261122,
+     {"train": split(0, 24, 6, 2, WIDE_NOISE, WIDE_HOLES, meshes=["gca00090", "gca00080"]),
+      "validation": split(200, 8, 4, 1, WIDE_NOISE, WIDE_HOLES)}, WIDE, axes="tube",
+     mesh_names=["gca00090", "gca00080"])
