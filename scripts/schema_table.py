@@ -2,7 +2,7 @@
 
 from colonbench.augment import AugmentConfig
 from colonbench.datagen.config import describe as describe_config
-from colonbench.shards.schema import ATTRIBUTES, describe
+from colonbench.shards.schema import ATTRIBUTES, OPTIONAL_ATTRIBUTES, describe
 
 
 def tables() -> str:
@@ -10,6 +10,7 @@ def tables() -> str:
     out += [f"| {p} | {s} | {d} | {u} | {f} | {m} |" for p, s, d, u, f, m in describe()]
     out += ["", "| file attribute | meaning |", "|---|---|"]
     out += [f"| `{k}` | {v} |" for k, v in ATTRIBUTES.items()]
+    out += [f"| `{k}` (optional) | {v} |" for k, v in OPTIONAL_ATTRIBUTES.items()]
     out += ["", "| augmentation field | default | limits | unit | meaning |", "|---|---|---|---|---|"]
     out += [f"| `{n}` | {d} | {lim} | {u} | {m} |" for n, d, lim, u, m in describe_config(AugmentConfig)]
     return "\n".join(out) + "\n"

@@ -1,0 +1,326 @@
+"""Generalization (0.2): the tube's own axis, real-mesh import as colonoscopy sees it, the widened generator."""
+
+import json
+
+import h5py
+import numpy as np
+import pytest
+import trimesh
+import yaml
+
+from colonbench.datagen.colon import generate_colon, tube_colon
+from colonbench.datagen.config import ColonConfig, SegmentConfig
+from colonbench.datagen.holes import sample_surface, unseen_end
+from colonbench.datagen.lumen import import_lumen
+from colonbench.datagen.sample import reconstruction_cloud
+from colonbench.datagen.segments import SegmentSurface
+from colonbench.datagen.tube import self_intersections
+from colonbench.errors import InputError
+from colonbench.grid import fit_grid, principal_axes, tube_axes
+from colonbench.shards.manifest import resolve
+from colonbench.shards.schema import sha256_file
+from conftest import MANIFESTS
+from shapes import straight
+
+WIDE = MANIFESTS / "wide.yaml"
+
+
+def _cylinder_cloud(radius, length, density=2.0, seed=0, rotation=None):
+    """Points on a straight tube of ``radius`` x ``length`` mm (the real swept mesh), turned by ``rotation``."""
+    colon = tube_colon(straight(length), radius, ring_spacing_mm=1.0, n_around=256)
+    pts = sample_surface(np.random.default_rng(seed), colon.mesh.vertices, colon.mesh.faces, density)
+    return pts if rotation is None else pts @ rotation.T
+
+
+def _angle(a, b):
+    return float(np.degrees(np.arccos(min(1.0, abs(float(a @ b))))))
+
+
+def test_short_wide_cylinder_gets_its_axis():
+    # a 50 mm piece of a 40 mm-radius colon: wider than long, so its largest spread runs across it
+    rot = np.linalg.qr(np.random.default_rng(3).normal(size=(3, 3)))[0]
+    pts = _cylinder_cloud(40.0, 50.0, rotation=rot)
+    axis = rot[:, 2]
+    assert _angle(tube_axes(pts)[0], axis) < 2.0
+    assert _angle(principal_axes(pts)[0], axis) > 45.0        # what the grid followed before
+    # a cloud with one side of the wall missing, and with noise, still gets it
+    half = pts[(pts @ rot[:, 0]) > 0]
+    assert _angle(tube_axes(half)[0], axis) < 2.0
+    noisy = pts + np.random.default_rng(4).normal(0, 0.5, pts.shape)
+    assert _angle(tube_axes(noisy)[0], axis) < 2.0
+    grid = fit_grid(pts, axes="tube")
+    assert _angle(grid.rotation[0], axis) < 2.0
+    assert np.isclose(np.linalg.det(grid.rotation), 1.0)
+    with pytest.raises(InputError, match="grid axes"):
+        fit_grid(pts, axes="longest")
+
+
+def _open_tube(radius, length=200.0):
+    return tube_colon(straight(length), radius, ring_spacing_mm=1.0, n_around=160).mesh
+
+
+def _lumen_band_area(mesh, z0=40.0, z1=160.0):
+    """Area of the faces whose centroids lie between two planes across a tube along z."""
+    z = mesh.triangles_center[:, 2]
+    return float(mesh.area_faces[(z > z0) & (z < z1)].sum())
+
+
+def test_double_walled_cylinder_imports_as_its_inner_surface():
+    inner, outer = _open_tube(20.0), _open_tube(24.0)
+    shell = trimesh.util.concatenate([inner, outer])
+    lumen = import_lumen(shell, straight(200.0).points)
+    r = np.linalg.norm(lumen.mesh.vertices[:, :2], axis=1)
+    band = (lumen.mesh.vertices[:, 2] > 40) & (lumen.mesh.vertices[:, 2] < 160)
+    assert np.abs(r[band] - 20.0).max() < 0.7          # nothing of the outer wall
+    expected = 2 * np.pi * 20.0 * 120.0
+    assert _lumen_band_area(lumen.mesh) == pytest.approx(expected, rel=0.02)
+    assert lumen.mesh.is_watertight
+    # the open ends were sealed inside the tube; those stretches are never cut into segments
+    assert 0 < lumen.info["open_share"] < 0.5
+    assert lumen.collapsed[0][0] == 0.0 and lumen.collapsed[-1][1] == pytest.approx(lumen.centerline.length)
+    # the re-centred centerline is the axis
+    mid = (lumen.centerline.points[:, 2] > 40) & (lumen.centerline.points[:, 2] < 160)
+    assert np.abs(lumen.centerline.points[mid, :2]).max() < 0.5
+    assert np.median(lumen.radius[mid]) == pytest.approx(20.0, rel=0.03)
+
+
+def test_duplicated_overlapping_piece_counts_once():
+    tube = _open_tube(20.0)
+    # a piece of the wall drawn a second time, a tenth of a millimetre off, as segmentations overlap
+    sel = np.flatnonzero((tube.triangles_center[:, 2] > 60) & (tube.triangles_center[:, 2] < 120)
+                         & (tube.triangles_center[:, 0] > 0))
+    piece = trimesh.Trimesh(tube.vertices + [0.1, 0.0, 0.0], tube.faces[sel], process=False)
+    doubled = trimesh.util.concatenate([tube, piece])
+    assert _lumen_band_area(doubled) > 1.2 * 2 * np.pi * 20.0 * 120.0      # the input counts it twice
+    lumen = import_lumen(doubled, straight(200.0).points)
+    assert _lumen_band_area(lumen.mesh) == pytest.approx(2 * np.pi * 20.0 * 120.0, rel=0.02)
+
+
+def test_lumen_import_refuses_a_midline_outside_the_mesh():
+    with pytest.raises(InputError, match="midline"):
+        import_lumen(_open_tube(20.0), straight(200.0).points + [60.0, 0.0, 0.0])
+
+
+def test_collapsed_stretch_is_reported():
+    # a tube pinched to 2 mm between 90 and 110 mm
+    def radius(s, theta):
+        return np.where(np.abs(s - 100.0) < 10.0, 2.0, 20.0) + 0 * theta
+    mesh = tube_colon(straight(200.0), radius, ring_spacing_mm=1.0, n_around=160).mesh
+    lumen = import_lumen(mesh, straight(200.0).points)
+    inner = [c for c in lumen.collapsed if 0 < c[0] and c[1] < lumen.centerline.length - 1]
+    assert len(inner) == 1
+    a, b = inner[0]
+    assert 80 < a < 95 and 105 < b < 120
+
+
+def test_unseen_end_removes_a_known_share():
+    colon = tube_colon(straight(60.0), 20.0, ring_spacing_mm=0.5, n_around=256)
+    cl = straight(60.0).points
+    areas = colon.mesh.area_faces
+    for seed in range(4):
+        unseen, info = unseen_end(np.random.default_rng(seed), colon.mesh.triangles_center, cl, (0.3, 0.3))
+        assert areas[unseen].sum() / areas.sum() == pytest.approx(0.3, abs=0.01)
+        z = colon.mesh.triangles_center[unseen, 2]
+        assert (z.max() < 18.5) if info["end"] == "start" else (z.min() > 41.5)
+
+
+def test_reconstruction_flaws_have_their_drawn_sizes():
+    colon = tube_colon(straight(60.0), 20.0, ring_spacing_mm=0.5, n_around=256)
+    mesh = colon.mesh
+    observed = np.ones(len(mesh.faces), bool)
+    surface = SegmentSurface(mesh, np.arange(len(mesh.faces)), (0.0, 60.0), straight(60.0).points)
+    area = mesh.area
+    cfg = SegmentConfig(point_density=2.0, point_density_scale=(2.0, 2.0), outlier_share=(0.1, 0.1),
+                        outlier_distance_mm=(5.0, 5.0), double_layer_share=(0.2, 0.2),
+                        double_layer_offset_mm=(2.0, 2.0))
+    pts, info = reconstruction_cloud(np.random.default_rng(0), mesh, observed, surface, cfg, {})
+    n = round(4.0 * area)
+    assert info["points"] == n
+    assert len(pts) == n + round(0.2 * n) + round(0.1 * (n + round(0.2 * n)))
+    r = np.linalg.norm(pts[:, :2], axis=1)
+    first = r[:n]
+    assert np.abs(first - 20.0).max() < 0.05                      # the surface itself
+    layer = r[n:n + round(0.2 * n)]
+    assert np.median(np.abs(layer - 20.0)) > 0.3                  # the second layer is off the wall
+    assert info["double_layer_shift_mm"] == pytest.approx(2.0)
+    # non-uniform density: with falloff, points crowd near the one viewpoint
+    far = SegmentConfig(density_falloff=(2.0, 2.0))
+    view = {"poses": {"positions": [[0.0, 0.0, 5.0]]}}
+    pts, _ = reconstruction_cloud(np.random.default_rng(1), mesh, observed, surface, far, view)
+    near = (pts[:, 2] < 30).mean()
+    assert near > 0.7
+
+
+def test_widened_colons_keep_the_self_intersection_check():
+    wide = yaml.safe_load(open(WIDE))["config"]["colon"]
+    cfg = ColonConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in wide.items()})
+    cfg = ColonConfig(**{**cfg.__dict__, "ring_spacing_mm": 3.0, "edge_mm": 4.0})
+    for colon_id in range(3):
+        colon = generate_colon(cfg, seed=20261122, colon_id=colon_id)
+        assert len(self_intersections(colon.centerline, colon.radius, cfg.clearance_mm)) == 0
+    # a smooth colon has no folds; an elliptic one has unequal diameters
+    smooth = generate_colon(ColonConfig(ring_spacing_mm=3.0, edge_mm=4.0, fold_free_share=1.0), seed=1)
+    assert smooth.info["n_folds"] == 0
+    flat = generate_colon(ColonConfig(ring_spacing_mm=3.0, edge_mm=4.0, ellipticity=(0.3, 0.3),
+                                      taenia_depth=(0.0, 0.0), taenia_depth_transverse=(0.0, 0.0),
+                                      fold_depth=(0.0, 0.0), polyps=(0, 0), roughness_mm=(0.0, 0.0)), seed=1)
+    n = flat.n_around
+    ring = flat.mesh.vertices[100 * n:101 * n]
+    r = np.linalg.norm(ring - ring.mean(axis=0), axis=1)
+    assert r.max() / r.min() == pytest.approx(1.3 / 0.7, rel=0.03)
+
+
+def _pinched(s, theta):
+    """A 15 mm tube collapsed to 2 mm between 142 and 158 mm."""
+    return np.where(np.abs(s - 150.0) < 8.0, 2.0, 15.0) + 0 * theta
+
+
+def _mesh_manifest(tmp_path, splits, meshes=None):
+    tube = tube_colon(straight(300.0), _pinched, ring_spacing_mm=1.0, n_around=96)
+    tube.mesh.export(tmp_path / "tube.ply")
+    np.save(tmp_path / "tube_mid.npy", straight(300.0).points)
+    entry = {"id": 9000, "mesh": "tube.ply", "mesh_sha256": sha256_file(tmp_path / "tube.ply"),
+             "centerline": "tube_mid.npy", "centerline_sha256": sha256_file(tmp_path / "tube_mid.npy")}
+    manifest = {"name": "mesh-test", "seed": 3, "generator_version": "0.2.0", "grid": {"axes": "tube"},
+                "config": {"segments": {"lengths_mm": [50.0]}}, "meshes": meshes or {"tube": entry},
+                "splits": splits}
+    path = tmp_path / "m.yaml"
+    path.write_text(yaml.safe_dump(manifest))
+    return path, manifest
+
+
+def test_a_mesh_is_a_colon_source_in_manifests(tmp_path):
+    from colonbench.shards.dataset import generate
+    from colonbench.shards.reader import ShardDataset
+
+    path, manifest = _mesh_manifest(tmp_path, {"test": {"meshes": ["tube"], "permutations": 1,
+                                                        "hole_models": {"spheres": 1.0}}})
+    lock = generate(path, tmp_path / "data", progress=False)
+    assert list(lock["shards"]) == ["test/mesh-tube-50mm.h5"]
+    with h5py.File(tmp_path / "data/test/mesh-tube-50mm.h5") as h5:
+        assert h5.attrs["colon_source"] == "tube"
+        assert h5.attrs["grid_axes"] == "tube"
+        skipped = json.loads(h5.attrs["skipped_segments"])
+        windows = h5["segments/window_mm"][:]
+        cov = h5["samples/coverage"][:]
+    # the window across the collapse is left out with its reason; the others are kept
+    across = [s for s in skipped if s["window_mm"][0] < 150 < s["window_mm"][1]]
+    assert len(across) == 1 and "collapsed" in across[0]["reason"]
+    assert len(windows) >= 2 and not any(a < 150 < b for a, b in windows)
+    assert np.all((cov > 0.2) & (cov <= 1.0))
+    ds = ShardDataset(tmp_path / "data", split="test")
+    assert ds.shards[0].grid_options["axes"] == "tube"
+    # a mesh that is not the file the manifest names is refused, naming it
+    (tmp_path / "tube.ply").write_bytes((tmp_path / "tube.ply").read_bytes() + b"\n")
+    from colonbench.errors import ColonbenchError
+    with pytest.raises(ColonbenchError, match="sha256 differs"):
+        generate(path, tmp_path / "data2", progress=False)
+
+
+def test_mesh_manifest_errors(tmp_path):
+    _, manifest = _mesh_manifest(tmp_path, {"train": {"meshes": ["tube"]}, "test": {"meshes": ["tube"]}})
+    with pytest.raises(InputError, match="test colons must never"):
+        resolve(manifest)
+    _, manifest = _mesh_manifest(tmp_path, {"train": {"colons": {"first": 9000, "count": 2}, "meshes": ["tube"]}})
+    with pytest.raises(InputError, match="give it an id outside"):
+        resolve(manifest)
+    _, manifest = _mesh_manifest(tmp_path, {"train": {"meshes": ["other"]}})
+    with pytest.raises(InputError, match="names from the manifest's meshes"):
+        resolve(manifest)
+    _, manifest = _mesh_manifest(tmp_path, {"train": {"meshes": ["tube"]}})
+    manifest["meshes"]["tube"]["mesh_sha256"] = "abc"
+    with pytest.raises(InputError, match="64 hex digits"):
+        resolve(manifest)
+
+
+def _end_frame(colon):
+    cl = colon.centerline
+    return cl.point_at([0.0, cl.length]), cl.tangent_at([0.0, cl.length])
+
+
+def test_hemispherical_diverticulum_adds_its_known_area():
+    from colonbench.datagen import irregular
+
+    # a wide tube, so that its wall is flat on the scale of the pouch: the added area is 2 pi r^2 - pi r^2
+    n_around, r = 2048, 5.0
+    tube = tube_colon(straight(40.0), 300.0, ring_spacing_mm=0.5, n_around=n_around)
+    point = tube.mesh.vertices[40 * n_around]
+    normal = point - tube.centerline.point_at([20.0])[0]
+    normal /= np.linalg.norm(normal)
+    ends, tangents = _end_frame(tube)
+    mesh = irregular.apply(tube.mesh.vertices, tube.mesh.faces, n_around, ends, tangents,
+                           [(point, normal, r, 0.0)], [])
+    assert mesh.area - tube.mesh.area == pytest.approx(2 * np.pi * r**2 - np.pi * r**2, rel=0.02)
+    assert mesh.is_winding_consistent
+    assert not mesh.is_watertight                 # the caps used for CSG are gone again
+    # the pouch lies outside the wall, as deep as its radius
+    depth = (mesh.vertices - point) @ normal
+    assert depth.max() == pytest.approx(r, abs=0.1)
+
+
+def test_pedunculated_polyp_reaches_into_the_lumen():
+    from colonbench.datagen import irregular
+
+    n_around = 256
+    tube = tube_colon(straight(60.0), 20.0, ring_spacing_mm=0.5, n_around=n_around)
+    point = tube.mesh.vertices[60 * n_around]
+    normal = point - tube.centerline.point_at([30.0])[0]
+    normal /= np.linalg.norm(normal)
+    ends, tangents = _end_frame(tube)
+    head, stalk = 4.0, 6.0
+    mesh = irregular.apply(tube.mesh.vertices, tube.mesh.faces, n_around, ends, tangents, [],
+                           [(point, normal, head, stalk, 1.5)])
+    # the head's far side lies stalk + 1.8 head radii into the lumen from the wall
+    rel = mesh.vertices - point
+    reach = -(rel @ normal)
+    near_axis = np.linalg.norm(rel + np.outer(reach, normal), axis=1) < head + 0.5
+    assert reach[near_axis & (reach < 30)].max() == pytest.approx(stalk + 1.8 * head, abs=0.15)
+    assert mesh.area > tube.mesh.area + 0.9 * 4 * np.pi * head**2
+
+
+def test_colons_with_diverticula_and_stalked_polyps(small_config):
+    cfg = ColonConfig(ring_spacing_mm=1.5, edge_mm=2.0, diverticula=(2, 2), pedunculated_polyps=(1, 1))
+    colon = generate_colon(cfg, seed=3, colon_id=0)
+    assert len(colon.info["diverticula"]) == 2 and len(colon.info["pedunculated_polyps"]) == 1
+    assert colon.mesh.is_winding_consistent
+    assert len(self_intersections(colon.centerline, colon.radius, cfg.clearance_mm)) == 0
+    # each pouch reaches beyond the wall where it sits by the depth of its ball
+    from scipy.spatial import cKDTree
+
+    tree = cKDTree(colon.mesh.vertices)
+    for d in colon.info["diverticula"]:
+        p = np.array(d["position_mm"])
+        axis_point = colon.centerline.point_at([d["arclength_mm"]])[0]
+        out = (p - axis_point) / np.linalg.norm(p - axis_point)
+        near = colon.mesh.vertices[tree.query_ball_point(p, 2.5 * d["radius_mm"])]
+        depth = ((near - p) @ out).max()
+        assert depth == pytest.approx(d["radius_mm"] * (1 + d["neck"]), abs=0.6)
+
+
+@pytest.mark.parametrize("name", ["paper", "demo", "smoke", "train-cpu", "train-gpu", "wide", "real-test",
+                                  "train-wide"])
+def test_resolving_a_resolved_manifest_keeps_its_hash(name):
+    # a dataset folder keeps the resolved manifest; a resumed run compares their hashes
+    from colonbench.shards.manifest import dumps, load, manifest_hash
+
+    resolved = load(MANIFESTS / f"{name}.yaml")
+    assert manifest_hash(resolve(yaml.safe_load(dumps(resolved)))) == manifest_hash(resolved)
+
+
+@pytest.mark.slow
+def test_real_colon_segments_hold_only_their_own_stretch(real_dir):
+    # gca00060 bends sharply at its caecum and flexures: the two cutting planes of a segment there form a
+    # wedge whose far side holds wall of another stretch, connected to this segment's wall
+    from colonbench.datagen.generate import PreparedColon
+    from colonbench.datagen.realmesh import import_colon
+
+    colon = import_colon(real_dir / "gca00060_large_intestine_mm.ply", real_dir / "gca00060_path_mm.npy", lumen=True)
+    prepared = PreparedColon(colon)
+    wins, skipped = prepared.usable_windows(70.0, 10.0)
+    assert len(wins) >= 10 and skipped                      # the open rectum end is left out
+    r = np.median(colon.radius[colon.radius > 0])
+    for s0, s1 in wins:
+        seg = prepared.segment(s0, s1)
+        span = np.ptp(seg.mesh.vertices, axis=0).max()
+        assert span < (s1 - s0) + 4 * r + 40.0, (s0, s1, span)
+        assert seg.area < 4 * 2 * np.pi * r * (s1 - s0), (s0, s1, seg.area)
