@@ -46,7 +46,7 @@ def threshold_coverage(heatmap: np.ndarray, grid: Grid, points, threshold: float
     for point, normal in end_planes(cl):
         vox = vox[(vox - point) @ normal >= END_INSET]
     partial = grid.to_voxel(np.asarray(points, dtype=float))
-    hole = hole_vertices(vox, partial, HOLE_DISTANCE)
+    hole = hole_vertices(vox, partial, HOLE_DISTANCE, false_hole_rate=None)  # the baseline as the paper ran it
     coverage = float(1.0 - hole.mean()) if len(vox) else float("nan")
     centerline = resample(grid.to_mm(cl), 0.5) if len(cl) else np.zeros((0, 3))
     return Estimate(coverage, grid.to_mm(vox[hole]) if hole.any() else np.zeros((0, 3)), centerline, method)

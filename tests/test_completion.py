@@ -13,7 +13,7 @@ from colonbench.cli import main  # noqa: E402
 from colonbench.completion.centerline import extract_centerline  # noqa: E402
 from colonbench.completion.method import CompletionMethod, check_cloud, from_heatmap  # noqa: E402
 from colonbench.completion.network import build_network, load_model, network_config, save_model  # noqa: E402
-from colonbench.completion.surface import complete, triangle_areas  # noqa: E402
+from colonbench.completion.surface import complete, hole_vertices, mesh_coverage, triangle_areas  # noqa: E402
 from colonbench.completion.train import TrainConfig, train  # noqa: E402
 from colonbench.datagen.colon import tube_colon  # noqa: E402
 from colonbench.datagen.generate import write_points_ply  # noqa: E402
@@ -92,6 +92,26 @@ def test_a_cut_window_is_found_as_a_hole_of_its_area():
     inside = (np.abs(np.arctan2(est.holes[:, 1], est.holes[:, 0])) < 0.55) & (est.holes[:, 2] > 19) & \
         (est.holes[:, 2] < 41)
     assert inside.mean() > 0.95
+
+
+@pytest.mark.parametrize("density", [0.5, 2.0, 8.0])
+def test_a_cut_window_in_a_sparse_or_dense_cloud_is_a_hole_of_its_area(density):
+    # the same window, the surface sampled uniformly at random at `density` points/mm^2 (a reconstruction's
+    # cloud): the paper's fixed distance calls the gaps of a sparse cloud holes; the widened one does not
+    from colonbench.datagen.holes import sample_surface
+
+    colon, grid, _, hm = tube_heatmaps(straight(63.0), UNIT)
+    mesh = colon.mesh
+    pts = sample_surface(np.random.default_rng(1), mesh.vertices, mesh.faces, density)
+    theta = np.arctan2(pts[:, 1], pts[:, 0])
+    window = (np.abs(theta) < 0.5) & (pts[:, 2] > 20) & (pts[:, 2] < 40)
+    est = from_heatmap(hm.target, grid, pts[~window])
+    wall = 2 * np.pi * R * (est.mesh_vertices[:, 2].max() - est.mesh_vertices[:, 2].min())
+    assert 1 - est.coverage == pytest.approx(R * 1.0 * 20.0 / wall, abs=0.015)
+    if density < 1:
+        paper = complete(hm.target, extract_centerline(hm.target), grid.to_voxel(pts[~window]))
+        hole = hole_vertices(paper.vertices, grid.to_voxel(pts[~window]), false_hole_rate=None)
+        assert mesh_coverage(paper.vertices, paper.faces, hole) < est.coverage - 0.1
 
 
 def test_gt_heatmap_as_prediction_bounds_the_error_after_the_network(smoke_dataset):
