@@ -440,7 +440,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("files", nargs="+", help="partial point clouds (.ply, .npy, .xyz; mm), one segment each")
     p.add_argument("--out-dir", required=True, help="folder for <name>.json per input")
     p.add_argument("--method", default="completion", help="method (default completion: the paper's)")
-    _add_model_args(p, "model .safetensors from colonbench train (default: the shipped model)")
+    _add_model_args(p, "model .safetensors from colonbench train, or a shipped model by name: small (the default), "
+                       "small-0.1 (the 0.1 model, trained on paper-style colons only)")
     p.add_argument("--mesh", action="store_true",
                    help="also write <name>_mesh.ply (completed mesh, holes red) and <name>_centerline.ply")
     p.set_defaults(func=cmd_estimate)
@@ -456,7 +457,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--split", default="test", help="split to evaluate (default test)")
     p.add_argument("--limit", type=_positive(int), help="only this many samples, spread evenly over the split")
     p.add_argument("--workers", type=_positive(int), default=1, help="processes (default 1)")
-    _add_model_args(p, "model .safetensors for the methods built on the network (default: shipped)")
+    _add_model_args(p, "model .safetensors for the methods built on the network, or a shipped model by name "
+                       "(default: small)")
     p.add_argument("--examples", type=int, default=3, help="segments whose meshes are kept for figures (default 3)")
     p.add_argument("--noise-seed", type=int, default=0, help="root seed of the input noise (default 0)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")

@@ -44,9 +44,29 @@ MAX_SEGMENT_MM = 250.0
 CENTERLINE_SPACING_MM = 0.5
 
 
-def shipped_model() -> Path:
-    """Path of the model that ships in the package (``colonbench/completion/models/small.safetensors``)."""
-    return Path(str(resources.files("colonbench.completion").joinpath("models/small.safetensors")))
+#: The default of the shipped models (``colonbench/completion/models/<name>.safetensors``).
+DEFAULT_MODEL = "small"
+
+
+def shipped_model(name: str = DEFAULT_MODEL) -> Path:
+    """Path of a model that ships in the package: ``colonbench/completion/models/<name>.safetensors``."""
+    return Path(str(resources.files("colonbench.completion").joinpath(f"models/{name}.safetensors")))
+
+
+def shipped_models() -> list[str]:
+    """Names of the models that ship in the package."""
+    folder = resources.files("colonbench.completion").joinpath("models")
+    return sorted(p.name[: -len(".safetensors")] for p in folder.iterdir() if p.name.endswith(".safetensors"))
+
+
+def model_path(model=None) -> Path:
+    """A model file: ``None`` is the default shipped model, a shipped model's name its file, else a path."""
+    if model is None:
+        return shipped_model()
+    path = Path(model)
+    if not path.exists() and path.suffix != ".safetensors" and str(model) in shipped_models():
+        return shipped_model(str(model))
+    return path
 
 
 def check_cloud(points, what: str = "point cloud") -> np.ndarray:
@@ -108,7 +128,8 @@ class Predictor:
     Parameters
     ----------
     model : path, optional
-        A ``.safetensors`` model from ``colonbench train`` (default: the shipped one).
+        A ``.safetensors`` model from ``colonbench train``, or the name of a shipped model
+        (:func:`shipped_models`; default: ``small``).
     device : str
         ``cpu``, ``cuda``, ``auto``.
     """
@@ -118,10 +139,11 @@ class Predictor:
     def __init__(self, model=None, device: str = "cpu"):
         from colonbench.completion.network import load_model, resolve_device
 
-        path = Path(model) if model is not None else shipped_model()
+        path = model_path(model)
         if not path.is_file():
             raise InputError("no model ships with this installation; train one (colonbench train) and pass it"
-                             if model is None else f"{path}: no such model file")
+                             if model is None else f"{path}: no such model file (shipped models: "
+                             f"{', '.join(shipped_models()) or 'none'})")
         self.device = resolve_device(device)
         self.net, self.config, self.meta = load_model(path, self.device)
         self.path = path
@@ -194,7 +216,8 @@ class CompletionMethod:
     Parameters
     ----------
     model : path, optional
-        A ``.safetensors`` model from ``colonbench train`` (default: the shipped one).
+        A ``.safetensors`` model from ``colonbench train``, or the name of a shipped model
+        (:func:`shipped_models`; default: ``small``).
     device : str
         ``cpu``, ``cuda``, ``auto``.
     hole_distance : float, optional

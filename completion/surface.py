@@ -46,6 +46,8 @@ HOLE_DISTANCE = np.sqrt(2.0) / 2.0
 FALSE_HOLE_RATE = 0.01
 #: Neighbours of a partial point that its local density is estimated from.
 DENSITY_NEIGHBOURS = 8
+#: The cloud's density is the median over an even subsample of at most this many of its points.
+DENSITY_POINTS = 2000
 #: Faces closer than this to an end plane are dropped, voxels.
 END_INSET = 1.0
 
@@ -131,8 +133,9 @@ def sparse_reach(partial_vox: np.ndarray, false_hole_rate: float = FALSE_HOLE_RA
 
     The local density at a point is ``rho = k / (pi r_k^2)`` points per
     voxel^2, ``r_k`` the distance to its k-th nearest neighbour; the cloud's
-    density is the median over its points, which outliers, a second layer
-    and hole borders barely move. On a surface sampled as a Poisson process
+    density is the median over its points (an even subsample of at most
+    :data:`DENSITY_POINTS`), which outliers, a second layer and hole borders
+    barely move. On a surface sampled as a Poisson process
     of density ``rho`` a disc of radius ``d`` holds no point with probability
     ``exp(-rho pi d^2)``, so a point of the observed surface is farther than
     ``sqrt(ln(1 / rate) / (pi rho))`` from every sample only with probability
@@ -142,7 +145,8 @@ def sparse_reach(partial_vox: np.ndarray, false_hole_rate: float = FALSE_HOLE_RA
     k = int(min(neighbours, len(partial_vox) - 1))
     if k < 1:
         return float("inf")
-    r_k = tree.query(partial_vox, k=k + 1)[0][:, -1]
+    sub = partial_vox[:: max(1, int(np.ceil(len(partial_vox) / DENSITY_POINTS)))]
+    r_k = tree.query(sub, k=k + 1)[0][:, -1]
     rho = k / (np.pi * max(float(np.median(r_k)), 1e-9) ** 2)
     return float(np.sqrt(np.log(1.0 / false_hole_rate) / (np.pi * rho)))
 
