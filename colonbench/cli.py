@@ -184,7 +184,7 @@ def cmd_train(args):
     cfg = TrainConfig(network=args.network, batch_size=args.batch_size, lr=args.lr, epochs=args.epochs,
                       augment_prob=args.augment_prob, seed=args.seed, workers=args.workers, flips=args.flips,
                       checkpoint_minutes=args.checkpoint_minutes, max_minutes=args.max_minutes,
-                      init=args.init, init_sha256=_file_sha256(args.init))
+                      init=args.init, init_sha256=_model_sha256(args.init))
     command = "colonbench train " + " ".join(sys.argv[2:]) if len(sys.argv) > 2 else ""
     result = train(args.data, args.out, cfg, device=args.device, progress=not args.quiet, command=command)
     how = {"time": "time budget reached; run the same command to resume",
@@ -193,11 +193,13 @@ def cmd_train(args):
           f"{result['seconds'] / 60:.1f} min in all: {how}. Model: {Path(args.out) / 'best.safetensors'}")
 
 
-def _file_sha256(path):
-    """sha256 of a file, None for None; a missing file is left for the command itself to report."""
+def _model_sha256(model):
+    """sha256 of a model file or shipped model's, None for None; a missing one is left for the command to report."""
+    from colonbench.completion.method import model_path
     from colonbench.shards.schema import sha256_file
 
-    return sha256_file(path) if path is not None and Path(path).is_file() else None
+    path = model_path(model) if model is not None else None
+    return sha256_file(path) if path is not None and path.is_file() else None
 
 
 def cmd_pack(args):
@@ -426,8 +428,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--flips", action="store_true",
                    help="flip each sample's grid axes at random (exact augmentation; the only one for a pack)")
     p.add_argument("--seed", type=int, default=0, help="seed of weights, sample order and augmentations")
-    p.add_argument("--init", help="start from this model's weights (.safetensors, same network) instead of random "
-                                  "ones: fine-tuning; its sha256 is recorded")
+    p.add_argument("--init", help="start from this model's weights (.safetensors or a shipped model's name, same "
+                                  "network) instead of random ones: fine-tuning; its sha256 is recorded")
     p.add_argument("--workers", type=int, default=1, help="DataLoader worker processes (default 1)")
     p.add_argument("--device", default="auto", help="auto, cpu, cuda, cuda:1, ... (default auto)")
     p.add_argument("--max-minutes", type=_positive(float), help="stop cleanly after this long (resume later)")

@@ -231,9 +231,10 @@ def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "a
     net_cfg = network_config(cfg.network)
     net = build_network(net_cfg).to(dev)
     if cfg.init is not None and not (out / "last.pt").exists():
+        from colonbench.completion.method import model_path
         from colonbench.completion.network import load_model
 
-        start, start_cfg, _ = load_model(cfg.init, "cpu")
+        start, start_cfg, _ = load_model(model_path(cfg.init), "cpu")
         if start_cfg != net_cfg:
             raise InputError(f"{cfg.init}: a {start_cfg} network, not the {cfg.network!r} network this run trains")
         net.load_state_dict(start.state_dict())

@@ -31,7 +31,8 @@ def main(argv=None):
     ap.add_argument("model")
     ap.add_argument("--log", required=True)
     ap.add_argument("--eval", nargs="*", default=[], help="JSON files of scripts/bench_completion.py --json")
-    ap.add_argument("--leaderboard", help="leaderboard.json of colonbench leaderboard over a run of this model")
+    ap.add_argument("--leaderboard", nargs="*", default=[],
+                    help="leaderboard.json files of colonbench leaderboard over runs of this model (one per suite)")
     ap.add_argument("--hardware", required=True)
     ap.add_argument("--data-manifest", default="data_manifests/train-cpu.yaml")
     ap.add_argument("--note", default="")
@@ -39,7 +40,7 @@ def main(argv=None):
     _, config, meta = load_model(args.model)
     rows = list(csv.DictReader(open(args.log)))
     tc = meta.get("train_config", {})
-    out = ["# Model card: the shipped completion network (`small.safetensors`)", ""]
+    out = [f"# Model card: the shipped completion network (`{Path(args.model).name}`)", ""]
     if args.note:
         out += [args.note, ""]
     out += ["| | |", "|---|---|",
@@ -75,8 +76,8 @@ def main(argv=None):
                        f"{m['holes_recall_2mm']:.2f} | {m['centerline_precision_2mm']:.2f} / "
                        f"{m['centerline_recall_2mm']:.2f} | {e['wall_per_segment']:.2f} | "
                        + (f"{e['constant_guess_mae_points']:.2f} |" if e.get("constant_guess_mae_points") else "- |"))
-    if args.leaderboard:
-        out += leaderboard_rows(args.leaderboard, f"{Path(args.model).stem}@{meta.get('steps')}")
+    for path in args.leaderboard:
+        out += leaderboard_rows(path, f"{Path(args.model).stem}@{meta.get('steps')}")
     print("\n".join(out))
     return 0
 
@@ -88,8 +89,8 @@ def leaderboard_rows(path, version: str) -> list[str]:
     if not any(r["method"] == "completion" for r in rows):
         raise SystemExit(f"{path} has no completion row of version {version}")
     d = lb["data"]
-    out = ["", "## Benchmark", "",
-           f"`colonbench evaluate` on manifest `{d['manifest_name']}`, split `{d['split']}`, all {d['samples']} "
+    out = ["", f"## Benchmark: `{d['manifest_name']}`", "",
+           f"`colonbench evaluate` on manifest `{d['manifest_name']}`, split `{d['split']}`, {d['samples']} "
            "segments, then `colonbench leaderboard` (docs/benchmark.md). Coverage errors in points; P / R are "
            "means at 2 mm; * = reference rows given ground truth, or the constant guess.", "",
            "| noise mm | method | MAE | median | bias | q95 | holes P / R | centerline P / R | s per segment |",

@@ -170,6 +170,24 @@ def torch_equal(a, b):
     return torch.equal(a, b)
 
 
+def test_fine_tuning_starts_from_the_given_model(tiny_run, tmp_path):
+    import torch
+
+    out, run, _, _ = tiny_run
+    start, _, _ = load_model(run / "best.safetensors")
+    cfg = TrainConfig(epochs=1, batch_size=2, workers=0, augment_prob=0.0, lr=1e-12, init=str(run / "best.safetensors"))
+    train(out, tmp_path / "tuned", cfg, device="cpu", progress=False)
+    tuned, _, meta = load_model(tmp_path / "tuned" / "best.safetensors")
+    # a step of 1e-12 leaves the weights where the given model had them (random ones would differ entirely;
+    # batch-norm running statistics, buffers, move with the data whatever the step)
+    for (k, a), (_, b) in zip(start.named_parameters(), tuned.named_parameters()):
+        assert torch.allclose(a, b, atol=1e-6), k
+    assert meta["train_config"]["init"] == str(run / "best.safetensors")
+    with pytest.raises(InputError, match="no such model file"):
+        train(out, tmp_path / "other", TrainConfig(epochs=1, batch_size=2, workers=0, init=str(tmp_path / "none.safetensors")),
+              device="cpu", progress=False)
+
+
 def test_training_resumes_and_refuses_other_settings(tiny_run):
     out, run, cfg, _ = tiny_run
     import dataclasses
