@@ -325,6 +325,46 @@ def cmd_methods(args):
         print(f"{name:<14} {target}")
 
 
+def cmd_map(args):
+    """A whole reconstruction's coverage map: centerline, segments, each segment's coverage, map files."""
+    from colonbench.benchmark.registry import load_method
+    from colonbench.mapping.colonmap import map_colon, write_map
+    from colonbench.mapping.inputs import check_trajectory, read_reconstruction, read_trajectory
+
+    t0 = time.perf_counter()
+    points = read_reconstruction(args.reconstruction)
+    positions = None
+    if args.trajectory:
+        positions = read_trajectory(args.trajectory)
+        check_trajectory(positions, points, str(args.trajectory))
+    method = load_method(args.method, model=args.model, device=args.device)
+    if getattr(method, "uses_truth", False):
+        raise ColonbenchError(f"method {method.name!r} is a reference that needs ground truth; it runs only in "
+                              "colonbench evaluate")
+    t1 = time.perf_counter()
+    result = map_colon(points, method, segment_mm=args.segment_length, positions=positions,
+                       progress=not args.quiet)
+    result["seconds"] = {"read": t1 - t0, **result["seconds"]}
+    model = None
+    if getattr(method, "name", "") in ("completion", "thresholding", "unwrap"):
+        from colonbench.completion.method import model_path
+
+        model = str(args.model or model_path(None).stem)
+    paths = write_map(result, args.out, method.name, model, figure=not args.no_figure)
+    segs = result["segments"]
+    done = [s for s in segs if s.coverage is not None]
+    import json as _json
+
+    summary = _json.loads((Path(args.out) / "summary.json").read_text())
+    print(f"{len(segs)} segments of {args.segment_length:g} mm over {summary['centerline_mm']:.0f} mm of centerline "
+          f"({len(result['interruptions'])} interruption(s)); {len(done)} estimated; whole-colon coverage "
+          f"{summary['coverage']}; orientation {result['orientation']}")
+    for s in segs:
+        cov = f"{s.coverage:.3f}" if s.coverage is not None else f"- ({s.error})"
+        print(f"  {s.index:3d}  {s.start_mm:7.1f}-{s.end_mm:7.1f} mm  {s.points:7d} points  coverage {cov}")
+    print(f"wrote {', '.join(p.name for p in paths)} to {args.out} ({time.perf_counter() - t0:.1f} s)")
+
+
 def cmd_demo(args):
     """The main job on demo.yaml: generate its test split, evaluate every method at both noise levels, report."""
     import shutil
@@ -355,8 +395,38 @@ def cmd_demo(args):
     print(f"evaluated {len(DEFAULT_METHODS)} methods at noise 0 and 0.5 mm ({t2 - t1:.0f} s)")
     result = write_leaderboard([out / "run"], out / "report")
     print(result["markdown"])
-    print(f"report: {out / 'report'} ({', '.join(p.name for p in result['paths'])}); "
-          f"{time.perf_counter() - t0:.0f} s in all")
+    print(f"report: {out / 'report'} ({', '.join(p.name for p in result['paths'])})")
+    if not args.no_map:
+        demo_map(out / "map", args.model, progress=not args.quiet)
+    print(f"{time.perf_counter() - t0:.0f} s in all")
+
+
+def demo_map(out: Path, model=None, progress: bool = True) -> None:
+    """The demo's whole-colon map: a procedural colon with sphere holes, its withdrawal, colonbench map."""
+    import numpy as np
+
+    from colonbench.benchmark.registry import load_method
+    from colonbench.completion.surface import triangle_areas
+    from colonbench.datagen.colon import generate_colon
+    from colonbench.datagen.wholecolon import whole_partial
+    from colonbench.mapping.colonmap import map_colon, write_map
+
+    t0 = time.perf_counter()
+    colon = generate_colon(seed=0, colon_id=0)
+    partial = whole_partial(colon, seed=0)
+    out.mkdir(parents=True, exist_ok=True)
+    np.save(out / "reconstruction.npy", partial.points.astype(np.float32))
+    np.save(out / "trajectory.npy", partial.positions)
+    area = triangle_areas(colon.mesh.vertices, colon.mesh.faces)
+    truth = float(area[partial.observed].sum() / area.sum())
+    result = map_colon(partial.points, load_method("completion", model=model), positions=partial.positions,
+                       progress=progress)
+    write_map(result, out, "completion", str(model or "small"))
+    summary = json.loads((out / "summary.json").read_text())
+    print(f"map: a {colon.centerline.length:.0f} mm colon with {len(partial.spheres)} sphere holes "
+          f"({len(partial.points)} points): {summary['segments']} segments, whole-colon coverage "
+          f"{summary['coverage']:.3f} (truth {truth:.3f}), {out} ({time.perf_counter() - t0:.0f} s; the same as "
+          f"colonbench map {out / 'reconstruction.npy'} --trajectory {out / 'trajectory.npy'} --out DIR)")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -448,6 +518,21 @@ def build_parser() -> argparse.ArgumentParser:
                    help="also write <name>_mesh.ply (completed mesh, holes red) and <name>_centerline.ply")
     p.set_defaults(func=cmd_estimate)
 
+    p = sub.add_parser("map", help="coverage map of a whole colon reconstruction: segments, their coverage, a "
+                                   "coloured mesh and picture")
+    p.add_argument("reconstruction", help="the reconstruction, mm: points or a mesh (.ply, .obj, .npy, .xyz)")
+    p.add_argument("--out", required=True, help="output folder: segments.json/.csv, centerline.npy, summary.json, "
+                                                "map.ply, map.glb, map.png")
+    p.add_argument("--segment-length", type=_positive(float), default=60.0, help="segment arc length, mm (default 60)")
+    p.add_argument("--trajectory", help="camera positions of the run that made it, same frame and unit: a TUM "
+                                        "trajectory (timestamp tx ty tz qx qy qz qw) or (k, 3) positions (.npy, "
+                                        ".txt); the map is then numbered from the rectum (where it ends)")
+    p.add_argument("--method", default="completion", help="method (default completion: the paper's)")
+    _add_model_args(p, "model .safetensors, or a shipped model by name (default: small)")
+    p.add_argument("--no-figure", action="store_true", help="skip map.png (the headless rendering)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=cmd_map)
+
     p = sub.add_parser("evaluate", help="run methods over a dataset's test shards into a run folder (resumable)")
     p.add_argument("data", help="dataset folder (colonbench generate)")
     p.add_argument("--methods", default="all",
@@ -480,6 +565,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--manifest", default="data_manifests/demo.yaml", help="manifest (default data_manifests/demo.yaml)")
     p.add_argument("--workers", type=_positive(int), default=2, help="processes (default 2)")
     p.add_argument("--model", help="model .safetensors (default: the shipped one)")
+    p.add_argument("--no-map", action="store_true", help="skip the whole-colon map (out/demo/map)")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(func=cmd_demo)
     return parser

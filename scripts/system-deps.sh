@@ -2,9 +2,10 @@
 # System libraries the Python stack needs and pip cannot install:
 #   libusb-1.0-0  open3d loads it at import
 #   libgl1, libgomp1  open3d's renderer and OpenMP (present on most images)
+#   libegl1, libegl-mesa0, libgl1-mesa-dri  headless OpenGL for pyrender (PYOPENGL_PLATFORM=egl: the map picture)
 set -euo pipefail
 need=()
-for pkg in libusb-1.0-0 libgl1 libgomp1; do
+for pkg in libusb-1.0-0 libgl1 libgomp1 libegl1 libegl-mesa0 libgl1-mesa-dri; do
     dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || need+=("$pkg")
 done
 [ ${#need[@]} -eq 0 ] && exit 0

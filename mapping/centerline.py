@@ -1,0 +1,336 @@
+"""The centerline of a whole colon reconstruction: a point cloud with holes and missing stretches.
+
+A reconstruction is an open surface: holes let the inside meet the outside,
+so the lumen cannot be flood-filled as for a closed mesh
+(:func:`colonbench.datagen.realmesh.compute_centerline`). Instead:
+
+1. The points are rasterised at ``voxel_mm`` and dilated by ``close_mm``
+   (the wall, with gaps of a sparse cloud closed).
+2. A free voxel is *enclosed* when a ray from it meets the wall in at least
+   ``enclosed_share`` of 26 directions (the 26-neighbourhood's): inside a tube
+   nearly all rays meet the wall, holes included; outside, between limbs or in
+   a bend, at most about two thirds do. The rays are cast on the grid by
+   doubling: a voxel sees the wall within ``2k`` steps when it, or the voxel
+   ``k`` steps ahead, sees it within ``k``.
+3. The enclosed voxels, opened (no sheets or threads), split into pieces
+   (6-connected, at least ``min_piece_mm`` across): where the colon has no
+   wall at all for a stretch, nothing is enclosed and the colon is
+   *interrupted*. Pieces whose median depth is under half the longest one's
+   are channels, not lumen (inside a wall drawn as a shell), and dropped.
+4. In each piece, the minimal path between its two geodesic extremities with
+   a speed that grows with the distance to the wall (fast marching, the
+   recipe of :mod:`colonbench.paths`), smoothed, its last two sigmas (bent by
+   the smoothing) cut; then continued straight past its ends over the points
+   beyond them (the rays near an open end
+   of the colon escape through it, so the enclosed lumen stops short of the end
+   by about a radius).
+5. The pieces are chained end to nearest end into one order, and joined
+   where the wall lines the gap between them (a hole on one side of the
+   colon, large enough to let the rays out, is no interruption): the colon
+   is interrupted only where no wall lines the gap.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+from colonbench.errors import InputError
+
+#: Raster of the wall, mm.
+VOXEL_MM = 2.0
+#: Gaps in the wall closed by dilation, mm (a cloud of 0.5 points/mm^2 leaves about 1.4 mm).
+CLOSE_MM = 4.0
+#: Share of the 26 ray directions that must meet the wall for a free voxel to be inside.
+ENCLOSED_SHARE = 0.8
+#: Pieces of the enclosed lumen shorter than this are dropped (specks in folds), mm.
+MIN_PIECE_MM = 20.0
+#: Gaussian smoothing of the voxel path, mm.
+SMOOTH_MM = 6.0
+#: The ray directions: the 26-neighbourhood.
+DIRECTIONS = np.array([(i, j, k) for i in (-1, 0, 1) for j in (-1, 0, 1) for k in (-1, 0, 1)
+                       if (i, j, k) != (0, 0, 0)])
+
+
+@dataclass
+class Piece:
+    """One uninterrupted stretch of the colon's centerline.
+
+    Attributes
+    ----------
+    points : (n, 3) float
+        The polyline, mm, 1 mm spacing, ordered along the colon.
+    radius : float
+        Median distance from the centerline to the wall, mm.
+    """
+
+    points: np.ndarray
+    radius: float
+
+    @property
+    def length(self) -> float:
+        """Arc length, mm."""
+        return float(np.linalg.norm(np.diff(self.points, axis=0), axis=1).sum())
+
+
+def _shift(a: np.ndarray, step) -> np.ndarray:
+    """``a`` moved by ``-step`` (voxel ``x`` holds ``a[x + step]``), False outside."""
+    out = np.zeros_like(a)
+    src, dst = [], []
+    for s, n in zip(step, a.shape):
+        s = int(s)
+        if abs(s) >= n:
+            return out
+        src.append(slice(max(s, 0), n + min(s, 0)))
+        dst.append(slice(max(-s, 0), n + min(-s, 0)))
+    out[tuple(dst)] = a[tuple(src)]
+    return out
+
+
+def ray_hits(wall: np.ndarray, max_steps: int | None = None) -> np.ndarray:
+    """For each voxel, in how many of the 26 grid directions a ray meets the wall.
+
+    Parameters
+    ----------
+    wall : (X, Y, Z) bool
+    max_steps : int, optional
+        Rays end after this many voxel steps (default: the grid's largest side).
+
+    Returns
+    -------
+    (X, Y, Z) uint8
+    """
+    wall = np.asarray(wall, bool)
+    max_steps = max(wall.shape) if max_steps is None else int(max_steps)
+    hits = np.zeros(wall.shape, np.uint8)
+    for d in DIRECTIONS:
+        seen, k = wall.copy(), 1
+        while k < max_steps:
+            seen |= _shift(seen, d * k)
+            k *= 2
+        hits += seen
+    return hits
+
+
+def rasterise(points: np.ndarray, voxel_mm: float, pad: int):
+    """Occupancy of ``points`` on a grid of ``voxel_mm``, with ``pad`` empty voxels around.
+
+    Returns
+    -------
+    occupied : (X, Y, Z) bool
+    origin : (3,) float
+        Centre of voxel (0, 0, 0), mm.
+    """
+    lo = points.min(axis=0) - pad * voxel_mm
+    idx = np.round((points - lo) / voxel_mm).astype(np.int64)
+    shape = idx.max(axis=0) + pad + 1
+    occupied = np.zeros(tuple(shape), bool)
+    occupied[tuple(idx.T)] = True
+    return occupied, lo
+
+
+def _piece_path(inside: np.ndarray, dist: np.ndarray, voxel_mm: float) -> np.ndarray:
+    """Voxel path between the geodesic extremities of one piece, keeping to its middle."""
+    from colonbench import paths
+
+    seed = np.array(np.unravel_index(int(np.argmax(np.where(inside, dist, -1))), dist.shape))
+    a, _ = paths.farthest_voxel(inside, seed, dx=voxel_mm)
+    b, _ = paths.farthest_voxel(inside, a, dx=voxel_mm)
+    speed = (dist / max(float(dist[inside].max()), 1e-9)) ** 2
+    t = paths.travel_time(np.where(inside, np.maximum(speed, 1e-4), 0.0), a, mask=inside, dx=voxel_mm)
+    return paths.backtrack(t, b)
+
+
+def _resample(points: np.ndarray, spacing: float = 1.0) -> np.ndarray:
+    from colonbench.completion.centerline import resample
+
+    return resample(points, spacing)
+
+
+def _extend(line: np.ndarray, cloud: np.ndarray, radius: float, reach_mm: float = 10.0) -> np.ndarray:
+    """``line`` continued straight past each end (its tangent over the last ``reach_mm``) over the points beyond.
+
+    It goes as far as the cloud's points ahead of the end (those within
+    ``2 * radius`` of its axis, so another limb beyond the end does not pull
+    it on; their 99.5th percentile), and at most ``2 * radius``: the enclosed
+    lumen stops short of an open end by about a radius (and the smoothed
+    path's ends were cut by two sigmas), a closed pole (the caecum) ends the
+    points anyway, and further out the straight line leaves a bending colon. (Continuing with the end's curvature was
+    no better on a helical tube: the last centimetre's turning is mostly noise.)
+    """
+    out = np.asarray(line, float)
+    for end in (0, 1):
+        pts = out if end == 1 else out[::-1]
+        if len(pts) < 2:
+            continue
+        t = pts[-1] - pts[max(len(pts) - 1 - int(reach_mm), 0)]
+        if np.linalg.norm(t) < 1e-9:
+            continue
+        t = t / np.linalg.norm(t)
+        rel = cloud - pts[-1]
+        along = rel @ t
+        across = np.linalg.norm(rel - along[:, None] * t, axis=1)
+        ahead = along[(along > 0) & (across < 2.0 * radius)]
+        if len(ahead) == 0:
+            continue
+        extra = int(round(min(float(np.percentile(ahead, 99.5)), 2.0 * radius)))
+        if extra < 1:
+            continue
+        new = pts[-1] + np.arange(1.0, extra + 1.0)[:, None] * t
+        out = np.concatenate([out, new]) if end == 1 else np.concatenate([new[::-1], out])
+    return out
+
+
+def _chain(pieces: list[Piece]) -> list[Piece]:
+    """Pieces ordered end to nearest end, each oriented to continue the previous one."""
+    if len(pieces) <= 1:
+        return pieces
+    ends = [(p.points[0], p.points[-1]) for p in pieces]
+
+    def gap(i, j):  # shortest distance between an end of i and an end of j
+        return min(np.linalg.norm(a - b) for a in ends[i] for b in ends[j])
+
+    n = len(pieces)
+    # start with the piece whose nearest neighbour is farthest: an end of the chain
+    first = max(range(n), key=lambda i: min(gap(i, j) for j in range(n) if j != i))
+    order, left = [first], set(range(n)) - {first}
+    line = pieces[first].points
+    # orient the first piece so that its far end (from the rest) comes first
+    rest = np.concatenate([pieces[j].points[[0, -1]] for j in left])
+    if np.linalg.norm(rest - line[0], axis=1).min() < np.linalg.norm(rest - line[-1], axis=1).min():
+        pieces[first] = Piece(line[::-1].copy(), pieces[first].radius)
+    out = [pieces[first]]
+    while left:
+        tip = out[-1].points[-1]
+        j = min(left, key=lambda i: min(np.linalg.norm(ends[i][0] - tip), np.linalg.norm(ends[i][1] - tip)))
+        p = pieces[j].points
+        if np.linalg.norm(p[-1] - tip) < np.linalg.norm(p[0] - tip):
+            p = p[::-1].copy()
+        out.append(Piece(p, pieces[j].radius))
+        left.remove(j)
+    return out
+
+
+def _bridge(pieces: list[Piece], cloud: np.ndarray, covered: float = 0.9) -> list[Piece]:
+    """Consecutive pieces joined across gaps that the wall still lines (a large hole, not a missing stretch).
+
+    A gap is bridged by the straight line between the two ends when at least
+    ``covered`` of its 1 mm steps have a point of the cloud within 1.2 radii:
+    one side of the colon unseen for a few centimetres opens the lumen to the
+    rays but leaves the other side's wall along the gap. Where the colon is
+    missing, no wall lines the gap and the pieces stay apart.
+    """
+    from scipy.spatial import cKDTree
+
+    if len(pieces) < 2:
+        return pieces
+    tree = cKDTree(cloud)
+    out = [pieces[0]]
+    for p in pieces[1:]:
+        a, b = out[-1].points[-1], p.points[0]
+        gap = float(np.linalg.norm(b - a))
+        radius = max(out[-1].radius, p.radius)
+        steps = np.linspace(0.0, 1.0, max(int(gap), 1) + 1)[1:-1]
+        if len(steps):
+            probe = a + steps[:, None] * (b - a)
+            d, _ = tree.query(probe, distance_upper_bound=1.2 * radius)
+            lined = float(np.mean(np.isfinite(d)))
+        else:
+            lined = 1.0
+        if lined >= covered:
+            joined = np.concatenate([out[-1].points, a + steps[:, None] * (b - a), p.points])
+            out[-1] = Piece(_resample(joined, 1.0), float(np.mean([out[-1].radius, p.radius])))
+        else:
+            out.append(p)
+    return out
+
+
+def colon_centerline(points, voxel_mm: float = VOXEL_MM, close_mm: float = CLOSE_MM,
+                     enclosed_share: float = ENCLOSED_SHARE, min_piece_mm: float = MIN_PIECE_MM,
+                     smooth_mm: float = SMOOTH_MM) -> list[Piece]:
+    """The centerline of a colon reconstruction, in uninterrupted pieces, chained in order.
+
+    Parameters
+    ----------
+    points : (n, 3) float
+        The reconstruction's points, mm.
+    voxel_mm, close_mm, enclosed_share, min_piece_mm, smooth_mm : float
+        See the module's description.
+
+    Returns
+    -------
+    list of Piece
+        Ordered along the colon (the direction is arbitrary: the first piece's
+        first point is one end of the chain); more than one where the colon is
+        interrupted.
+
+    Raises
+    ------
+    InputError
+        When nothing is enclosed: not a tube, or far too sparse.
+    """
+    import edt
+
+    pts = np.asarray(points, float)
+    close = max(int(round(close_mm / voxel_mm)), 0)
+    occupied, origin = rasterise(pts, voxel_mm, pad=close + 2)
+    wall = ndimage.binary_dilation(occupied, iterations=close) if close else occupied
+    hits = ray_hits(wall)
+    inside = ~wall & (hits >= int(np.ceil(enclosed_share * len(DIRECTIONS))))
+    # thin sheets and threads between dilated walls are no lumen (and fast marching needs faces)
+    inside = ndimage.binary_opening(inside)
+    # the wall was dilated by `close`: the lumen's distance to the true wall is `close` voxels more
+    dist = edt.edt(inside, anisotropy=(voxel_mm,) * 3)
+    label, n = ndimage.label(inside)
+    if n == 0:
+        raise InputError("no lumen found: the points do not enclose a tube (is this a colon reconstruction "
+                         "in mm?)")
+    pieces = []
+    extents = ndimage.find_objects(label)
+    for lab, box in enumerate(extents, start=1):
+        span = np.linalg.norm([(s.stop - s.start) * voxel_mm for s in box])
+        if span < min_piece_mm:
+            continue
+        # one empty voxel around the piece (the grid's padding holds it): fast marching needs a border
+        box = tuple(slice(s.start - 1, s.stop + 1) for s in box)
+        part = label[box] == lab
+        vox = _piece_path(part, dist[box], voxel_mm)
+        # geodesic extremities lie at the rim of the enclosed lumen, off its axis: keep the path from where
+        # it is at least 0.7 of its median depth (as for closed meshes, datagen.realmesh.compute_centerline)
+        depth = dist[box][tuple(vox.T)]
+        deep = np.flatnonzero(depth >= 0.7 * np.median(depth))
+        vox = vox[deep[0]: deep[-1] + 1]
+        if len(vox) < 4:
+            continue
+        from colonbench import paths
+
+        line = origin + (paths.smooth_path(vox, smooth_mm / voxel_mm) + [s.start for s in box]) * voxel_mm
+        line = _resample(line, 1.0)
+        # smoothing bends the last sigma or two of a path's ends: they are grown again from the points
+        trim = int(round(2 * smooth_mm))
+        if len(line) < 2 * trim + 4:
+            continue
+        line = line[trim: len(line) - trim]
+        depth = float(np.median(dist[box][tuple(vox.T)]))
+        pieces.append((Piece(line, depth + close * voxel_mm), depth))
+    if pieces:
+        # channels far narrower than the colon's lumen (the gap inside a wall drawn as a shell,
+        # a pocket between folds) are no stretch of it
+        longest = max(pieces, key=lambda p: p[0].length)[1]
+        pieces = [p for p, depth in pieces if depth >= 0.5 * longest]
+    if not pieces:
+        raise InputError("no stretch of lumen longer than "
+                         f"{min_piece_mm:g} mm found: the points do not enclose a tube")
+    # the pieces' ends, extended over the points beyond them (open ends lose about a radius);
+    # each piece's points: those nearest to it
+    from scipy.spatial import cKDTree
+
+    owner = np.concatenate([np.full(len(p.points), i) for i, p in enumerate(pieces)])
+    _, near = cKDTree(np.concatenate([p.points for p in pieces])).query(pts)
+    for i, p in enumerate(pieces):
+        mine = pts[owner[near] == i]
+        if len(mine):
+            pieces[i] = Piece(_resample(_extend(p.points, mine, p.radius), 1.0), p.radius)
+    return _bridge(_chain(pieces), pts)

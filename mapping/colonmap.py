@@ -1,0 +1,328 @@
+"""``colonbench map``: one colon reconstruction in, a per-segment coverage map out.
+
+Steps: the reconstruction's centerline in uninterrupted pieces
+(:mod:`colonbench.mapping.centerline`); oriented from the rectum when a
+trajectory says where the withdrawal ended; cut into segments of a given arc
+length by planes perpendicular to it; every point given to the segment of its
+nearest centerline point (the segment-only protocol's cut, by the nearest
+stretch so that a bend does not hand a neighbour's wall over); each segment
+estimated by a method on its own points alone; results written.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from colonbench.errors import InputError
+
+#: Default segment arc length, mm (the paper's 6 cm).
+SEGMENT_MM = 60.0
+#: A segment with fewer points is reported without an estimate.
+MIN_POINTS = 200
+#: Hole regions smaller than this are not counted in ``holes`` (specks between the cloud's points), mm^2.
+MIN_HOLE_MM2 = 10.0
+#: Coverage at or below this is red, 1 green (the paper's supplementary map).
+RED_AT = 0.5
+
+
+@dataclass
+class Segment:
+    """One segment of the map (mm, the input's frame).
+
+    Attributes
+    ----------
+    index : int
+        From 0 at the rectum end (or at the first end when the direction is unknown).
+    start_mm, end_mm : float
+        Arc lengths along the map's centerline.
+    plane_start, plane_end : dict
+        ``{"point": [x, y, z], "normal": [x, y, z]}``, normals along increasing arc length.
+    points : int
+        Reconstruction points in the segment.
+    coverage : float or None
+        The method's estimate; None when it could not run (``error`` says why).
+    hole_area_mm2, largest_hole_mm2 : float or None
+        From the completed mesh (None for methods without one).
+    holes : int or None
+        Hole regions of at least :data:`MIN_HOLE_MM2` on the completed mesh.
+    """
+
+    index: int
+    piece: int
+    start_mm: float
+    end_mm: float
+    plane_start: dict
+    plane_end: dict
+    points: int
+    coverage: float | None = None
+    hole_area_mm2: float | None = None
+    holes: int | None = None
+    largest_hole_mm2: float | None = None
+    area_mm2: float | None = None
+    seconds: float = 0.0
+    error: str = ""
+    mesh: tuple = field(default=(), repr=False)
+
+    def row(self) -> dict:
+        """The JSON / CSV row."""
+        return {"index": self.index, "piece": self.piece, "start_mm": round(self.start_mm, 2),
+                "end_mm": round(self.end_mm, 2), "plane_start": self.plane_start, "plane_end": self.plane_end,
+                "points": self.points, "coverage": _round(self.coverage, 4),
+                "hole_area_mm2": _round(self.hole_area_mm2, 1), "holes": self.holes,
+                "largest_hole_mm2": _round(self.largest_hole_mm2, 1), "area_mm2": _round(self.area_mm2, 1),
+                "seconds": round(self.seconds, 3), "error": self.error}
+
+
+def _round(x, nd):
+    return None if x is None or not np.isfinite(x) else round(float(x), nd)
+
+
+def hole_regions(vertices: np.ndarray, faces: np.ndarray, hole: np.ndarray) -> tuple[float, np.ndarray]:
+    """Hole area and the area of each hole region of a completed mesh, mm^2.
+
+    Each triangle counts its area times its share of hole vertices (as
+    :func:`colonbench.completion.surface.mesh_coverage` does); a region is a
+    set of triangles with a hole vertex joined by shared edges.
+
+    Returns
+    -------
+    total : float
+    regions : (r,) float, largest first
+    """
+    import trimesh
+
+    from colonbench.completion.surface import triangle_areas
+
+    if len(faces) == 0:
+        return 0.0, np.zeros(0)
+    share = hole[faces].mean(axis=1)
+    area = triangle_areas(vertices, faces) * share
+    holed = np.flatnonzero(share > 0)
+    if len(holed) == 0:
+        return 0.0, np.zeros(0)
+    adjacency = trimesh.graph.face_adjacency(faces[holed])
+    groups = trimesh.graph.connected_components(adjacency, nodes=np.arange(len(holed)), min_len=1)
+    regions = np.sort([float(area[holed[g]].sum()) for g in groups])[::-1]
+    return float(area.sum()), regions
+
+
+def _frame(line: np.ndarray, s: np.ndarray, at: float, half_mm: float = 8.0) -> dict:
+    """Plane through the centerline at arc length ``at``, normal along its chord over ``at +- half_mm``."""
+    i = int(np.clip(np.searchsorted(s, at), 1, len(s) - 1))
+    lo = int(np.clip(np.searchsorted(s, at - half_mm), 0, len(s) - 1))
+    hi = int(np.clip(np.searchsorted(s, at + half_mm), 0, len(s) - 1))
+    t = line[hi] - line[lo]
+    t = t / max(np.linalg.norm(t), 1e-12)
+    p = np.array([np.interp(at, s, line[:, k]) for k in range(3)])
+    return {"point": np.round(p, 3).tolist(), "normal": np.round(t, 6).tolist()}
+
+
+def windows(length: float, segment_mm: float) -> list[tuple[float, float]]:
+    """Windows of ``segment_mm`` over ``[0, length]``; a remainder under half a segment joins the last one."""
+    n = int(length // segment_mm)
+    rest = length - n * segment_mm
+    if n == 0:
+        return [(0.0, length)]
+    bounds = [(k * segment_mm, (k + 1) * segment_mm) for k in range(n)]
+    if rest >= 0.5 * segment_mm:
+        bounds.append((n * segment_mm, length))
+    else:
+        bounds[-1] = (bounds[-1][0], length)
+    return bounds
+
+
+def orient(pieces: list, positions: np.ndarray | None) -> tuple[list, str]:
+    """The chained pieces turned so that the map starts at the rectum when the trajectory says where.
+
+    A withdrawal ends at the rectum: the end of the chain nearer to the last
+    camera position is the rectum end.
+    """
+    from colonbench.mapping.centerline import Piece
+
+    if positions is None:
+        return pieces, "unknown (no trajectory): numbered from one end of the centerline"
+    first, last = pieces[0].points[0], pieces[-1].points[-1]
+    tip = positions[-1]
+    if np.linalg.norm(last - tip) < np.linalg.norm(first - tip):
+        pieces = [Piece(p.points[::-1].copy(), p.radius) for p in pieces[::-1]]
+    return pieces, "from the rectum (the end of the trajectory)"
+
+
+def map_colon(points: np.ndarray, method, segment_mm: float = SEGMENT_MM, positions: np.ndarray | None = None,
+              progress: bool = True) -> dict:
+    """The coverage map of a reconstruction.
+
+    Parameters
+    ----------
+    points : (n, 3) float
+        The reconstruction, mm.
+    method : object
+        A coverage-estimation method (``estimate(points)``, see docs/benchmark.md).
+    segment_mm : float
+        Segment arc length, mm.
+    positions : (k, 3) float, optional
+        Camera positions in time order, mm, same frame.
+    progress : bool
+        A progress bar over the segments.
+
+    Returns
+    -------
+    dict
+        ``segments`` (list of :class:`Segment`), ``centerline`` ((m, 3) mm),
+        ``arclength`` ((m,) mm), ``interruptions`` (list of dicts),
+        ``orientation`` (str), ``seconds`` (per stage).
+
+    Raises
+    ------
+    InputError
+        No tube found, or a colon no longer than two segments (a single
+        segment: use ``colonbench estimate``).
+    """
+    from scipy.spatial import cKDTree
+    from tqdm import tqdm
+
+    from colonbench.benchmark.registry import as_estimate
+    from colonbench.errors import ColonbenchError
+    from colonbench.mapping.centerline import colon_centerline
+
+    if segment_mm <= 0:
+        raise InputError(f"--segment-length must be positive, got {segment_mm}")
+    seconds = {}
+    t0 = time.perf_counter()
+    pieces = colon_centerline(points)
+    pieces, orientation = orient(pieces, positions)
+    seconds["centerline"] = time.perf_counter() - t0
+    total = sum(p.length for p in pieces)
+    if total < 2 * segment_mm:
+        raise InputError(f"the centerline found is {total:.0f} mm long, not more than two segments of "
+                         f"{segment_mm:g} mm: this looks like a single segment, not a colon; use colonbench "
+                         "estimate for one segment")
+    # one centerline: the pieces joined, arc length running on over the gaps
+    lines, arcs, owner, interruptions, spans = [], [], [], [], []
+    s0 = 0.0
+    for k, p in enumerate(pieces):
+        if k:
+            gap = float(np.linalg.norm(p.points[0] - lines[-1][-1]))
+            interruptions.append({"after_mm": round(s0, 2), "gap_mm": round(gap, 2),
+                                  "point_before": np.round(lines[-1][-1], 3).tolist(),
+                                  "point_after": np.round(p.points[0], 3).tolist()})
+            s0 += gap
+        seg = np.linalg.norm(np.diff(p.points, axis=0), axis=1)
+        s = s0 + np.concatenate([[0.0], np.cumsum(seg)])
+        lines.append(p.points)
+        arcs.append(s)
+        owner.append(np.full(len(s), k))
+        spans.append((s[0], s[-1]))
+        s0 = s[-1]
+    line, arc, owner = np.concatenate(lines), np.concatenate(arcs), np.concatenate(owner)
+    t0 = time.perf_counter()
+    _, nearest = cKDTree(line).query(points)
+    point_s, point_piece = arc[nearest], owner[nearest]
+    segments = []
+    for k, (a, b) in enumerate(spans):
+        ps, pa = arcs[k], lines[k]
+        for lo, hi in windows(b - a, segment_mm):
+            lo, hi = a + lo, a + hi
+            last = hi >= b - 1e-9
+            mask = (point_piece == k) & (point_s >= lo) & ((point_s < hi) | (last & (point_s <= hi)))
+            segments.append((Segment(index=len(segments), piece=k, start_mm=lo, end_mm=hi,
+                                     plane_start=_frame(pa, ps, lo), plane_end=_frame(pa, ps, hi),
+                                     points=int(mask.sum())), mask))
+    seconds["cut"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    out = []
+    for seg, mask in tqdm(segments, desc="segments", unit="seg", disable=not progress):
+        if seg.points < MIN_POINTS:
+            seg.error = f"{seg.points} points, fewer than {MIN_POINTS}: not estimated"
+            out.append(seg)
+            continue
+        t = time.perf_counter()
+        try:
+            est = as_estimate(method.estimate(points[mask]), getattr(method, "name", "method"))
+        except ColonbenchError as exc:
+            seg.error = str(exc)
+            out.append(seg)
+            continue
+        seg.seconds = time.perf_counter() - t
+        seg.coverage = float(est.coverage)
+        if len(est.mesh_faces):
+            from colonbench.completion.surface import triangle_areas
+
+            seg.area_mm2 = float(triangle_areas(est.mesh_vertices, est.mesh_faces).sum())
+            seg.hole_area_mm2, regions = hole_regions(est.mesh_vertices, est.mesh_faces, est.hole_vertices)
+            seg.holes = int(np.sum(regions >= MIN_HOLE_MM2))
+            seg.largest_hole_mm2 = float(regions[0]) if len(regions) else 0.0
+            seg.mesh = (est.mesh_vertices, est.mesh_faces, est.hole_vertices)
+        out.append(seg)
+    seconds["estimate"] = time.perf_counter() - t0
+    return {"segments": out, "centerline": line, "arclength": arc, "interruptions": interruptions,
+            "orientation": orientation, "seconds": seconds}
+
+
+def whole_coverage(segments: list[Segment]) -> float | None:
+    """Observed over completed area over all estimated segments (coverage weighted by length without meshes)."""
+    done = [s for s in segments if s.coverage is not None]
+    if not done:
+        return None
+    if all(s.area_mm2 for s in done):
+        area = sum(s.area_mm2 for s in done)
+        return float(sum(s.area_mm2 - s.hole_area_mm2 for s in done) / area)
+    length = np.array([s.end_mm - s.start_mm for s in done])
+    return float(np.sum(length * [s.coverage for s in done]) / length.sum())
+
+
+def write_map(result: dict, out, method_name: str, model: str | None, threshold: float = RED_AT,
+              figure: bool = True) -> list[Path]:
+    """Write ``segments.json``/``.csv``, ``centerline.npy``, ``summary.json``, ``map.ply``/``.glb``, ``map.png``."""
+    import pandas as pd
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    rows = [s.row() for s in result["segments"]]
+    written = []
+    doc = {"segments": rows, "method": method_name, "model": model}
+    (out / "segments.json").write_text(json.dumps(doc, indent=1) + "\n")
+    flat = []
+    for r in rows:
+        f = {k: v for k, v in r.items() if k not in ("plane_start", "plane_end")}
+        for name in ("plane_start", "plane_end"):
+            for part in ("point", "normal"):
+                for axis, v in zip("xyz", r[name][part]):
+                    f[f"{name}_{part}_{axis}"] = v
+        flat.append(f)
+    pd.DataFrame(flat).to_csv(out / "segments.csv", index=False)
+    np.save(out / "centerline.npy", np.asarray(result["centerline"], np.float64))
+    written += [out / "segments.json", out / "segments.csv", out / "centerline.npy"]
+    segs = result["segments"]
+    summary = {
+        "coverage": _round(whole_coverage(segs), 4),
+        "segments": len(segs),
+        "estimated": sum(s.coverage is not None for s in segs),
+        "below_threshold": {"threshold": threshold,
+                            "segments": [s.index for s in segs if s.coverage is not None and s.coverage < threshold]},
+        "centerline_mm": round(float(result["arclength"][-1]), 1),
+        "interruptions": result["interruptions"],
+        "orientation": result["orientation"],
+        "method": method_name, "model": model,
+        "seconds": {k: round(v, 3) for k, v in result["seconds"].items()},
+    }
+    (out / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
+    written.append(out / "summary.json")
+    if any(s.mesh for s in segs):
+        from colonbench.reports.coverage_map import map_mesh, render_map
+
+        mesh = map_mesh(segs, red_at=threshold)
+        mesh.export(out / "map.ply")
+        mesh.export(out / "map.glb")
+        written += [out / "map.ply", out / "map.glb"]
+        if figure:
+            t = time.perf_counter()
+            written.append(render_map(mesh, out / "map.png", red_at=threshold))
+            summary["seconds"]["figure"] = round(time.perf_counter() - t, 3)
+            (out / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
+    return written

@@ -1,0 +1,132 @@
+"""colonbench map on tubes with known answers: centerline, planes, segment coverage, interruptions, bad input."""
+
+import json
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+from shapes import helix, straight
+
+from colonbench.cli import main
+from colonbench.datagen.colon import tube_colon
+from colonbench.datagen.holes import sample_surface
+from colonbench.mapping.centerline import colon_centerline
+
+RADIUS = 15.0
+
+
+def tube_cloud(centerline, density=2.0, seed=0, radius=RADIUS):
+    """Points on a tube of ``radius`` around ``centerline``, with each point's arc length and angle."""
+    colon = tube_colon(centerline, radius, ring_spacing_mm=1.0, n_around=96)
+    rng = np.random.default_rng(seed)
+    pts = sample_surface(rng, colon.mesh.vertices, colon.mesh.faces, density=density)
+    _, i = cKDTree(centerline.points).query(pts)
+    return pts, centerline.arclength[i], centerline
+
+
+def test_helical_tube_centerline_and_planes(tmp_path):
+    line, length = helix(radius=40.0, pitch=70.0, turns=1.6)
+    pts, s, _ = tube_cloud(line)
+    pieces = colon_centerline(pts)
+    assert len(pieces) == 1
+    found = pieces[0]
+    d, _ = cKDTree(line.points).query(found.points)
+    # within a voxel along the lumen; the open ends are extrapolated over about a radius (docs/mapping.md)
+    assert np.median(d) < 1.5 and np.percentile(d, 80) < 2.5 and d.max() < 12.0
+    assert abs(found.length - length) < 0.03 * length
+    # the map's planes: perpendicular to the known tangent, through the known centerline
+    np.save(tmp_path / "helix.npy", pts)
+    traj = line.points[::-40]  # a withdrawal ending at arc length 0: the map starts there
+    np.save(tmp_path / "traj.npy", traj)
+    assert main(["map", str(tmp_path / "helix.npy"), "--out", str(tmp_path / "map"), "--trajectory",
+                 str(tmp_path / "traj.npy"), "--segment-length", "60", "--no-figure", "--quiet"]) == 0
+    segs = json.loads((tmp_path / "map" / "segments.json").read_text())["segments"]
+    assert len(segs) == round(length / 60)
+    tangents = line.tangents()
+    for k, seg in enumerate(segs):
+        for plane in ("plane_start", "plane_end")[k == 0:(1 if k == len(segs) - 1 else 2)]:  # the inner planes
+            p, n = np.array(seg[plane]["point"]), np.array(seg[plane]["normal"])
+            dist, i = cKDTree(line.points).query(p)
+            assert dist < 2.5
+            assert np.degrees(np.arccos(min(abs(n @ tangents[i]), 1.0))) < 5.0
+            assert n @ tangents[i] > 0  # along increasing arc length, which runs with the known one here
+        # the plane sits where the known arc length says (from the rectum end: known arc length 0)
+        _, i = cKDTree(line.points).query(seg["plane_end"]["point"])
+        # the open end is extrapolated and a tight bend cut a little short (docs/mapping.md)
+        assert abs(line.arclength[i] - seg["end_mm"]) < 5.0 + 0.03 * seg["end_mm"]
+    cl = np.load(tmp_path / "map" / "centerline.npy")
+    assert cl.shape[1] == 3 and np.linalg.norm(cl[0] - line.points[0]) < 12.0
+
+
+@pytest.mark.slow
+def test_straight_tube_segments_get_their_known_coverage(tmp_path):
+    line = straight(300.0)
+    pts, s, _ = tube_cloud(line, seed=1)
+    theta = np.arctan2(pts[:, 1], pts[:, 0])
+    # two windows of known area: a quarter of the wall over 70-100 mm, half of it over 190-230 mm
+    cut = ((s > 70) & (s < 100) & (theta > 0) & (theta < np.pi / 2)) | ((s > 190) & (s < 230) & (theta > 0))
+    np.save(tmp_path / "tube.npy", pts[~cut])
+    traj = np.stack([np.zeros(31), np.zeros(31), np.linspace(300, 0, 31)], axis=1)  # withdrawal to z = 0
+    np.savetxt(tmp_path / "traj.txt", np.concatenate([np.arange(31)[:, None], traj,
+                                                      np.tile([0, 0, 0, 1.0], (31, 1))], axis=1))
+    assert main(["map", str(tmp_path / "tube.npy"), "--out", str(tmp_path / "map"), "--trajectory",
+                 str(tmp_path / "traj.txt"), "--quiet"]) == 0
+    segs = json.loads((tmp_path / "map" / "segments.json").read_text())["segments"]
+    assert [round(x["start_mm"]) for x in segs] == [0, 60, 120, 180, 240]
+    truth = [1.0, 1 - 30 / (4 * 60), 1.0, 1 - 40 / (2 * 60), 1.0]
+    for seg, t in zip(segs, truth):
+        assert seg["plane_start"]["point"][2] == pytest.approx(seg["start_mm"], abs=4.0)
+        assert abs(seg["plane_start"]["normal"][2]) > np.cos(np.radians(5))
+        assert seg["coverage"] == pytest.approx(t, abs=0.08), (seg, t)
+    assert segs[3]["largest_hole_mm2"] > 0.5 * 40 * np.pi * RADIUS
+    summary = json.loads((tmp_path / "map" / "summary.json").read_text())
+    whole = 1 - (30 * RADIUS * np.pi / 2 + 40 * RADIUS * np.pi) / (2 * np.pi * RADIUS * 300)
+    assert summary["coverage"] == pytest.approx(whole, abs=0.05)
+    assert summary["interruptions"] == [] and summary["orientation"].startswith("from the rectum")
+    for name in ("segments.csv", "centerline.npy", "map.ply", "map.glb", "map.png"):
+        assert (tmp_path / "map" / name).stat().st_size > 0
+
+
+def test_interrupted_colon_is_split_and_reported(tmp_path):
+    line = straight(360.0)
+    pts, s, _ = tube_cloud(line, density=1.0)
+    keep = (s < 150) | (s > 210)  # 60 mm of colon never reconstructed
+    pieces = colon_centerline(pts[keep])
+    assert len(pieces) == 2
+    ends = sorted([p.points[:, 2].min() for p in pieces] + [p.points[:, 2].max() for p in pieces])
+    assert ends[1] == pytest.approx(150, abs=5) and ends[2] == pytest.approx(210, abs=5)
+
+    class Constant:  # every segment's estimate 0.5: this test is about the cut, not the method
+        name = "half"
+
+        def estimate(self, points):
+            return {"coverage": 0.5, "holes": np.zeros((0, 3)), "centerline": np.zeros((0, 3))}
+
+    from colonbench.mapping.colonmap import map_colon
+
+    result = map_colon(pts[keep], Constant(), segment_mm=60.0, progress=False)
+    (gap,) = result["interruptions"]
+    assert gap["gap_mm"] == pytest.approx(60, abs=6)
+    for seg in result["segments"]:  # no segment spans the gap
+        assert seg.end_mm <= gap["after_mm"] + 0.02 or seg.start_mm >= gap["after_mm"] + gap["gap_mm"] - 0.02
+    assert {seg.piece for seg in result["segments"]} == {0, 1}
+
+
+def test_bad_inputs_are_refused(tmp_path, capsys):
+    line = straight(300.0)
+    pts, _, _ = tube_cloud(line, density=0.5)
+    np.save(tmp_path / "colon.npy", pts)
+    np.save(tmp_path / "colon_m.npy", pts / 1000.0)
+    np.save(tmp_path / "traj_m.npy", line.points[::-20] / 1000.0)
+    short, _, _ = tube_cloud(straight(70.0), density=0.5)
+    np.save(tmp_path / "segment.npy", short)
+    cases = [(["colon_m.npy"], "metres"),
+             (["colon.npy", "--trajectory", str(tmp_path / "traj_m.npy")], "another unit"),
+             (["segment.npy"], "single segment"),
+             (["missing.ply"], "no such file")]
+    for args, message in cases:
+        code = main(["map", str(tmp_path / args[0]), *args[1:], "--out", str(tmp_path / "out"), "--quiet",
+                     "--no-figure"])
+        assert code == 2, args
+        assert message in capsys.readouterr().err, args
+    assert not (tmp_path / "out" / "segments.json").exists()
