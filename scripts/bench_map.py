@@ -1,0 +1,62 @@
+"""Speed of colonbench map on whole procedural colons: seconds per stage, per segment, peak memory.
+
+Usage::
+
+    python scripts/bench_map.py [--colons 2] [--segment-length 60] [--model small] [--threads 2]
+
+Each colon is a procedural colon of the default generator with sphere holes
+over its whole length at 2 points/mm^2 (``colonbench.datagen.wholecolon``),
+mapped with the completion method; its whole-colon coverage is printed beside
+the truth.
+"""
+
+from __future__ import annotations
+
+import argparse
+import resource
+import time
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--colons", type=int, default=2)
+    parser.add_argument("--segment-length", type=float, default=60.0)
+    parser.add_argument("--model", default=None)
+    parser.add_argument("--threads", type=int, default=2, help="torch threads (the CPU cores used)")
+    args = parser.parse_args()
+
+    import torch
+
+    from colonbench.benchmark.registry import load_method
+    from colonbench.completion.surface import triangle_areas
+    from colonbench.datagen.colon import generate_colon
+    from colonbench.datagen.wholecolon import whole_partial
+    from colonbench.mapping.colonmap import map_colon, whole_coverage
+    from colonbench.reports.coverage_map import map_mesh, render_map
+
+    torch.set_num_threads(args.threads)
+    method = load_method("completion", model=args.model)
+    print(f"{'colon':>5} {'length mm':>9} {'points':>8} {'segs':>4} {'centerline s':>12} {'cut s':>6} "
+          f"{'estimate s':>10} {'s/seg':>6} {'figure s':>8} {'total s':>7} {'coverage':>8} {'truth':>6}")
+    for colon_id in range(args.colons):
+        colon = generate_colon(seed=0, colon_id=colon_id)
+        partial = whole_partial(colon, seed=colon_id)
+        area = triangle_areas(colon.mesh.vertices, colon.mesh.faces)
+        truth = area[partial.observed].sum() / area.sum()
+        t0 = time.perf_counter()
+        result = map_colon(partial.points, method, segment_mm=args.segment_length, positions=partial.positions,
+                           progress=False)
+        t1 = time.perf_counter()
+        render_map(map_mesh(result["segments"]), f"bench_map_{colon_id}.png")
+        figure = time.perf_counter() - t1
+        sec = result["seconds"]
+        n = len(result["segments"])
+        print(f"{colon_id:>5} {colon.centerline.length:>9.0f} {len(partial.points):>8} {n:>4} "
+              f"{sec['centerline']:>12.2f} {sec['cut']:>6.2f} {sec['estimate']:>10.2f} {sec['estimate'] / n:>6.2f} "
+              f"{figure:>8.2f} {t1 - t0 + figure:>7.1f} {whole_coverage(result['segments']):>8.3f} {truth:>6.3f}")
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    print(f"peak memory {peak:.0f} MiB; pictures bench_map_*.png in the current folder")
+
+
+if __name__ == "__main__":
+    main()
