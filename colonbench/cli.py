@@ -405,8 +405,8 @@ def demo_map(out: Path, model=None, progress: bool = True) -> None:
     """The demo's whole-colon map: a procedural colon with sphere holes, its withdrawal, colonbench map."""
     import numpy as np
 
+    from colonbench.benchmark.colon_metrics import map_metrics
     from colonbench.benchmark.registry import load_method
-    from colonbench.completion.surface import triangle_areas
     from colonbench.datagen.colon import generate_colon
     from colonbench.datagen.wholecolon import whole_partial
     from colonbench.mapping.colonmap import map_colon, write_map
@@ -417,16 +417,18 @@ def demo_map(out: Path, model=None, progress: bool = True) -> None:
     out.mkdir(parents=True, exist_ok=True)
     np.save(out / "reconstruction.npy", partial.points.astype(np.float32))
     np.save(out / "trajectory.npy", partial.positions)
-    area = triangle_areas(colon.mesh.vertices, colon.mesh.faces)
-    truth = float(area[partial.observed].sum() / area.sum())
     result = map_colon(partial.points, load_method("completion", model=model), positions=partial.positions,
                        progress=progress)
     write_map(result, out, "completion", str(model or "small"))
     summary = json.loads((out / "summary.json").read_text())
+    score = map_metrics([s.row() for s in result["segments"]], summary["coverage"], result["centerline"],
+                        colon.mesh.vertices, colon.mesh.faces, partial.observed, colon.centerline)
     print(f"map: a {colon.centerline.length:.0f} mm colon with {len(partial.spheres)} sphere holes "
-          f"({len(partial.points)} points): {summary['segments']} segments, whole-colon coverage "
-          f"{summary['coverage']:.3f} (truth {truth:.3f}), {out} ({time.perf_counter() - t0:.0f} s; the same as "
-          f"colonbench map {out / 'reconstruction.npy'} --trajectory {out / 'trajectory.npy'} --out DIR)")
+          f"({len(partial.points)} points): {summary['segments']} segments; whole-colon coverage "
+          f"{summary['coverage']:.3f} (truth {score['whole_truth']:.3f}); segment coverage MAE "
+          f"{score['segment_mae']:.1f} points; centerline P/R @2 mm {score['centerline_precision']:.2f} / "
+          f"{score['centerline_recall']:.2f}; {out} ({time.perf_counter() - t0:.0f} s; the same as colonbench map "
+          f"{out / 'reconstruction.npy'} --trajectory {out / 'trajectory.npy'} --out DIR)")
 
 
 def build_parser() -> argparse.ArgumentParser:

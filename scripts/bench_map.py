@@ -6,8 +6,9 @@ Usage::
 
 Each colon is a procedural colon of the default generator with sphere holes
 over its whole length at 2 points/mm^2 (``colonbench.datagen.wholecolon``),
-mapped with the completion method; its whole-colon coverage is printed beside
-the truth.
+mapped with the completion method and scored against its exact truth
+(``colonbench.benchmark.colon_metrics``): whole-colon coverage beside the truth,
+segment coverage MAE (points), centerline precision / recall at 2 mm.
 """
 
 from __future__ import annotations
@@ -27,8 +28,8 @@ def main() -> None:
 
     import torch
 
+    from colonbench.benchmark.colon_metrics import map_metrics
     from colonbench.benchmark.registry import load_method
-    from colonbench.completion.surface import triangle_areas
     from colonbench.datagen.colon import generate_colon
     from colonbench.datagen.wholecolon import whole_partial
     from colonbench.mapping.colonmap import map_colon, whole_coverage
@@ -37,23 +38,27 @@ def main() -> None:
     torch.set_num_threads(args.threads)
     method = load_method("completion", model=args.model)
     print(f"{'colon':>5} {'length mm':>9} {'points':>8} {'segs':>4} {'centerline s':>12} {'cut s':>6} "
-          f"{'estimate s':>10} {'s/seg':>6} {'figure s':>8} {'total s':>7} {'coverage':>8} {'truth':>6}")
+          f"{'estimate s':>10} {'s/seg':>6} {'figure s':>8} {'total s':>7} {'coverage':>8} {'truth':>6} "
+          f"{'seg MAE':>7} {'CL P/R @2mm':>11}")
     for colon_id in range(args.colons):
         colon = generate_colon(seed=0, colon_id=colon_id)
         partial = whole_partial(colon, seed=colon_id)
-        area = triangle_areas(colon.mesh.vertices, colon.mesh.faces)
-        truth = area[partial.observed].sum() / area.sum()
         t0 = time.perf_counter()
         result = map_colon(partial.points, method, segment_mm=args.segment_length, positions=partial.positions,
                            progress=False)
         t1 = time.perf_counter()
         render_map(map_mesh(result["segments"]), f"bench_map_{colon_id}.png")
         figure = time.perf_counter() - t1
+        score = map_metrics([s.row() for s in result["segments"]], whole_coverage(result["segments"]),
+                            result["centerline"], colon.mesh.vertices, colon.mesh.faces, partial.observed,
+                            colon.centerline)
         sec = result["seconds"]
         n = len(result["segments"])
         print(f"{colon_id:>5} {colon.centerline.length:>9.0f} {len(partial.points):>8} {n:>4} "
               f"{sec['centerline']:>12.2f} {sec['cut']:>6.2f} {sec['estimate']:>10.2f} {sec['estimate'] / n:>6.2f} "
-              f"{figure:>8.2f} {t1 - t0 + figure:>7.1f} {whole_coverage(result['segments']):>8.3f} {truth:>6.3f}")
+              f"{figure:>8.2f} {t1 - t0 + figure:>7.1f} {whole_coverage(result['segments']):>8.3f} "
+              f"{score['whole_truth']:>6.3f} {score['segment_mae']:>7.2f} "
+              f"{score['centerline_precision']:>5.2f}/{score['centerline_recall']:.2f}")
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     print(f"peak memory {peak:.0f} MiB; pictures bench_map_*.png in the current folder")
 

@@ -85,6 +85,20 @@ def test_straight_tube_segments_get_their_known_coverage(tmp_path):
     assert summary["interruptions"] == [] and summary["orientation"].startswith("from the rectum")
     for name in ("segments.csv", "centerline.npy", "map.ply", "map.glb", "map.png"):
         assert (tmp_path / "map" / name).stat().st_size > 0
+    # the whole-colon score: each segment's region of the true surface has its known coverage
+    from colonbench.benchmark.colon_metrics import map_metrics
+
+    tube = tube_colon(line, RADIUS, ring_spacing_mm=0.5, n_around=256)
+    c = tube.mesh.vertices[tube.mesh.faces].mean(axis=1)
+    ang = np.arctan2(c[:, 1], c[:, 0])
+    window = ((c[:, 2] > 70) & (c[:, 2] < 100) & (ang > 0) & (ang < np.pi / 2)) | (
+        (c[:, 2] > 190) & (c[:, 2] < 230) & (ang > 0))
+    score = map_metrics(segs, summary["coverage"], np.load(tmp_path / "map" / "centerline.npy"),
+                        tube.mesh.vertices, tube.mesh.faces, ~window, line)
+    inner = score["segment_truth"][1:4]  # the end segments' regions reach past the extrapolated ends
+    assert inner == pytest.approx(truth[1:4], abs=0.02)
+    assert score["whole_truth"] == pytest.approx(whole, abs=0.005)
+    assert score["segment_mae"] < 3.0 and score["centerline_recall"] > 0.85  # the far end stops ~6 mm short
 
 
 def test_interrupted_colon_is_split_and_reported(tmp_path):
