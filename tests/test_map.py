@@ -144,3 +144,17 @@ def test_bad_inputs_are_refused(tmp_path, capsys):
         assert code == 2, args
         assert message in capsys.readouterr().err, args
     assert not (tmp_path / "out" / "segments.json").exists()
+
+
+def test_a_mesh_reconstruction_is_sampled_at_the_training_density(tmp_path):
+    from colonbench.errors import InputError
+    from colonbench.mapping.inputs import MESH_DENSITY, read_reconstruction
+
+    tube = tube_colon(straight(200.0), RADIUS, ring_spacing_mm=1.0, n_around=96)
+    tube.mesh.export(tmp_path / "tube.obj")
+    pts = read_reconstruction(tmp_path / "tube.obj")
+    assert len(pts) == pytest.approx(MESH_DENSITY * tube.mesh.area, rel=0.01)
+    assert np.abs(np.linalg.norm(pts[:, :2], axis=1) - RADIUS).max() < 0.1  # on the surface
+    (tmp_path / "bad.obj").write_text("this is not a mesh\n")
+    with pytest.raises(InputError):
+        read_reconstruction(tmp_path / "bad.obj")
