@@ -343,7 +343,7 @@ def cmd_map(args):
                               "colonbench evaluate")
     t1 = time.perf_counter()
     result = map_colon(points, method, segment_mm=args.segment_length, positions=positions,
-                       progress=not args.quiet)
+                       progress=not args.quiet, context_mm=args.context_mm)
     result["seconds"] = {"read": t1 - t0, **result["seconds"]}
     model = None
     if getattr(method, "name", "") in ("completion", "thresholding", "unwrap"):
@@ -530,6 +530,10 @@ def build_parser() -> argparse.ArgumentParser:
                                         "trajectory (timestamp tx ty tz qx qy qz qw) or (k, 3) positions (.npy, "
                                         ".txt); the map is then numbered from the rectum (where it ends)")
     p.add_argument("--method", default="completion", help="method (default completion: the paper's)")
+    p.add_argument("--context-mm", type=float, default=0.0,
+                   help="give the method the neighbours' points up to this far beyond each plane and count "
+                        "coverage on its completed surface between the planes only (default 0: each segment "
+                        "alone, the paper's protocol)")
     _add_model_args(p, "model .safetensors, or a shipped model by name (default: small)")
     p.add_argument("--no-figure", action="store_true", help="skip map.png (the headless rendering)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")

@@ -153,8 +153,20 @@ def orient(pieces: list, positions: np.ndarray | None) -> tuple[list, str]:
     return pieces, "from the rectum (the end of the trajectory)"
 
 
+def clip_between(vertices: np.ndarray, faces: np.ndarray, line: np.ndarray, arc: np.ndarray, lo: float,
+                 hi: float) -> np.ndarray:
+    """Faces of a mesh whose centroid's nearest point of the centerline ``line`` lies at arc length in [lo, hi)."""
+    from scipy.spatial import cKDTree
+
+    if len(faces) == 0:
+        return faces
+    _, near = cKDTree(line).query(vertices[faces].mean(axis=1))
+    s = arc[near]
+    return faces[(s >= lo) & (s < hi)]
+
+
 def map_colon(points: np.ndarray, method, segment_mm: float = SEGMENT_MM, positions: np.ndarray | None = None,
-              progress: bool = True) -> dict:
+              progress: bool = True, context_mm: float = 0.0) -> dict:
     """The coverage map of a reconstruction.
 
     Parameters
@@ -169,6 +181,14 @@ def map_colon(points: np.ndarray, method, segment_mm: float = SEGMENT_MM, positi
         Camera positions in time order, mm, same frame.
     progress : bool
         A progress bar over the segments.
+    context_mm : float
+        0: each segment estimated on its own points alone (the paper's
+        segment-only protocol). Above 0: the method is given the segment's
+        points and those up to ``context_mm`` of arc length beyond each plane
+        (its neighbours' surface), and its completed mesh is clipped to the
+        faces nearest to the segment's stretch of the centerline before the
+        coverage is counted; a method without a completed mesh is then run on
+        the segment alone.
 
     Returns
     -------
@@ -192,6 +212,8 @@ def map_colon(points: np.ndarray, method, segment_mm: float = SEGMENT_MM, positi
 
     if segment_mm <= 0:
         raise InputError(f"--segment-length must be positive, got {segment_mm}")
+    if context_mm < 0:
+        raise InputError(f"--context-mm must be 0 or more, got {context_mm}")
     seconds = {}
     t0 = time.perf_counter()
     pieces = colon_centerline(points)
@@ -229,39 +251,56 @@ def map_colon(points: np.ndarray, method, segment_mm: float = SEGMENT_MM, positi
         for lo, hi in windows(b - a, segment_mm):
             lo, hi = a + lo, a + hi
             last = hi >= b - 1e-9
-            mask = (point_piece == k) & (point_s >= lo) & ((point_s < hi) | (last & (point_s <= hi)))
+            mine = point_piece == k
+            mask = mine & (point_s >= lo) & ((point_s < hi) | (last & (point_s <= hi)))
+            ctx = mine & (point_s >= lo - context_mm) & (point_s <= hi + context_mm) if context_mm > 0 else mask
             segments.append((Segment(index=len(segments), piece=k, start_mm=lo, end_mm=hi,
                                      plane_start=_frame(pa, ps, lo), plane_end=_frame(pa, ps, hi),
-                                     points=int(mask.sum())), mask))
+                                     points=int(mask.sum())), mask, ctx, (pa, ps, last)))
     seconds["cut"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     out = []
-    for seg, mask in tqdm(segments, desc="segments", unit="seg", disable=not progress):
+    name = getattr(method, "name", "method")
+    for seg, mask, ctx, (pa, ps, last) in tqdm(segments, desc="segments", unit="seg", disable=not progress):
         if seg.points < MIN_POINTS:
             seg.error = f"{seg.points} points, fewer than {MIN_POINTS}: not estimated"
             out.append(seg)
             continue
         t = time.perf_counter()
         try:
-            est = as_estimate(method.estimate(points[mask]), getattr(method, "name", "method"))
+            est = as_estimate(method.estimate(points[ctx]), name)
+            faces = est.mesh_faces
+            if context_mm > 0 and len(faces):  # the completed context, clipped to the segment's stretch
+                hi = seg.end_mm + (1e-6 if last else 0.0)
+                faces = clip_between(est.mesh_vertices, faces, pa, ps, seg.start_mm, hi)
+                if len(faces) == 0:
+                    raise ColonbenchError("the completed surface holds nothing between the segment's planes")
+            elif context_mm > 0:  # no mesh to clip: the segment alone
+                est = as_estimate(method.estimate(points[mask]), name)
+                faces = est.mesh_faces
         except ColonbenchError as exc:
             seg.error = str(exc)
             out.append(seg)
             continue
         seg.seconds = time.perf_counter() - t
         seg.coverage = float(est.coverage)
-        if len(est.mesh_faces):
-            from colonbench.completion.surface import triangle_areas
+        if len(faces):
+            from colonbench.completion.surface import mesh_coverage, triangle_areas
 
-            seg.area_mm2 = float(triangle_areas(est.mesh_vertices, est.mesh_faces).sum())
-            seg.hole_area_mm2, regions = hole_regions(est.mesh_vertices, est.mesh_faces, est.hole_vertices)
+            if faces is not est.mesh_faces:
+                seg.coverage = mesh_coverage(est.mesh_vertices, faces, est.hole_vertices)
+            seg.area_mm2 = float(triangle_areas(est.mesh_vertices, faces).sum())
+            seg.hole_area_mm2, regions = hole_regions(est.mesh_vertices, faces, est.hole_vertices)
             seg.holes = int(np.sum(regions >= MIN_HOLE_MM2))
             seg.largest_hole_mm2 = float(regions[0]) if len(regions) else 0.0
-            seg.mesh = (est.mesh_vertices, est.mesh_faces, est.hole_vertices)
+            used = np.unique(faces)
+            index = np.full(len(est.mesh_vertices), -1)
+            index[used] = np.arange(len(used))
+            seg.mesh = (est.mesh_vertices[used], index[faces], est.hole_vertices[used])
         out.append(seg)
     seconds["estimate"] = time.perf_counter() - t0
     return {"segments": out, "centerline": line, "arclength": arc, "interruptions": interruptions,
-            "orientation": orientation, "seconds": seconds}
+            "orientation": orientation, "context_mm": float(context_mm), "seconds": seconds}
 
 
 def whole_coverage(segments: list[Segment]) -> float | None:
@@ -308,6 +347,7 @@ def write_map(result: dict, out, method_name: str, model: str | None, threshold:
         "centerline_mm": round(float(result["arclength"][-1]), 1),
         "interruptions": result["interruptions"],
         "orientation": result["orientation"],
+        "context_mm": result.get("context_mm", 0.0),
         "method": method_name, "model": model,
         "seconds": {k: round(v, 3) for k, v in result["seconds"].items()},
     }

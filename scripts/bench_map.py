@@ -24,6 +24,8 @@ def main() -> None:
     parser.add_argument("--segment-length", type=float, default=60.0)
     parser.add_argument("--model", default=None)
     parser.add_argument("--threads", type=int, default=2, help="torch threads (the CPU cores used)")
+    parser.add_argument("--context-mm", type=float, nargs="+", default=[0.0],
+                        help="context margins to compare on the same segments (0 = segment-only)")
     args = parser.parse_args()
 
     import torch
@@ -37,28 +39,29 @@ def main() -> None:
 
     torch.set_num_threads(args.threads)
     method = load_method("completion", model=args.model)
-    print(f"{'colon':>5} {'length mm':>9} {'points':>8} {'segs':>4} {'centerline s':>12} {'cut s':>6} "
-          f"{'estimate s':>10} {'s/seg':>6} {'figure s':>8} {'total s':>7} {'coverage':>8} {'truth':>6} "
-          f"{'seg MAE':>7} {'CL P/R @2mm':>11}")
+    print(f"{'colon':>5} {'context':>7} {'length mm':>9} {'points':>8} {'segs':>4} {'centerline s':>12} "
+          f"{'cut s':>6} {'estimate s':>10} {'s/seg':>6} {'figure s':>8} {'total s':>7} {'coverage':>8} "
+          f"{'truth':>6} {'seg MAE':>7} {'CL P/R @2mm':>11}")
     for colon_id in range(args.colons):
         colon = generate_colon(seed=0, colon_id=colon_id)
         partial = whole_partial(colon, seed=colon_id)
-        t0 = time.perf_counter()
-        result = map_colon(partial.points, method, segment_mm=args.segment_length, positions=partial.positions,
-                           progress=False)
-        t1 = time.perf_counter()
-        render_map(map_mesh(result["segments"]), f"bench_map_{colon_id}.png")
-        figure = time.perf_counter() - t1
-        score = map_metrics([s.row() for s in result["segments"]], whole_coverage(result["segments"]),
-                            result["centerline"], colon.mesh.vertices, colon.mesh.faces, partial.observed,
-                            colon.centerline)
-        sec = result["seconds"]
-        n = len(result["segments"])
-        print(f"{colon_id:>5} {colon.centerline.length:>9.0f} {len(partial.points):>8} {n:>4} "
-              f"{sec['centerline']:>12.2f} {sec['cut']:>6.2f} {sec['estimate']:>10.2f} {sec['estimate'] / n:>6.2f} "
-              f"{figure:>8.2f} {t1 - t0 + figure:>7.1f} {whole_coverage(result['segments']):>8.3f} "
-              f"{score['whole_truth']:>6.3f} {score['segment_mae']:>7.2f} "
-              f"{score['centerline_precision']:>5.2f}/{score['centerline_recall']:.2f}")
+        for context in args.context_mm:
+            t0 = time.perf_counter()
+            result = map_colon(partial.points, method, segment_mm=args.segment_length,
+                               positions=partial.positions, progress=False, context_mm=context)
+            t1 = time.perf_counter()
+            render_map(map_mesh(result["segments"]), f"bench_map_{colon_id}_context{context:g}.png")
+            figure = time.perf_counter() - t1
+            segments = result["segments"]
+            score = map_metrics([s.row() for s in segments], whole_coverage(segments), result["centerline"],
+                                colon.mesh.vertices, colon.mesh.faces, partial.observed, colon.centerline)
+            sec = result["seconds"]
+            n = len(segments)
+            print(f"{colon_id:>5} {context:>7g} {colon.centerline.length:>9.0f} {len(partial.points):>8} {n:>4} "
+                  f"{sec['centerline']:>12.2f} {sec['cut']:>6.2f} {sec['estimate']:>10.2f} "
+                  f"{sec['estimate'] / n:>6.2f} {figure:>8.2f} {t1 - t0 + figure:>7.1f} "
+                  f"{whole_coverage(segments):>8.3f} {score['whole_truth']:>6.3f} {score['segment_mae']:>7.2f} "
+                  f"{score['centerline_precision']:>5.2f}/{score['centerline_recall']:.2f}")
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     print(f"peak memory {peak:.0f} MiB; pictures bench_map_*.png in the current folder")
 

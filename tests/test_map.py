@@ -85,6 +85,16 @@ def test_straight_tube_segments_get_their_known_coverage(tmp_path):
     assert summary["interruptions"] == [] and summary["orientation"].startswith("from the rectum")
     for name in ("segments.csv", "centerline.npy", "map.ply", "map.glb", "map.png"):
         assert (tmp_path / "map" / name).stat().st_size > 0
+    # with the neighbours' points as context, coverage counted between the planes only
+    from colonbench.benchmark.registry import load_method
+    from colonbench.mapping.colonmap import map_colon
+
+    traj_xyz = np.loadtxt(tmp_path / "traj.txt")[:, 1:4]
+    ctx = map_colon(pts[~cut], load_method("completion"), positions=traj_xyz, progress=False, context_mm=15.0)
+    for seg, t in zip(ctx["segments"][1:4], truth[1:4]):
+        assert seg.coverage == pytest.approx(t, abs=0.08)
+        z = seg.mesh[0][:, 2]  # the completed surface, clipped at the segment's planes
+        assert z.min() > seg.plane_start["point"][2] - 2 and z.max() < seg.plane_end["point"][2] + 2
     # the whole-colon score: each segment's region of the true surface has its known coverage
     from colonbench.benchmark.colon_metrics import map_metrics
 
