@@ -1,11 +1,18 @@
-"""A whole colon's partial reconstruction with sphere holes and a withdrawal trajectory (the map demo's input).
+"""A whole colon's partial reconstruction and its withdrawal trajectory (the map's demo and benchmark input).
 
-The sphere hole model (the paper's for CT colons) over the whole colon:
-spheres centred on the surface crop the wall, and every point of the
-partial cloud lies outside them; a face is observed when its centroid is
-outside every sphere, which is the exact ground truth of this hole model.
-The camera positions follow the centerline from the caecum to the rectum
-(a withdrawal), with the back-and-forth of a real examination.
+The camera positions follow the centerline from the caecum to the rectum (a
+withdrawal), with the back-and-forth of a real examination. Two hole models:
+
+- ``spheres`` (the paper's for CT colons): spheres centred on the surface crop
+  the wall; a face is observed when its centroid is outside every sphere.
+- ``camera``: what the withdrawing colonoscope sees (``datagen.camera``:
+  exact per-face visibility by ray casting), from every 10 mm of the path,
+  looking up the colon towards the caecum, tilted by up to 60 degrees (looking
+  around), off the centerline by up to half the way to the wall. The far sides
+  of folds facing the rectum are missed, as in a real withdrawal.
+
+Either way the per-face observed mask is the exact ground truth, and the
+partial cloud is drawn on the observed faces only.
 """
 
 from __future__ import annotations
@@ -40,7 +47,47 @@ class WholePartial:
     spheres: np.ndarray
 
 
-def whole_partial(colon, seed: int = 0, density: float = 2.0, holes_per_m: float = 25.0,
+def withdrawal(colon, seed: int) -> np.ndarray:
+    """Camera positions from the caecum to the rectum at 2 mm a pose, going back 10-30 mm now and then."""
+    rng = seeding.rng(seed, "whole", "trajectory")
+    s, path, length = 0.0, [], colon.centerline.length
+    while s < length:
+        path.append(s)
+        s += 2.0
+        if rng.random() < 0.02:
+            back = rng.uniform(10.0, 30.0)
+            path.extend(np.arange(s, max(s - back, 0.0), -2.0))
+    return np.clip(np.array(path), 0.0, length)
+
+
+def camera_observed(colon, seed: int, step_mm: float = 10.0, tilt_deg: float = 60.0, fov_deg: float = 140.0,
+                    reach_mm=(50.0, 100.0), offset: float = 0.5) -> np.ndarray:
+    """(f,) bool: faces a withdrawing colonoscope sees (see the module's description)."""
+    from colonbench.datagen.camera import Poses, SurfaceScene, visible_faces
+    from colonbench.datagen.centerline import perpendicular_basis
+
+    rng = seeding.rng(seed, "whole", "camera")
+    line = colon.centerline
+    scene = SurfaceScene(colon.mesh.vertices, colon.mesh.faces)
+    s = np.arange(0.0, line.length, step_mm)
+    centre, tangent = line.point_at(s), line.tangent_at(s)
+    u, v = perpendicular_basis(tangent)
+    phi = rng.uniform(0, 2 * np.pi, len(s))
+    side = np.cos(phi)[:, None] * u + np.sin(phi)[:, None] * v
+    wall, _ = scene.cast(centre, side)
+    wall = np.where(np.isfinite(wall), wall, scene.distance(centre))
+    position = centre + (rng.uniform(0, offset, len(s)) * wall)[:, None] * side
+    axis = -tangent  # looking up the colon, towards the caecum
+    cos_a = rng.uniform(np.cos(np.radians(tilt_deg)), 1.0, len(s))
+    psi = rng.uniform(0, 2 * np.pi, len(s))
+    au, av = perpendicular_basis(axis)
+    direction = cos_a[:, None] * axis + np.sqrt(1 - cos_a**2)[:, None] * (
+        np.cos(psi)[:, None] * au + np.sin(psi)[:, None] * av)
+    reach = rng.uniform(reach_mm[0], reach_mm[1], len(s))
+    return visible_faces(scene, Poses(position, direction, reach, s), fov_deg, near_mm=2.0)
+
+
+def whole_partial(colon, seed: int = 0, density: float = 2.0, holes: str = "spheres", holes_per_m: float = 25.0,
                   radius_mm=(4.0, 18.0)) -> WholePartial:
     """Sphere-cropped partial cloud of a whole colon, with a withdrawal trajectory.
 
@@ -52,28 +99,28 @@ def whole_partial(colon, seed: int = 0, density: float = 2.0, holes_per_m: float
         Root seed; the draws descend from it (``seeding.rng(seed, "whole", ...)``).
     density : float
         Points per mm^2 of observed surface.
+    holes : str
+        ``"spheres"`` or ``"camera"`` (see the module's description).
     holes_per_m : float
-        Hole spheres per metre of centerline.
+        Hole spheres per metre of centerline (``spheres``).
     radius_mm : (float, float)
         Range of sphere radii, mm (uniform).
     """
-    rng = seeding.rng(seed, "whole", "holes")
+    from colonbench.errors import InputError
+
     v, f = np.asarray(colon.mesh.vertices), np.asarray(colon.mesh.faces)
-    count = max(int(round(holes_per_m * colon.centerline.length / 1000.0)), 1)
-    centres = sample_surface(rng, v, f, count=count)
-    radii = rng.uniform(radius_mm[0], radius_mm[1], count)
-    pts = sample_surface(seeding.rng(seed, "whole", "points"), v, f, density=density)
-    pts = pts[~inside_spheres(pts, centres, radii)]
-    observed = ~inside_spheres(v[f].mean(axis=1), centres, radii)
-    # withdrawal: caecum to rectum at 2 mm per pose, going back 10-30 mm now and then
-    rng = seeding.rng(seed, "whole", "trajectory")
-    s, path, length = 0.0, [], colon.centerline.length
-    while s < length:
-        path.append(s)
-        s += 2.0
-        if rng.random() < 0.02:
-            back = rng.uniform(10.0, 30.0)
-            path.extend(np.arange(s, max(s - back, 0.0), -2.0))
-    positions = colon.centerline.point_at(np.clip(np.array(path), 0.0, length))
-    return WholePartial(points=pts, positions=positions, observed=observed,
-                        spheres=np.concatenate([centres, radii[:, None]], axis=1))
+    positions = colon.centerline.point_at(withdrawal(colon, seed))
+    if holes == "spheres":
+        rng = seeding.rng(seed, "whole", "holes")
+        count = max(int(round(holes_per_m * colon.centerline.length / 1000.0)), 1)
+        centres = sample_surface(rng, v, f, count=count)
+        radii = rng.uniform(radius_mm[0], radius_mm[1], count)
+        observed = ~inside_spheres(v[f].mean(axis=1), centres, radii)
+        spheres = np.concatenate([centres, radii[:, None]], axis=1)
+    elif holes == "camera":
+        observed = camera_observed(colon, seed)
+        spheres = np.zeros((0, 4))
+    else:
+        raise InputError(f"unknown whole-colon hole model {holes!r}; use spheres or camera")
+    pts = sample_surface(seeding.rng(seed, "whole", "points"), v, f[observed], density=density)
+    return WholePartial(points=pts, positions=positions, observed=observed, spheres=spheres)

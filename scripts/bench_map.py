@@ -4,8 +4,9 @@ Usage::
 
     python scripts/bench_map.py [--colons 2] [--segment-length 60] [--model small] [--threads 2]
 
-Each colon is a procedural colon of the default generator with sphere holes
-over its whole length at 2 points/mm^2 (``colonbench.datagen.wholecolon``),
+Each colon is a procedural colon of the default generator with sphere or
+withdrawal-camera holes over its whole length at 2 points/mm^2
+(``colonbench.datagen.wholecolon``),
 mapped with the completion method and scored against its exact truth
 (``colonbench.benchmark.colon_metrics``): whole-colon coverage beside the truth,
 segment coverage MAE (points), centerline precision / recall at 2 mm.
@@ -24,6 +25,8 @@ def main() -> None:
     parser.add_argument("--segment-length", type=float, default=60.0)
     parser.add_argument("--model", default=None)
     parser.add_argument("--threads", type=int, default=2, help="torch threads (the CPU cores used)")
+    parser.add_argument("--holes", default="spheres", choices=["spheres", "camera"],
+                        help="whole-colon hole model (datagen.wholecolon)")
     parser.add_argument("--context-mm", type=float, nargs="+", default=[0.0],
                         help="context margins to compare on the same segments (0 = segment-only)")
     args = parser.parse_args()
@@ -44,7 +47,7 @@ def main() -> None:
           f"{'truth':>6} {'seg MAE':>7} {'CL P/R @2mm':>11}")
     for colon_id in range(args.colons):
         colon = generate_colon(seed=0, colon_id=colon_id)
-        partial = whole_partial(colon, seed=colon_id)
+        partial = whole_partial(colon, seed=colon_id, holes=args.holes)
         for context in args.context_mm:
             t0 = time.perf_counter()
             result = map_colon(partial.points, method, segment_mm=args.segment_length,
