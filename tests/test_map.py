@@ -168,3 +168,20 @@ def test_a_mesh_reconstruction_is_sampled_at_the_training_density(tmp_path):
     (tmp_path / "bad.obj").write_text("this is not a mesh\n")
     with pytest.raises(InputError):
         read_reconstruction(tmp_path / "bad.obj")
+
+
+def test_whole_partials_hold_points_on_observed_faces_only():
+    from colonbench.datagen.wholecolon import whole_partial
+    from colonbench.errors import InputError
+
+    line = straight(240.0)
+    colon = tube_colon(line, RADIUS, ring_spacing_mm=1.0, n_around=96)
+    centroids = colon.mesh.vertices[colon.mesh.faces].mean(axis=1)
+    for holes in ("spheres", "camera"):
+        part = whole_partial(colon, seed=3, holes=holes)
+        assert 0.3 < part.observed.mean() < 1.0
+        _, face = cKDTree(centroids).query(part.points)  # faces are ~1 mm: the nearest centroid is the face's
+        assert part.observed[face].mean() > 0.98
+        assert part.positions[0][2] < 5 and part.positions[-1][2] > 235  # caecum (arc length 0) to rectum
+    with pytest.raises(InputError, match="hole model"):
+        whole_partial(colon, holes="video")
