@@ -38,6 +38,10 @@ DELTA = 0.08
 SPEED_POWER = 8.0
 #: Fast marching runs over the voxels above this heatmap value.
 LUMEN = 0.5
+#: ... or above this share of the lowest candidate's value, when that is lower (a weak prediction).
+#: 0.8 (was 0.6) keeps fast marching off the plateau just under 0.5 that the 0.2 model predicts around
+#: the lumen: the same centerlines on paper.yaml, a quarter of the time (0.11 -> 0.03 s per segment).
+LUMEN_SHARE = 0.8
 #: At most this many pieces of the candidates (the largest) are joined into one graph.
 MAX_PIECES = 32
 #: Fewest candidate voxels before the threshold is lowered.
@@ -174,7 +178,7 @@ def extract_centerline(heatmap: np.ndarray, delta: float = DELTA, smooth_voxels:
     a, b, _ = graph_ends(graph)
     start, end = vox[a], vox[b]
     # a weak prediction whose candidates sit below LUMEN still gets a connected domain
-    lumen = min(LUMEN, 0.6 * float(h[tuple(vox.T)].min()))
+    lumen = min(LUMEN, LUMEN_SHARE * float(h[tuple(vox.T)].min()))
     speed = np.maximum(h, 1e-3) ** power
     t = paths.travel_time(speed, start, mask=(h > lumen) | _point_mask(h.shape, (start, end)))
     if not np.isfinite(t[tuple(end)]):  # the two ends are not connected above `lumen`: march everywhere
