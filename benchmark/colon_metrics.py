@@ -16,7 +16,8 @@ from scipy.spatial import cKDTree
 from colonbench.benchmark.metrics import precision_recall
 
 
-def segment_truth(vertices: np.ndarray, faces: np.ndarray, observed: np.ndarray, centerline, segments) -> np.ndarray:
+def segment_truth(vertices: np.ndarray, faces: np.ndarray, observed: np.ndarray, centerline, segments,
+                  area: np.ndarray | None = None) -> np.ndarray:
     """True coverage of the region of each map segment, (s,) float (NaN where the region holds no face).
 
     Parameters
@@ -30,11 +31,13 @@ def segment_truth(vertices: np.ndarray, faces: np.ndarray, observed: np.ndarray,
         The true centerline.
     segments : list of dict
         ``segments.json`` rows (``plane_start``, ``plane_end``).
+    area : (f,) float, optional
+        The faces' areas, mm^2, when the caller has them.
     """
     from colonbench.completion.surface import triangle_areas
 
     tree = cKDTree(centerline.points)
-    area = triangle_areas(vertices, faces)
+    area = triangle_areas(vertices, faces) if area is None else area
     _, near = tree.query(vertices[faces].mean(axis=1))
     face_s = centerline.arclength[near]
     out = np.full(len(segments), np.nan)
@@ -61,10 +64,10 @@ def map_metrics(segments, coverage: float | None, map_centerline, vertices, face
     from colonbench.completion.centerline import resample
     from colonbench.completion.surface import triangle_areas
 
-    truth = segment_truth(vertices, faces, observed, centerline, segments)
+    area = triangle_areas(vertices, faces)
+    truth = segment_truth(vertices, faces, observed, centerline, segments, area)
     est = np.array([np.nan if s["coverage"] is None else s["coverage"] for s in segments], float)
     errors = est - truth
-    area = triangle_areas(vertices, faces)
     whole = float(area[observed].sum() / area.sum())
     p, r = precision_recall(resample(np.asarray(map_centerline, float), 0.5), centerline.points, threshold_mm)
     return {"segment_truth": truth, "segment_errors": errors,

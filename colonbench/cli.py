@@ -328,6 +328,7 @@ def cmd_methods(args):
 def cmd_map(args):
     """A whole reconstruction's coverage map: centerline, segments, each segment's coverage, map files."""
     from colonbench.benchmark.registry import load_method
+    from colonbench.completion.method import DEFAULT_MODEL
     from colonbench.mapping.colonmap import map_colon, write_map
     from colonbench.mapping.inputs import check_trajectory, read_reconstruction, read_trajectory
 
@@ -345,17 +346,11 @@ def cmd_map(args):
     result = map_colon(points, method, segment_mm=args.segment_length, positions=positions,
                        progress=not args.quiet, context_mm=args.context_mm)
     result["seconds"] = {"read": t1 - t0, **result["seconds"]}
-    model = None
-    if getattr(method, "name", "") in ("completion", "thresholding", "unwrap"):
-        from colonbench.completion.method import model_path
-
-        model = str(args.model or model_path(None).stem)
-    paths = write_map(result, args.out, method.name, model, figure=not args.no_figure)
+    # the methods built on the network share a predictor: they record the model they ran
+    model = str(args.model or DEFAULT_MODEL) if hasattr(method, "predictor") else None
+    paths, summary = write_map(result, args.out, method.name, model, figure=not args.no_figure)
     segs = result["segments"]
     done = [s for s in segs if s.coverage is not None]
-    import json as _json
-
-    summary = _json.loads((Path(args.out) / "summary.json").read_text())
     print(f"{len(segs)} segments of {args.segment_length:g} mm over {summary['centerline_mm']:.0f} mm of centerline "
           f"({len(result['interruptions'])} interruption(s)); {len(done)} estimated; whole-colon coverage "
           f"{summary['coverage']}; orientation {result['orientation']}")
@@ -407,6 +402,7 @@ def demo_map(out: Path, model=None, progress: bool = True) -> None:
 
     from colonbench.benchmark.colon_metrics import map_metrics
     from colonbench.benchmark.registry import load_method
+    from colonbench.completion.method import DEFAULT_MODEL
     from colonbench.datagen.colon import generate_colon
     from colonbench.datagen.wholecolon import whole_partial
     from colonbench.mapping.colonmap import map_colon, write_map
@@ -419,8 +415,7 @@ def demo_map(out: Path, model=None, progress: bool = True) -> None:
     np.save(out / "trajectory.npy", partial.positions)
     result = map_colon(partial.points, load_method("completion", model=model), positions=partial.positions,
                        progress=progress)
-    write_map(result, out, "completion", str(model or "small"))
-    summary = json.loads((out / "summary.json").read_text())
+    _, summary = write_map(result, out, "completion", str(model or DEFAULT_MODEL))
     score = map_metrics([s.row() for s in result["segments"]], summary["coverage"], result["centerline"],
                         colon.mesh.vertices, colon.mesh.faces, partial.observed, colon.centerline)
     print(f"map: a {colon.centerline.length:.0f} mm colon with {len(partial.spheres)} sphere holes "

@@ -37,6 +37,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
+from colonbench import paths
+from colonbench.completion.centerline import resample
 from colonbench.errors import InputError
 
 #: Raster of the wall, mm.
@@ -133,20 +135,12 @@ def rasterise(points: np.ndarray, voxel_mm: float, pad: int):
 
 def _piece_path(inside: np.ndarray, dist: np.ndarray, voxel_mm: float) -> np.ndarray:
     """Voxel path between the geodesic extremities of one piece, keeping to its middle."""
-    from colonbench import paths
-
     seed = np.array(np.unravel_index(int(np.argmax(np.where(inside, dist, -1))), dist.shape))
     a, _ = paths.farthest_voxel(inside, seed, dx=voxel_mm)
     b, _ = paths.farthest_voxel(inside, a, dx=voxel_mm)
     speed = (dist / max(float(dist[inside].max()), 1e-9)) ** 2
     t = paths.travel_time(np.where(inside, np.maximum(speed, 1e-4), 0.0), a, mask=inside, dx=voxel_mm)
     return paths.backtrack(t, b)
-
-
-def _resample(points: np.ndarray, spacing: float = 1.0) -> np.ndarray:
-    from colonbench.completion.centerline import resample
-
-    return resample(points, spacing)
 
 
 def _extend(line: np.ndarray, cloud: np.ndarray, radius: float, reach_mm: float = 10.0) -> np.ndarray:
@@ -195,7 +189,7 @@ def _chain(pieces: list[Piece]) -> list[Piece]:
     n = len(pieces)
     # start with the piece whose nearest neighbour is farthest: an end of the chain
     first = max(range(n), key=lambda i: min(gap(i, j) for j in range(n) if j != i))
-    order, left = [first], set(range(n)) - {first}
+    left = set(range(n)) - {first}
     line = pieces[first].points
     # orient the first piece so that its far end (from the rest) comes first
     rest = np.concatenate([pieces[j].points[[0, -1]] for j in left])
@@ -241,7 +235,7 @@ def _bridge(pieces: list[Piece], cloud: np.ndarray, covered: float = 0.9) -> lis
             lined = 1.0
         if lined >= covered:
             joined = np.concatenate([out[-1].points, a + steps[:, None] * (b - a), p.points])
-            out[-1] = Piece(_resample(joined, 1.0), float(np.mean([out[-1].radius, p.radius])))
+            out[-1] = Piece(resample(joined, 1.0), float(np.mean([out[-1].radius, p.radius])))
         else:
             out.append(p)
     return out
@@ -301,19 +295,17 @@ def colon_centerline(points, voxel_mm: float = VOXEL_MM, close_mm: float = CLOSE
         # it is at least 0.7 of its median depth (as for closed meshes, datagen.realmesh.compute_centerline)
         depth = dist[box][tuple(vox.T)]
         deep = np.flatnonzero(depth >= 0.7 * np.median(depth))
-        vox = vox[deep[0]: deep[-1] + 1]
+        vox, depth = vox[deep[0]: deep[-1] + 1], depth[deep[0]: deep[-1] + 1]
         if len(vox) < 4:
             continue
-        from colonbench import paths
-
         line = origin + (paths.smooth_path(vox, smooth_mm / voxel_mm) + [s.start for s in box]) * voxel_mm
-        line = _resample(line, 1.0)
+        line = resample(line, 1.0)
         # smoothing bends the last sigma or two of a path's ends: they are grown again from the points
         trim = int(round(2 * smooth_mm))
         if len(line) < 2 * trim + 4:
             continue
         line = line[trim: len(line) - trim]
-        depth = float(np.median(dist[box][tuple(vox.T)]))
+        depth = float(np.median(depth))
         pieces.append((Piece(line, depth + close * voxel_mm), depth))
     if pieces:
         # channels far narrower than the colon's lumen (the gap inside a wall drawn as a shell,
@@ -332,5 +324,5 @@ def colon_centerline(points, voxel_mm: float = VOXEL_MM, close_mm: float = CLOSE
     for i, p in enumerate(pieces):
         mine = pts[owner[near] == i]
         if len(mine):
-            pieces[i] = Piece(_resample(_extend(p.points, mine, p.radius), 1.0), p.radius)
+            pieces[i] = Piece(resample(_extend(p.points, mine, p.radius), 1.0), p.radius)
     return _bridge(_chain(pieces), pts)

@@ -113,7 +113,6 @@ def hole_regions(vertices: np.ndarray, faces: np.ndarray, hole: np.ndarray) -> t
 
 def _frame(line: np.ndarray, s: np.ndarray, at: float, half_mm: float = 8.0) -> dict:
     """Plane through the centerline at arc length ``at``, normal along its chord over ``at +- half_mm``."""
-    i = int(np.clip(np.searchsorted(s, at), 1, len(s) - 1))
     lo = int(np.clip(np.searchsorted(s, at - half_mm), 0, len(s) - 1))
     hi = int(np.clip(np.searchsorted(s, at + half_mm), 0, len(s) - 1))
     t = line[hi] - line[lo]
@@ -316,8 +315,15 @@ def whole_coverage(segments: list[Segment]) -> float | None:
 
 
 def write_map(result: dict, out, method_name: str, model: str | None, threshold: float = RED_AT,
-              figure: bool = True) -> list[Path]:
-    """Write ``segments.json``/``.csv``, ``centerline.npy``, ``summary.json``, ``map.ply``/``.glb``, ``map.png``."""
+              figure: bool = True) -> tuple[list[Path], dict]:
+    """Write ``segments.json``/``.csv``, ``centerline.npy``, ``summary.json``, ``map.ply``/``.glb``, ``map.png``.
+
+    Returns
+    -------
+    written : list of Path
+    summary : dict
+        What ``summary.json`` holds.
+    """
     import pandas as pd
 
     out = Path(out)
@@ -338,6 +344,18 @@ def write_map(result: dict, out, method_name: str, model: str | None, threshold:
     np.save(out / "centerline.npy", np.asarray(result["centerline"], np.float64))
     written += [out / "segments.json", out / "segments.csv", out / "centerline.npy"]
     segs = result["segments"]
+    seconds = {k: round(v, 3) for k, v in result["seconds"].items()}
+    if any(s.mesh for s in segs):
+        from colonbench.reports.coverage_map import map_mesh, render_map
+
+        mesh = map_mesh(segs, red_at=threshold)
+        mesh.export(out / "map.ply")
+        mesh.export(out / "map.glb")
+        written += [out / "map.ply", out / "map.glb"]
+        if figure:
+            t = time.perf_counter()
+            written.append(render_map(mesh, out / "map.png", red_at=threshold))
+            seconds["figure"] = round(time.perf_counter() - t, 3)
     summary = {
         "coverage": _round(whole_coverage(segs), 4),
         "segments": len(segs),
@@ -349,20 +367,8 @@ def write_map(result: dict, out, method_name: str, model: str | None, threshold:
         "orientation": result["orientation"],
         "context_mm": result.get("context_mm", 0.0),
         "method": method_name, "model": model,
-        "seconds": {k: round(v, 3) for k, v in result["seconds"].items()},
+        "seconds": seconds,
     }
     (out / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
     written.append(out / "summary.json")
-    if any(s.mesh for s in segs):
-        from colonbench.reports.coverage_map import map_mesh, render_map
-
-        mesh = map_mesh(segs, red_at=threshold)
-        mesh.export(out / "map.ply")
-        mesh.export(out / "map.glb")
-        written += [out / "map.ply", out / "map.glb"]
-        if figure:
-            t = time.perf_counter()
-            written.append(render_map(mesh, out / "map.png", red_at=threshold))
-            summary["seconds"]["figure"] = round(time.perf_counter() - t, 3)
-            (out / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
-    return written
+    return written, summary
