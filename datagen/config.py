@@ -117,7 +117,46 @@ class SegmentConfig:
                            "share of the segment's arc length never seen by the 'end' hole model")
 
 
-CONFIG_CLASSES = {"colon": ColonConfig, "camera": CameraConfig, "spheres": SphereConfig, "segments": SegmentConfig}
+@dataclass(frozen=True)
+class VideoConfig:
+    """The ``video`` hole model: a rendered withdrawal, degraded like a real pipeline's input and fused (TSDF)."""
+
+    speed_mm_s: tuple = _p((3.0, 12.0), 0.5, 50.0, "mm/s", "withdrawal speed of the colonoscope tip")
+    push_back_per_100mm: float = _p(0.5, 0.0, 10.0, "count",
+                                    "how often the scope is pushed back in, per 100 mm of withdrawal")
+    push_back_mm: tuple = _p((10.0, 30.0), 0.0, 200.0, "mm", "how far it is pushed back in each time")
+    look_around_deg: tuple = _p((10.0, 50.0), 0.0, 89.0, "degree",
+                                "largest tilt of the view away from the lumen ahead (looking around)")
+    look_period_s: tuple = _p((4.0, 10.0), 0.5, 60.0, "s", "period of the slowest looking-around swing")
+    lateral_offset: tuple = _p((0.0, 0.5), 0.0, 0.9, "fraction of the wall distance",
+                               "how far the tip wanders off the centerline")
+    fps: float = _p(10.0, 1.0, 60.0, "frames/s", "frames rendered for a sample")
+    image_px: int = _p(128, 16, 1024, "px", "side of the square depth frames fused for a sample")
+    fov_deg: float = _p(140.0, 30.0, 170.0, "degree", "diagonal field of view of the pinhole camera")
+    reach_mm: tuple = _p((30.0, 80.0), 10.0, 1000.0, "mm",
+                         "distance beyond which a frame's depth is not trusted: nothing farther is fused or seen")
+    near_mm: float = _p(2.0, 0.0, 50.0, "mm", "depth below which nothing is seen or fused")
+    max_incidence_deg: tuple = _p((70.0, 85.0), 10.0, 90.0, "degree",
+                                  "surface seen more obliquely than this (line of sight to normal) gives no "
+                                  "usable depth: it is neither fused nor seen")
+    depth_noise: tuple = _p((0.0, 0.02), 0.0, 0.2, "fraction of depth",
+                            "sigma of the per-pixel depth noise, proportional to the depth")
+    edge_blur_px: tuple = _p((0.0, 2.0), 0.0, 10.0, "px",
+                             "Gaussian smoothing of depth across edges, as monocular depth networks do")
+    drift_rot_deg: tuple = _p((0.0, 0.3), 0.0, 10.0, "degree/sqrt(s)", "rotation random walk of the pose drift")
+    drift_trans_mm: tuple = _p((0.0, 0.5), 0.0, 20.0, "mm/sqrt(s)", "translation random walk of the pose drift")
+    drift_scale: tuple = _p((0.0, 0.01), 0.0, 0.2, "1/sqrt(s)", "log-scale random walk of the depth (scale drift)")
+    tracking_loss_per_100mm: float = _p(2.0, 0.0, 20.0, "count",
+                                        "how often tracking is lost, per 100 mm of the trajectory's arc length")
+    tracking_loss_s: tuple = _p((1.0, 8.0), 0.0, 60.0, "s", "how long each loss lasts: its frames are not fused")
+    skip_deg_s: float = _p(60.0, 1.0, 10000.0, "degree/s", "frames turning faster than this are dropped (blur)")
+    skip_mm_s: float = _p(25.0, 1.0, 10000.0, "mm/s", "frames moving faster than this are dropped (blur)")
+    voxel_mm: float = _p(1.0, 0.2, 5.0, "mm", "TSDF voxel size")
+    trunc_mm: float = _p(4.0, 0.5, 20.0, "mm", "TSDF truncation distance")
+
+
+CONFIG_CLASSES = {"colon": ColonConfig, "camera": CameraConfig, "spheres": SphereConfig, "segments": SegmentConfig,
+                  "video": VideoConfig}
 
 
 def _check_value(cls, f, value):

@@ -18,7 +18,7 @@ from colonbench import seeding
 from colonbench.datagen.camera import SurfaceScene
 from colonbench.datagen.colon import Colon, generate_colon
 from colonbench.datagen.config import (CONFIG_CLASSES, CameraConfig, ColonConfig, SegmentConfig, SphereConfig,
-                                       from_dict, read_yaml, to_dict)
+                                       VideoConfig, from_dict, read_yaml, to_dict)
 from colonbench.datagen.holes import check_hole_model
 from colonbench.datagen.sample import Sample, make_sample
 from colonbench.datagen.segments import segment_surface, windows
@@ -27,12 +27,14 @@ from colonbench.errors import InputError
 
 @dataclass(frozen=True)
 class GeneratorConfig:
-    """All the parameters of the data generator (YAML sections ``colon``, ``camera``, ``spheres``, ``segments``)."""
+    """All the parameters of the data generator (YAML sections ``colon``, ``camera``, ``spheres``, ``segments``,
+    ``video``)."""
 
     colon: ColonConfig = field(default_factory=ColonConfig)
     camera: CameraConfig = field(default_factory=CameraConfig)
     spheres: SphereConfig = field(default_factory=SphereConfig)
     segments: SegmentConfig = field(default_factory=SegmentConfig)
+    video: VideoConfig = field(default_factory=VideoConfig)
 
     @classmethod
     def from_dict(cls, data: dict | None) -> "GeneratorConfig":
@@ -52,8 +54,15 @@ class GeneratorConfig:
         return cls.from_dict(data)
 
     def to_dict(self) -> dict:
-        """Plain dict of all sections (ranges as lists)."""
-        return {k: to_dict(getattr(self, k)) for k in CONFIG_CLASSES}
+        """Plain dict of all sections (ranges as lists).
+
+        The ``video`` section is left out while it holds its defaults, so that
+        manifests from before it existed keep their hash.
+        """
+        out = {k: to_dict(getattr(self, k)) for k in CONFIG_CLASSES}
+        if self.video == VideoConfig():
+            del out["video"]
+        return out
 
 
 class PreparedColon:
@@ -132,7 +141,7 @@ def colon_samples(colon: Colon, config: GeneratorConfig, seed: int, colon_id: in
         for p in range(permutations):
             rng = seeding.rng(seed, "sample", colon_id, int(round(length_mm * 1000)), k, p)
             yield k, p, make_sample(rng, prepared.scene, colon.centerline, surface, hole_model,
-                                    config.camera, config.spheres, config.segments)
+                                    config.camera, config.spheres, config.segments, video=config.video)
 
 
 def procedural_colon(config: GeneratorConfig, seed: int, colon_id: int) -> Colon:

@@ -23,7 +23,7 @@ from scipy.spatial import cKDTree
 from colonbench.datagen.config import SphereConfig, draw
 from colonbench.errors import InputError
 
-HOLE_MODELS = ("camera", "spheres", "camera+spheres", "camera+end", "spheres+end", "camera+spheres+end")
+HOLE_MODELS = ("camera", "spheres", "camera+spheres", "camera+end", "spheres+end", "camera+spheres+end", "video")
 
 
 def check_hole_model(name: str) -> tuple[str, ...]:

@@ -13,7 +13,7 @@ import numpy as np
 import trimesh
 
 from colonbench.datagen import camera as cam
-from colonbench.datagen.config import CameraConfig, SegmentConfig, SphereConfig
+from colonbench.datagen.config import CameraConfig, SegmentConfig, SphereConfig, VideoConfig
 from colonbench.datagen.config import draw
 from colonbench.datagen.holes import (check_hole_model, inside_spheres, sample_spheres, sample_surface,
                                       unseen_end)
@@ -125,6 +125,29 @@ def observe_covered(rng, scene, centerline, surface: SegmentSurface, hole_model:
     return observed, coverage, info
 
 
+#: How many times a ``video`` withdrawal is drawn at most to reach ``SegmentConfig.min_coverage`` (each costs
+#: a rendered and fused video).
+MAX_VIDEO_DRAWS = 3
+
+
+def _video_covered(rng, scene, centerline, surface: SegmentSurface, camera: CameraConfig,
+                   segments: SegmentConfig, video: VideoConfig):
+    """The ``video`` hole model (:func:`colonbench.datagen.fusion.video_partial`), redrawn up to
+    ``MAX_VIDEO_DRAWS`` times until the coverage reaches ``segments.min_coverage``."""
+    from colonbench.datagen.fusion import video_partial
+
+    check_hole_model("video")
+    areas = surface.mesh.area_faces
+    total = areas.sum()
+    for attempt in range(MAX_VIDEO_DRAWS):
+        observed, partial, info = video_partial(rng, scene, centerline, surface, video, camera.spread_mm,
+                                                segments.point_density)
+        coverage = float(areas[observed].sum() / total) if total > 0 else float("nan")
+        if coverage >= segments.min_coverage and len(partial):
+            break
+    return observed, coverage, partial, {"video": info, "hole_draws": attempt + 1}
+
+
 def hole_areas(mesh: trimesh.Trimesh, observed: np.ndarray) -> np.ndarray:
     """Areas (mm^2) of the connected pieces of unobserved faces, largest first."""
     holes = np.flatnonzero(~observed)
@@ -221,7 +244,8 @@ def _unit(rng, n: int | None = None) -> np.ndarray:
 
 def make_sample(rng, scene, centerline, surface: SegmentSurface, hole_model: str = "camera",
                 camera: CameraConfig | None = None, spheres: SphereConfig | None = None,
-                segments: SegmentConfig | None = None, noise_mm: float | None = None) -> Sample:
+                segments: SegmentConfig | None = None, noise_mm: float | None = None,
+                video: VideoConfig | None = None) -> Sample:
     """One sample: holes drawn with ``rng``, points sampled, ground truth measured.
 
     Parameters
@@ -234,9 +258,12 @@ def make_sample(rng, scene, centerline, surface: SegmentSurface, hole_model: str
         The colon's GT centerline.
     surface : SegmentSurface
         From :func:`colonbench.datagen.segments.segment_surface`.
-    hole_model : {"camera", "spheres", "camera+spheres"}
+    hole_model : str
+        One of :data:`colonbench.datagen.holes.HOLE_MODELS`.
     noise_mm : float, optional
         Gaussian noise sigma on the partial points (default: ``segments.noise_mm``).
+    video : VideoConfig, optional
+        The ``video`` hole model's settings.
     """
     camera = camera or CameraConfig()
     spheres = spheres or SphereConfig()
@@ -244,16 +271,20 @@ def make_sample(rng, scene, centerline, surface: SegmentSurface, hole_model: str
     noise = segments.noise_mm if noise_mm is None else float(noise_mm)
     mesh = surface.mesh
     areas = mesh.area_faces
-    observed, coverage, info = observe_covered(rng, scene, centerline, surface, hole_model, camera, spheres,
-                                               segments.min_coverage, segments)
-    if _realistic(segments):
-        # the reconstruction's flaws draw from a stream of their own, split off only when one is set, so
-        # that a config without them gives the samples it gave before they existed
-        partial, info["cloud"] = reconstruction_cloud(np.random.default_rng(rng.integers(2**63)), mesh, observed,
-                                                      surface, segments, info)
+    if hole_model == "video":  # the partial points are drawn on the fused surface
+        observed, coverage, partial, info = _video_covered(rng, scene, centerline, surface, camera, segments,
+                                                           video or VideoConfig())
     else:
-        partial = sample_surface(rng, mesh.vertices, mesh.faces[observed], segments.point_density,
-                                 areas=areas[observed])
+        observed, coverage, info = observe_covered(rng, scene, centerline, surface, hole_model, camera, spheres,
+                                                   segments.min_coverage, segments)
+        if _realistic(segments):
+            # the reconstruction's flaws draw from a stream of their own, split off only when one is set, so
+            # that a config without them gives the samples it gave before they existed
+            partial, info["cloud"] = reconstruction_cloud(np.random.default_rng(rng.integers(2**63)), mesh,
+                                                          observed, surface, segments, info)
+        else:
+            partial = sample_surface(rng, mesh.vertices, mesh.faces[observed], segments.point_density,
+                                     areas=areas[observed])
     holes = sample_surface(rng, mesh.vertices, mesh.faces[~observed], segments.hole_point_density,
                            areas=areas[~observed])
     if noise > 0:

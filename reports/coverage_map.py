@@ -7,7 +7,6 @@ colour bar (matplotlib).
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
@@ -62,18 +61,11 @@ def map_mesh(segments, red_at: float = 0.5):
     return mesh
 
 
-def _pyrender():
-    os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
-    if not hasattr(np, "infty"):  # pyrender 0.1.45 uses np.infty, gone in NumPy 2
-        np.infty = np.inf
-    import pyrender
-
-    return pyrender
-
-
 def render_views(mesh, size: int = 640) -> list[np.ndarray]:
     """Two (size, size, 3) uint8 renderings of ``mesh`` from either side of its broadest plane."""
-    pyrender = _pyrender()
+    from colonbench.offscreen import pyrender as _load
+
+    pyrender = _load()
     centre = mesh.vertices.mean(axis=0)
     rel = mesh.vertices - centre
     _, _, axes = np.linalg.svd(rel[:: max(1, len(rel) // 20000)], full_matrices=False)

@@ -121,6 +121,7 @@ def build_shard(resolved: dict, unit: Unit, out_dir) -> dict:
     if unit.mesh is not None:
         attrs["colon_source"] = unit.mesh
         attrs["skipped_segments"] = json.dumps(skipped)
+    sample_info = []
     with ShardWriter(Path(out_dir) / unit.name, n, size) as writer:
         for k in picks:
             surface = prepared.segment(*wins[k])
@@ -137,7 +138,9 @@ def build_shard(resolved: dict, unit: Unit, out_dir) -> dict:
                 sigma = draw_mix(split["noise_mm"], seed, "noise", unit.colon_id, lmm, k, p)
                 rng = seeding.rng(seed, "sample", unit.colon_id, lmm, k, p)
                 s = make_sample(rng, prepared.scene, prepared.colon.centerline, surface, hole_model,
-                                config.camera, config.spheres, config.segments, noise_mm=sigma)
+                                config.camera, config.spheres, config.segments, noise_mm=sigma,
+                                video=config.video)
+                sample_info.append(s.info.get("video"))
                 partial = s.partial_points.astype(np.float32)
                 partial64 = partial.astype(float)
                 t = stages.add("sample", t)
@@ -150,5 +153,7 @@ def build_shard(resolved: dict, unit: Unit, out_dir) -> dict:
                                   observed_faces=s.observed_faces, partial_points=partial,
                                   hole_points=s.hole_points, hole_areas_mm2=s.hole_areas)
                 t = stages.add("write", t)
+        if any(i is not None for i in sample_info):
+            attrs["sample_info"] = json.dumps(sample_info)
         writer.close(attrs)
     return {"name": unit.name, "samples": n, "segments": len(picks), "seconds": stages.t}

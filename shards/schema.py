@@ -54,7 +54,7 @@ FORMAT_VERSION = 1
 
 #: Hole models, as stored in the enum ``samples/hole_model``.
 HOLE_MODEL_CODES = {"camera": 0, "spheres": 1, "camera+spheres": 2, "camera+end": 3, "spheres+end": 4,
-                    "camera+spheres+end": 5}
+                    "camera+spheres+end": 5, "video": 6}
 
 
 @dataclass(frozen=True)
@@ -111,7 +111,8 @@ FIELDS = (
     Field("samples", "segment", "int32", ("rows",), "-", "-", "row of the sample's segment in segments/"),
     Field("samples", "permutation", "int32", ("rows",), "-", "-", "hole permutation index within the segment"),
     Field("samples", "hole_model", "uint8", ("rows",), "-", "-",
-          "enum: 0 camera, 1 spheres, 2 camera+spheres (names in the dataset's enum type)"),
+          "enum: 0 camera, 1 spheres, 2 camera+spheres, 3 camera+end, 4 spheres+end, 5 camera+spheres+end, 6 video "
+          "(names in the dataset's enum type)"),
     Field("samples", "noise_mm", "float32", ("rows",), "mm", "-",
           "sigma of the Gaussian noise added to the partial points (0 = noiseless)"),
     Field("samples", "coverage", "float64", ("rows",), "fraction", "-",
@@ -154,6 +155,9 @@ OPTIONAL_ATTRIBUTES = {
     "colon_source": "the imported colon mesh a shard was cut from, by its manifest name; procedural colons have "
                     "none ['']",
     "skipped_segments": "JSON list of the segments left out, each with its window and the reason ('[]')",
+    "sample_info": "JSON list with one entry per row of samples/: what a video sample drew (its degradation "
+                   "settings, reach, frames rendered and fused), null for other hole models; present only when "
+                   "the shard holds a video sample",
 }
 
 #: Options of every dataset: per-sample heatmap chunks, gzip level 4 with shuffle, no timestamps.
