@@ -49,6 +49,8 @@ from colonbench.errors import InputError
 
 #: Depth PNG step, mm.
 DEPTH_UNIT_MM = 0.1
+#: Depth shown darkest in the preview, mm.
+PREVIEW_DEPTH_MM = 80.0
 #: Frames rendered with one colour scene; each scene holds the faces within ``far_mm`` of its frames.
 CHUNK_FRAMES = 120
 
@@ -190,7 +192,7 @@ def write_video(colon, out, seed: int = 0, start_mm: float | None = None, end_mm
                 t1 = time.perf_counter()
                 seen = caster.seen(pose)
                 t2 = time.perf_counter()
-                rgb = renderer.render(pose)
+                rgb = renderer.render(pose, depth)
                 t3 = time.perf_counter()
                 _write_png(out / "rgb" / f"{i:06d}.png", rgb)
                 _write_png(out / "depth" / f"{i:06d}.png", depth_to_png(depth))
@@ -199,7 +201,7 @@ def write_video(colon, out, seed: int = 0, start_mm: float | None = None, end_mm
                 seen_all.append(seen.astype(np.int32))
                 offsets.append(offsets[-1] + len(seen))
                 if i < gif_n:
-                    gif.append(_thumbnail(preview_frame(rgb, depth, far_mm), gif_size))
+                    gif.append(_thumbnail(preview_frame(rgb, depth, PREVIEW_DEPTH_MM), gif_size))
                 timing["depth"] += t1 - t
                 timing["visibility"] += t2 - t1
                 timing["rgb"] += t3 - t2

@@ -5,7 +5,7 @@ Texture
 Per-vertex colours from random Fourier fields of the 3D position (no UV map is
 needed, and any mesh, procedural or imported, gets one):
 
-- a pink base (linear RGB 0.80, 0.42, 0.40) that varies slowly (30 mm fields);
+- a pink base (linear RGB 0.86, 0.36, 0.32) that varies slowly (30 mm fields);
 - vessels: the zero lines of a 12 mm field, drawn dark red, and fainter
   capillaries along the zero lines of a 4 mm field;
 - a specular sheen from the material (metallic 0, roughness 0.35): the wet
@@ -25,9 +25,11 @@ import numpy as np
 from colonbench import seeding
 
 #: Linear RGB of the mucosa, of vessels and of capillaries.
-BASE_RGB = (0.80, 0.42, 0.40)
-VESSEL_RGB = (0.42, 0.08, 0.10)
-CAPILLARY_RGB = (0.62, 0.20, 0.22)
+BASE_RGB = (0.86, 0.36, 0.32)
+VESSEL_RGB = (0.45, 0.05, 0.07)
+CAPILLARY_RGB = (0.66, 0.16, 0.16)
+#: Automatic exposure: the tip light's intensity is this times the frame's median depth squared (mm^2).
+EXPOSURE = 8.0
 
 
 def _field(rng, points, wavelength_mm: float, n: int = 16) -> np.ndarray:
@@ -122,11 +124,21 @@ class ColourRenderer:
             self.scene.remove_node(self._mesh)
         self._mesh = self.scene.add(pyrender.Mesh([primitive]))
 
-    def render(self, pose) -> np.ndarray:
-        """The colour frame at a camera-to-world pose (OpenCV axes); (height, width, 3) uint8."""
+    def render(self, pose, depth=None) -> np.ndarray:
+        """The colour frame at a camera-to-world pose (OpenCV axes); (height, width, 3) uint8.
+
+        With the frame's ``depth`` (mm, 0 where none) the light is set as a
+        colonoscope's automatic exposure would: to the square of the median
+        depth (mm^2) times :data:`EXPOSURE`, so that the median pixel is lit alike near a wall and in
+        a wide lumen.
+        """
         gl = np.asarray(pose, float) @ np.diag([1.0, -1.0, -1.0, 1.0])  # OpenCV -> OpenGL camera axes
         self.scene.set_pose(self._camera, gl)
         self.scene.set_pose(self._light, gl)
+        if depth is not None:
+            valid = np.asarray(depth)[np.asarray(depth) > 0]
+            if len(valid):
+                self._light.light.intensity = EXPOSURE * float(max(np.median(valid), 3.0) ** 2)
         colour, _ = self._renderer.render(self.scene, flags=self._flags)
         return np.asarray(colour)[..., :3].copy()
 

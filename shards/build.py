@@ -39,15 +39,15 @@ def _prepared_colon(config: GeneratorConfig, seed: int, unit: Unit, key: str) ->
     """The colon of a unit, kept for the next unit of the same colon in this process (one at a time)."""
     ck = (key, seed, unit.colon_id, unit.source)
     if unit.mesh is not None:
-        _check_mesh_files(unit)  # every time: the files may have changed since the colon was cached
+        check_mesh_files(unit)  # every time: the files may have changed since the colon was cached
     if ck not in _COLON_CACHE:
         _COLON_CACHE.clear()
-        _COLON_CACHE[ck] = PreparedColon(_mesh_colon(unit) if unit.mesh is not None
+        _COLON_CACHE[ck] = PreparedColon(mesh_colon(unit) if unit.mesh is not None
                                          else procedural_colon(config, seed, unit.colon_id))
     return _COLON_CACHE[ck]
 
 
-def _check_mesh_files(unit: Unit) -> None:
+def check_mesh_files(unit: Unit) -> None:
     """Raise unless a mesh unit's files exist and are the ones the manifest names (by sha256)."""
     name, mesh, mesh_sha, centerline, centerline_sha = unit.source
     for path, digest in ((mesh, mesh_sha), (centerline, centerline_sha)):
@@ -57,7 +57,7 @@ def _check_mesh_files(unit: Unit) -> None:
             raise ColonbenchError(f"mesh {name!r}: {path} is not the file the manifest names (sha256 differs)")
 
 
-def _mesh_colon(unit: Unit):
+def mesh_colon(unit: Unit):
     """The imported colon of a mesh unit: its lumen as colonoscopy sees it."""
     from colonbench.datagen.realmesh import import_colon
 

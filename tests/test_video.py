@@ -219,3 +219,24 @@ def test_a_manifest_mixes_video_with_camera_and_records_the_settings(tmp_path):
     assert sorted(set(models)) == ["camera", "video"]
     assert [i is not None for i in info] == [m == "video" for m in models]
     assert all(i["frames_fused"] > 0 and "drift_trans_mm" in i for i in info if i is not None)
+
+
+def test_video_command_writes_a_dataset_and_refuses_bad_input(tmp_path, capsys):
+    from colonbench.cli import main
+
+    from conftest import MANIFESTS
+
+    out = tmp_path / "v"
+    assert main(["video", str(MANIFESTS / "smoke.yaml"), "--colon", "2", "--out", str(out), "--start-mm", "200",
+                 "--end-mm", "260", "--size", "48", "--fps", "2", "--max-frames", "3", "--gif-seconds", "0",
+                 "--quiet"]) == 0
+    assert len(list((out / "rgb").glob("*.png"))) == 3 and len(list((out / "depth").glob("*.png"))) == 3
+    assert not (out / "preview.gif").exists()
+    meta = json.loads((out / "video.json").read_text())
+    assert meta["frames"] == 3 and meta["source"] == {"manifest": str(MANIFESTS / "smoke.yaml"), "colon": "2"}
+    capsys.readouterr()
+    for argv, message in ((["--colon", "2"], "--colon picks a colon of a manifest"),
+                          ([str(MANIFESTS / "smoke.yaml"), "--colon", "gca00060"], "neither a procedural colon id"),
+                          ([str(MANIFESTS / "smoke.yaml"), "--start-mm", "5000"], "is not inside the colon")):
+        assert main(["video", *argv, "--out", str(tmp_path / "bad"), "--quiet"]) == 2
+        assert message in capsys.readouterr().err
