@@ -32,6 +32,7 @@ PyTorch's DistributedDataParallel averages the gradients.
 from __future__ import annotations
 
 import csv
+import hashlib
 import json
 import os
 import signal
@@ -163,7 +164,30 @@ def _data_lock(data_dir: Path) -> dict:
         raise InputError(f"{data_dir}: the {'pack' if pack else 'dataset'} has no {' and no '.join(missing)} split; "
                          "make it with them")
     coverage = lock["train_coverage_mean"] if pack else lock["splits"]["train"]["statistics"]["coverage"]["mean"]
-    return {"manifest_sha256": lock["manifest_sha256"], "train_coverage_mean": coverage, "pack": pack}
+    samples = lock.get("train_samples") if pack else lock["splits"]["train"].get("samples")
+    return {"manifest_sha256": lock["manifest_sha256"], "train_coverage_mean": coverage, "pack": pack,
+            "train_samples": samples}
+
+
+def _data_locks(data_dirs: list[Path]) -> dict:
+    """:func:`_data_lock` of one or more dataset folders trained on together.
+
+    Several folders must all be shard datasets with the same grid; their
+    ``manifest_sha256`` is then the SHA-256 of theirs joined by ``+`` (in the
+    order given), ``manifests`` lists theirs, and ``train_coverage_mean`` is
+    the mean over all their training samples.
+    """
+    locks = [_data_lock(d) for d in data_dirs]
+    if len(locks) == 1:
+        return {**locks[0], "manifests": [locks[0]["manifest_sha256"]]}
+    if any(lk["pack"] for lk in locks):
+        raise InputError("several datasets train together as shard folders only; pack them into one "
+                         "(colonbench pack of a single manifest) or train on their shards")
+    n = [lk["train_samples"] or 1 for lk in locks]
+    hashes = [lk["manifest_sha256"] for lk in locks]
+    return {"manifest_sha256": hashlib.sha256("+".join(hashes).encode()).hexdigest(), "manifests": hashes,
+            "train_coverage_mean": float(np.average([lk["train_coverage_mean"] for lk in locks], weights=n)),
+            "pack": False, "train_samples": sum(n)}
 
 
 def _ignore_stop_signals(worker_id: int):
@@ -178,10 +202,12 @@ def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "a
 
     Parameters
     ----------
-    data_dir : path
+    data_dir : path or list of paths
         Dataset folder with ``train`` and ``validation`` splits, or a pack of
         one (:mod:`colonbench.shards.pack`; heatmaps are then made on the
-        training device, and only flips augment).
+        training device, and only flips augment). Several dataset folders
+        (same grid) train together: their train splits are one training set,
+        their validation splits one validation set.
     out_dir : path
         Run folder (log, checkpoints, best model). If it holds ``last.pt`` the
         run resumes; its settings must then match.
@@ -199,8 +225,9 @@ def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "a
         ``epochs``, ``steps``, ``best_val_l2``, ``stopped`` ("done" or "time").
     """
     cfg = (config or TrainConfig()).check()
-    data_dir, out = Path(data_dir), Path(out_dir)
-    lock = _data_lock(data_dir)
+    data_dirs = [Path(d) for d in ([data_dir] if isinstance(data_dir, (str, os.PathLike)) else data_dir)]
+    data_dir, out = data_dirs[0], Path(out_dir)
+    lock = _data_locks(data_dirs)
     data_hash = lock["manifest_sha256"]
     train_coverage = lock["train_coverage_mean"]
     rank, world = _dist()
@@ -220,12 +247,17 @@ def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "a
         train_ds, val_ds = PackSplit(data_dir, "train", dev), PackSplit(data_dir, "validation", dev)
         grid_options = train_ds.info["grid_options"]
     else:
-        from colonbench.shards.reader import ShardDataset
+        from colonbench.shards.reader import ShardDataset, dataset_files
         aug = AugmentConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in cfg.augment.items()})
-        train_ds = ShardDataset(data_dir, split="train", augment=aug if cfg.augment_prob > 0 else None,
+        files = {split: [f for d in data_dirs for f in dataset_files(d, split)] for split in ("train", "validation")}
+        train_ds = ShardDataset(files["train"], augment=aug if cfg.augment_prob > 0 else None,
                                 seed=cfg.seed, augment_prob=cfg.augment_prob)
-        val_ds = ShardDataset(data_dir, split="validation")
+        val_ds = ShardDataset(files["validation"])
         grid_options = train_ds.shards[0].grid_options
+        other = [str(sh.path) for sh in train_ds.shards + val_ds.shards if sh.grid_options != grid_options]
+        if other:
+            raise InputError(f"{other[0]} has another grid ({len(other)} shard(s)) than {train_ds.shards[0].path}; "
+                             "datasets trained together need the same grid")
 
     torch.manual_seed(cfg.seed)
     net_cfg = network_config(cfg.network)
@@ -344,7 +376,8 @@ def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "a
                                          f"{opt.param_groups[0]['lr']:.3g}", f"{state['seconds']:.1f}"])
             if val < state["best_val"]:
                 state["best_val"] = val
-                meta = {"data_manifest_sha256": data_hash, "data_dir": data_dir.name,
+                meta = {"data_manifest_sha256": data_hash, "data_dir": "+".join(d.name for d in data_dirs),
+                        **({"data_manifests": lock["manifests"]} if len(data_dirs) > 1 else {}),
                         "data_format": "pack" if lock["pack"] else "shards", "train_config": asdict(cfg),
                         "epoch": epoch, "steps": state["steps"], "samples_seen": state["samples"],
                         "val_l2": val, "train_seconds": round(state["seconds"], 1), "device": str(dev),

@@ -303,3 +303,36 @@ def test_sigterm_stops_training_cleanly_and_it_resumes(smoke_dataset, tmp_path):
     more = train(out, run, TrainConfig(epochs=saved["state"]["epoch"] + 2, batch_size=1, workers=1), device="cpu",
                  progress=False)
     assert more["steps"] > saved["state"]["steps"] and more["stopped"] == "done"
+
+
+def test_several_datasets_train_together(smoke_dataset, tmp_path):
+    import yaml
+
+    from colonbench.shards.dataset import generate
+    from colonbench.shards.reader import ShardDataset
+
+    from conftest import MANIFESTS
+
+    out, lock = smoke_dataset
+    manifest = yaml.safe_load((MANIFESTS / "smoke.yaml").read_text())
+    manifest.update(name="smoke-b", seed=8)
+    manifest["splits"] = {"train": {"colons": {"first": 5, "count": 1}, "segments_per_length": 1, "permutations": 1},
+                          "validation": {"colons": {"first": 6, "count": 1}, "segments_per_length": 1,
+                                         "permutations": 1}}
+    (tmp_path / "b.yaml").write_text(yaml.safe_dump(manifest))
+    lock_b = generate(tmp_path / "b.yaml", tmp_path / "b", workers=1, progress=False)
+    cfg = TrainConfig(epochs=1, batch_size=1, workers=0, augment_prob=0.0)
+    result = train([out, tmp_path / "b"], tmp_path / "run", cfg, device="cpu", progress=False)
+    n_train = len(ShardDataset(out, split="train")) + len(ShardDataset(tmp_path / "b", split="train"))
+    assert result["steps"] == n_train  # one epoch of batch 1 over both train splits
+    _, _, meta = load_model(tmp_path / "run" / "best.safetensors")
+    assert meta["data_manifests"] == [lock["manifest_sha256"], lock_b["manifest_sha256"]]
+    assert meta["data_dir"] == f"{out.name}+b"
+    with pytest.raises(InputError, match="is a run on other data"):  # the same run folder, one dataset fewer
+        train([out], tmp_path / "run", cfg, device="cpu", progress=False)
+
+    manifest.update(name="smoke-c", grid={"size": 32, "margin": 2, "min_extent_mm": 70.0})
+    (tmp_path / "c.yaml").write_text(yaml.safe_dump(manifest))
+    generate(tmp_path / "c.yaml", tmp_path / "c", workers=1, progress=False)
+    with pytest.raises(InputError, match="need the same grid"):
+        train([out, tmp_path / "c"], tmp_path / "run-c", cfg, device="cpu", progress=False)
