@@ -9,7 +9,7 @@ from pathlib import Path
 
 from colonbench._version import __version__
 from colonbench.datagen.generate import GeneratorConfig
-from colonbench.shards.manifest import dumps
+from colonbench.shards.manifest import dumps, resolve
 from colonbench.shards.schema import sha256_file
 
 OUT = Path(__file__).resolve().parents[1] / "data_manifests"
@@ -46,6 +46,7 @@ def dump(name, description, seed, splits, overrides=None, axes="pca", mesh_names
                 "grid": grid, "config": GeneratorConfig.from_dict(overrides or {}).to_dict(), "splits": splits}
     if mesh_names:
         manifest["meshes"] = meshes(*mesh_names)
+    manifest["config"] = resolve(manifest, name)["config"]  # with the video section where a split uses it
     head = (f"# colonbench dataset manifest: {name}\n"
             f"# Generate with: colonbench generate data_manifests/{name}.yaml --out data/{name} --workers N\n"
             "# Written by scripts/write_manifests.py; every generator parameter is spelled out\n"
@@ -105,4 +106,21 @@ dump("train-wide", "Training data of the 0.2 model: 24 colons of the widened gen
      "colons are never seen. Sized for a fine-tune on a 2-core CPU; grow the colon count on a GPU.", 20261122,
      {"train": split(0, 24, 6, 2, WIDE_NOISE, WIDE_HOLES, meshes=["gca00090", "gca00080"]),
       "validation": split(200, 8, 4, 1, WIDE_NOISE, WIDE_HOLES)}, WIDE, axes="tube",
+     mesh_names=["gca00090", "gca00080"])
+
+# ------------------------------------------------------------------ 0.3: reconstruction-like partials (issue 13)
+#: The same segments of paper.yaml's test colons, as ideal visibility (camera) and as a fused, degraded video.
+for name, mix, what in (("video", {"video": 1.0}, "reconstruction-like partials: a rendered withdrawal per segment, "
+                         "its depth degraded (noise, edge smoothing, scale drift), its poses drifting, frames lost, "
+                         "fused by TSDF (the video hole model, docs/video.md)"),
+                        ("video-camera", {"camera": 1.0}, "ideal per-face visibility from camera poses, the paper's "
+                         "camera holes, for the side-by-side comparison with video.yaml")):
+    dump(name, f"The video suite: the segments of 6 of paper.yaml's test colons (2 per length per colon), with {what}.",
+         20210901, {"test": split(440, 6, 2, 1, CLEAN, mix)})
+dump("train-video", "Video partials for training (the video hole model on the widened generator and the real training "
+     "colons): 16 widened colons that train-wide.yaml does not use, gca00090 and gca00080, validated on 4 other "
+     "widened colons. Trained together with train-wide.yaml (colonbench train data/train-wide data/train-video); "
+     "wide.yaml's, real-test.yaml's and video.yaml's test colons are never seen.", 20261124,
+     {"train": split(24, 16, 3, 1, WIDE_NOISE, {"video": 1.0}, meshes=["gca00090", "gca00080"]),
+      "validation": split(208, 4, 2, 1, WIDE_NOISE, {"video": 1.0})}, WIDE, axes="tube",
      mesh_names=["gca00090", "gca00080"])

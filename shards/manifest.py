@@ -57,7 +57,7 @@ import yaml
 
 from colonbench import seeding
 from colonbench._version import __version__
-from colonbench.datagen.config import read_yaml
+from colonbench.datagen.config import read_yaml, to_dict
 from colonbench.datagen.generate import GeneratorConfig
 from colonbench.datagen.holes import HOLE_MODELS
 from colonbench.errors import InputError
@@ -252,9 +252,12 @@ def resolve(data: dict, source: str = "manifest") -> dict:
     grid = {"size": size, "margin": margin, "min_extent_mm": min_extent}
     if axes != "pca":  # written only when set, so that manifests from before keep their hash
         grid["axes"] = axes
+    config_dict = config.to_dict()
+    if any("video" in v["hole_models"] for v in splits.values()):  # spelled out where it is used
+        config_dict["video"] = to_dict(config.video)
     out = {"name": name, "description": str(data.get("description", "")),
            "generator_version": str(data.get("generator_version", __version__)), "seed": seed,
-           "grid": grid, "config": config.to_dict(), "splits": splits}
+           "grid": grid, "config": config_dict, "splits": splits}
     if meshes:  # only when used, so that manifests from before keep their hash
         out["meshes"] = meshes
     return out
