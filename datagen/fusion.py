@@ -221,6 +221,7 @@ def fused_video(rng, caster, trajectory, settings: dict, config: VideoConfig, an
     ----------
     rng : numpy.random.Generator
     caster : FrameCaster
+        Its reach and largest incidence are the sample's: nothing beyond them is fused or seen.
     trajectory : Trajectory
     settings : dict
         From :func:`degradation`.
@@ -244,13 +245,12 @@ def fused_video(rng, caster, trajectory, settings: dict, config: VideoConfig, an
     poses = apply_drift(trajectory.poses, drift, anchor)
     depths, seen = [], []
     for i in np.flatnonzero(kept):
-        z, _ = caster.depth(trajectory.poses[i], max_distance=settings["reach_mm"])
+        z, _ = caster.depth(trajectory.poses[i], max_distance=caster.reach_mm)
         z[z < config.near_mm] = 0.0
         depths.append(degrade_depth(rng, z, settings["depth_noise"], settings["edge_blur_px"],
                                     drift["log_scale"][i]))
-        seen.append(caster.seen(trajectory.poses[i], candidates, reach_mm=settings["reach_mm"]))
-    v, f = tsdf_fuse(depths, poses[kept], caster.intrinsics, config.voxel_mm, config.trunc_mm,
-                     settings["reach_mm"] + 1.0)
+        seen.append(caster.seen(trajectory.poses[i], candidates))
+    v, f = tsdf_fuse(depths, poses[kept], caster.intrinsics, config.voxel_mm, config.trunc_mm, caster.reach_mm + 1.0)
     seen = np.unique(np.concatenate(seen)) if seen else np.zeros(0, np.int64)
     return {"vertices": v, "faces": f, "seen": seen, "kept": kept, "frames": int(kept.sum()), "poses": poses}
 

@@ -113,8 +113,11 @@ class Trajectory:
         rel = np.einsum("kji,kjl->kil", self.poses[:-1, :3, :3], self.poses[1:, :3, :3])
         cos = np.clip((np.trace(rel, axis1=1, axis2=2) - 1) / 2, -1.0, 1.0)
         ang = np.degrees(np.arccos(cos)) / dt
-        pad = lambda x: np.maximum(np.concatenate([x[:1], x]), np.concatenate([x, x[-1:]]))  # noqa: E731
-        return pad(lin), pad(ang)
+
+        def at_poses(x):  # a pose's speed: the faster of the steps into and out of it
+            return np.maximum(np.concatenate([x[:1], x]), np.concatenate([x, x[-1:]]))
+
+        return at_poses(lin), at_poses(ang)
 
 
 def _smooth(rng, t, period) -> np.ndarray:
@@ -182,7 +185,7 @@ def withdrawal(rng, scene, centerline, s_start: float, s_end: float, config: Vid
     frac = lo + (hi - lo) * 0.5 * (1 + _smooth(rng, t, period))
     phi = np.pi * _smooth(rng, t, 1.5 * period)
 
-    tangent_s, normal_s, _ = centerline.frames()
+    _, normal_s, _ = centerline.frames()
     centre = centerline.point_at(s)
     tangent = centerline.tangent_at(s)
     normal = np.stack([np.interp(s, centerline.arclength, normal_s[:, k]) for k in range(3)], axis=1)
