@@ -188,8 +188,27 @@ def tsdf_fuse(depths, poses, intrinsics, voxel_mm: float = 1.0, trunc_mm: float 
         mesh = grid.extract_triangle_mesh(weight_threshold=float(min_weight) - 0.5)
     except RuntimeError:  # open3d raises on an empty surface
         return np.zeros((0, 3)), np.zeros((0, 3), np.int64)
-    return (mesh.vertex.positions.numpy().astype(float),
-            mesh.triangle.indices.numpy().astype(np.int64))
+    return canonical_mesh(mesh.vertex.positions.numpy().astype(float), mesh.triangle.indices.numpy().astype(np.int64))
+
+
+def canonical_mesh(vertices, faces) -> tuple[np.ndarray, np.ndarray]:
+    """The same triangle mesh in an order fixed by its geometry alone; (n, 3) float, (m, 3) int.
+
+    open3d's TSDF fills its block hash map from several threads, so the order
+    of the extracted vertices and triangles changes from run to run while the
+    surface does not. Vertices sorted by (x, y, z), each triangle rotated to
+    start at its smallest index (its orientation kept), triangles sorted: the
+    points sampled on the surface, and the shards, are then the same every run.
+    """
+    vertices, faces = np.asarray(vertices, float), np.asarray(faces, np.int64)
+    if len(faces) == 0:
+        return vertices, faces
+    order = np.lexsort(vertices.T[::-1])
+    rank = np.empty(len(order), np.int64)
+    rank[order] = np.arange(len(order))
+    f = rank[faces]
+    f = np.take_along_axis(f, (np.argmin(f, axis=1)[:, None] + np.arange(3)) % 3, axis=1)
+    return vertices[order], f[np.lexsort(f.T[::-1])]
 
 
 def tracking_lost(rng, trajectory, config: VideoConfig) -> np.ndarray:

@@ -240,3 +240,25 @@ def test_video_command_writes_a_dataset_and_refuses_bad_input(tmp_path, capsys):
                           ([str(MANIFESTS / "smoke.yaml"), "--start-mm", "5000"], "is not inside the colon")):
         assert main(["video", *argv, "--out", str(tmp_path / "bad"), "--quiet"]) == 2
         assert message in capsys.readouterr().err
+
+
+def test_fused_meshes_come_out_in_one_order_whatever_order_open3d_gives():
+    from colonbench.datagen.fusion import canonical_mesh
+
+    rng = np.random.default_rng(0)
+    colon = tube_colon(straight(20.0), RADIUS, ring_spacing_mm=1.0, n_around=32)
+    v, f = colon.mesh.vertices, colon.mesh.faces
+    perm = rng.permutation(len(v))
+    inverse = np.argsort(perm)
+    shuffled_f = inverse[f][rng.permutation(len(f))]
+    shuffled_f = np.roll(shuffled_f, 1, axis=1)  # each triangle starting at another corner, same orientation
+    a_v, a_f = canonical_mesh(v, f)
+    b_v, b_f = canonical_mesh(v[perm], shuffled_f)
+    np.testing.assert_array_equal(a_v, b_v)
+    np.testing.assert_array_equal(a_f, b_f)
+    assert np.allclose(np.sort(face_normals(a_v, a_f), axis=0), np.sort(face_normals(v, f), axis=0))  # orientation
+
+
+def face_normals(vertices, faces):
+    """Unnormalised normals of triangles (their orientation's sign kept)."""
+    return np.cross(vertices[faces[:, 1]] - vertices[faces[:, 0]], vertices[faces[:, 2]] - vertices[faces[:, 0]])
