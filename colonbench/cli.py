@@ -405,13 +405,11 @@ def cmd_video(args):
     meta = write_video(colon, args.out, seed=seed, start_mm=args.start_mm, end_mm=args.end_mm, config=config.video,
                        size=args.size, fps=args.fps, face_ids=args.face_ids, max_frames=args.max_frames,
                        gif_seconds=args.gif_seconds, source=source, progress=not args.quiet)
-    t = meta["seconds"]
+    ms = {k: 1000 * v / max(meta["frames"], 1) for k, v in meta["seconds"].items()}
     print(f"{meta['frames']} frames ({meta['duration_s']:.1f} s of withdrawal over {meta['stretch_mm'][0]:.0f}-"
           f"{meta['stretch_mm'][1]:.0f} mm at {meta['fps']:g} frames/s, {meta['size_px']} px) -> {args.out}: "
-          f"{meta['frames_per_second']:.1f} frames/s; per frame depth {1000 * t['depth'] / max(meta['frames'], 1):.0f}"
-          f" ms, visibility {1000 * t['visibility'] / max(meta['frames'], 1):.0f} ms, RGB "
-          f"{1000 * t['rgb'] / max(meta['frames'], 1):.0f} ms, writing {1000 * t['write'] / max(meta['frames'], 1):.0f}"
-          f" ms")
+          f"{meta['frames_per_second']:.1f} frames/s; per frame depth {ms['depth']:.0f} ms, visibility "
+          f"{ms['visibility']:.0f} ms, RGB {ms['rgb']:.0f} ms, writing {ms['write']:.0f} ms")
 
 
 def cmd_demo(args):

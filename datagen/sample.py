@@ -114,15 +114,40 @@ def observe_covered(rng, scene, centerline, surface: SegmentSurface, hole_model:
     info : dict
         As :func:`observe`, plus ``hole_draws``.
     """
-    areas = surface.mesh.area_faces
-    total = areas.sum()
-    for attempt in range(MAX_HOLE_DRAWS):
-        observed, info = observe(rng, scene, centerline, surface, hole_model, camera, spheres, segments)
-        coverage = float(areas[observed].sum() / total) if total > 0 else float("nan")
-        if coverage >= min_coverage:
-            break
-    info["hole_draws"] = attempt + 1
+    (observed, info), coverage, draws = _until_covered(
+        lambda: observe(rng, scene, centerline, surface, hole_model, camera, spheres, segments),
+        surface.mesh.area_faces, min_coverage, MAX_HOLE_DRAWS)
+    info["hole_draws"] = draws
     return observed, coverage, info
+
+
+def _until_covered(draw, areas, min_coverage: float, max_draws: int, usable=None):
+    """Call ``draw()`` until what it observed covers ``min_coverage`` of the area, at most ``max_draws`` times.
+
+    Parameters
+    ----------
+    draw : callable
+        Returns a tuple whose first item is the (f,) bool observed mask.
+    areas : (f,) float
+        Face areas, mm^2.
+    usable : callable, optional
+        A draw must also satisfy ``usable(result)``.
+
+    Returns
+    -------
+    result : tuple
+        The last draw's.
+    coverage : float
+        Its observed area / complete area.
+    draws : int
+    """
+    total = areas.sum()
+    for attempt in range(max_draws):
+        result = draw()
+        coverage = float(areas[result[0]].sum() / total) if total > 0 else float("nan")
+        if coverage >= min_coverage and (usable is None or usable(result)):
+            break
+    return result, coverage, attempt + 1
 
 
 #: How many times a ``video`` withdrawal is drawn at most to reach ``SegmentConfig.min_coverage`` (each costs
@@ -136,16 +161,10 @@ def _video_covered(rng, scene, centerline, surface: SegmentSurface, camera: Came
     ``MAX_VIDEO_DRAWS`` times until the coverage reaches ``segments.min_coverage``."""
     from colonbench.datagen.fusion import video_partial
 
-    check_hole_model("video")
-    areas = surface.mesh.area_faces
-    total = areas.sum()
-    for attempt in range(MAX_VIDEO_DRAWS):
-        observed, partial, info = video_partial(rng, scene, centerline, surface, video, camera.spread_mm,
-                                                segments.point_density)
-        coverage = float(areas[observed].sum() / total) if total > 0 else float("nan")
-        if coverage >= segments.min_coverage and len(partial):
-            break
-    return observed, coverage, partial, {"video": info, "hole_draws": attempt + 1}
+    (observed, partial, info), coverage, draws = _until_covered(
+        lambda: video_partial(rng, scene, centerline, surface, video, camera.spread_mm, segments.point_density),
+        surface.mesh.area_faces, segments.min_coverage, MAX_VIDEO_DRAWS, usable=lambda r: len(r[1]) > 0)
+    return observed, coverage, partial, {"video": info, "hole_draws": draws}
 
 
 def hole_areas(mesh: trimesh.Trimesh, observed: np.ndarray) -> np.ndarray:

@@ -240,7 +240,7 @@ class FrameCaster:
         self._normals = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
         self._rays = intrinsics.rays()
         self._norm = np.linalg.norm(self._rays, axis=1)
-        self._tree_built = None
+        self._tree = None  # of the face centroids, built on first use
 
     def depth(self, pose, max_distance: float | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Depth and the face under each pixel at a pose; (height, width) each.
@@ -273,9 +273,9 @@ class FrameCaster:
         pose = np.asarray(pose, float)
         reach = self.reach_mm if reach_mm is None else float(reach_mm)
         if candidates is None:
-            if self._tree_built is None:
-                self._tree_built = cKDTree(self.scene.centroids)
-            idx = np.asarray(self._tree_built.query_ball_point(pose[:3, 3], reach), dtype=np.int64)
+            if self._tree is None:
+                self._tree = cKDTree(self.scene.centroids)
+            idx = np.asarray(self._tree.query_ball_point(pose[:3, 3], reach), dtype=np.int64)
         else:
             idx = np.asarray(candidates, dtype=np.int64)
             idx = idx[np.sum((self.scene.centroids[idx] - pose[:3, 3]) ** 2, axis=1) <= reach ** 2]
