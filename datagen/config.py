@@ -155,8 +155,25 @@ class VideoConfig:
     trunc_mm: float = _p(4.0, 0.5, 20.0, "mm", "TSDF truncation distance")
 
 
+@dataclass(frozen=True)
+class WholeConfig:
+    """Whole-colon partial reconstructions (``datagen.wholecolon``): the data of the whole-colon benchmark."""
+
+    point_density: float = _p(2.0, 0.01, 100.0, "points/mm^2", "density of the partial cloud on the observed faces")
+    holes_per_m: float = _p(25.0, 0.0, 1000.0, "count per m",
+                            "hole spheres per metre of centerline (spheres model), centred on the surface")
+    sphere_radius_mm: tuple = _p((4.0, 18.0), 0.1, 200.0, "mm", "hole sphere radius (spheres model)")
+    camera_step_mm: float = _p(10.0, 1.0, 200.0, "mm", "arc length between the views of the camera model")
+    camera_tilt_deg: float = _p(60.0, 0.0, 90.0, "degree",
+                                "largest tilt of a view away from looking up the colon (camera model)")
+    camera_reach_mm: tuple = _p((50.0, 100.0), 5.0, 1000.0, "mm", "how far each view sees (camera model)")
+    camera_offset: float = _p(0.5, 0.0, 0.9, "fraction of the wall distance",
+                              "largest offset of a view off the centerline (camera model)")
+    fov_deg: float = _p(140.0, 30.0, 170.0, "degree", "field of view of each view (camera model)")
+
+
 CONFIG_CLASSES = {"colon": ColonConfig, "camera": CameraConfig, "spheres": SphereConfig, "segments": SegmentConfig,
-                  "video": VideoConfig}
+                  "video": VideoConfig, "whole": WholeConfig}
 
 
 def _check_value(cls, f, value):

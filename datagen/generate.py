@@ -18,7 +18,7 @@ from colonbench import seeding
 from colonbench.datagen.camera import SurfaceScene
 from colonbench.datagen.colon import Colon, generate_colon
 from colonbench.datagen.config import (CONFIG_CLASSES, CameraConfig, ColonConfig, SegmentConfig, SphereConfig,
-                                       VideoConfig, from_dict, read_yaml, to_dict)
+                                       VideoConfig, WholeConfig, from_dict, read_yaml, to_dict)
 from colonbench.datagen.holes import check_hole_model
 from colonbench.datagen.sample import Sample, make_sample
 from colonbench.datagen.segments import segment_surface, windows
@@ -28,13 +28,14 @@ from colonbench.errors import InputError
 @dataclass(frozen=True)
 class GeneratorConfig:
     """All the parameters of the data generator (YAML sections ``colon``, ``camera``, ``spheres``, ``segments``,
-    ``video``)."""
+    ``video``, ``whole``)."""
 
     colon: ColonConfig = field(default_factory=ColonConfig)
     camera: CameraConfig = field(default_factory=CameraConfig)
     spheres: SphereConfig = field(default_factory=SphereConfig)
     segments: SegmentConfig = field(default_factory=SegmentConfig)
     video: VideoConfig = field(default_factory=VideoConfig)
+    whole: WholeConfig = field(default_factory=WholeConfig)
 
     @classmethod
     def from_dict(cls, data: dict | None) -> "GeneratorConfig":
@@ -56,12 +57,14 @@ class GeneratorConfig:
     def to_dict(self) -> dict:
         """Plain dict of all sections (ranges as lists).
 
-        The ``video`` section is left out while it holds its defaults, so that
-        manifests from before it existed keep their hash.
+        The ``video`` and ``whole`` sections are left out while they hold their
+        defaults, so that manifests from before they existed keep their hash.
         """
         out = {k: to_dict(getattr(self, k)) for k in CONFIG_CLASSES}
         if self.video == VideoConfig():
             del out["video"]
+        if self.whole == WholeConfig():
+            del out["whole"]
         return out
 
 

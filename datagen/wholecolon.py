@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from colonbench import seeding
+from colonbench.datagen.config import WholeConfig
 from colonbench.datagen.holes import inside_spheres, sample_surface
 
 
@@ -60,36 +61,45 @@ def withdrawal(colon, seed: int) -> np.ndarray:
     return np.clip(np.array(path), 0.0, length)
 
 
-def camera_observed(colon, seed: int, step_mm: float = 10.0, tilt_deg: float = 60.0, fov_deg: float = 140.0,
-                    reach_mm=(50.0, 100.0), offset: float = 0.5) -> np.ndarray:
-    """(f,) bool: faces a withdrawing colonoscope sees (see the module's description)."""
+def camera_observed(colon, seed: int, config: WholeConfig | None = None) -> np.ndarray:
+    """(f,) bool: faces a withdrawing colonoscope sees (see the module's description).
+
+    The views are ``config.camera_step_mm`` apart along the centerline; each
+    looks up the colon tilted by up to ``camera_tilt_deg``, sits off the
+    centerline by up to ``camera_offset`` of the way to the wall, and sees
+    ``camera_reach_mm`` far with a ``fov_deg`` field of view.
+    """
     from colonbench.datagen.camera import Poses, SurfaceScene, visible_faces
     from colonbench.datagen.centerline import perpendicular_basis
 
+    config = config or WholeConfig()
     rng = seeding.rng(seed, "whole", "camera")
     line = colon.centerline
     scene = SurfaceScene(colon.mesh.vertices, colon.mesh.faces)
-    s = np.arange(0.0, line.length, step_mm)
+    s = np.arange(0.0, line.length, config.camera_step_mm)
     centre, tangent = line.point_at(s), line.tangent_at(s)
     u, v = perpendicular_basis(tangent)
     phi = rng.uniform(0, 2 * np.pi, len(s))
     side = np.cos(phi)[:, None] * u + np.sin(phi)[:, None] * v
     wall, _ = scene.cast(centre, side)
     wall = np.where(np.isfinite(wall), wall, scene.distance(centre))
-    position = centre + (rng.uniform(0, offset, len(s)) * wall)[:, None] * side
+    position = centre + (rng.uniform(0, config.camera_offset, len(s)) * wall)[:, None] * side
     axis = -tangent  # looking up the colon, towards the caecum
-    cos_a = rng.uniform(np.cos(np.radians(tilt_deg)), 1.0, len(s))
+    cos_a = rng.uniform(np.cos(np.radians(config.camera_tilt_deg)), 1.0, len(s))
     psi = rng.uniform(0, 2 * np.pi, len(s))
     au, av = perpendicular_basis(axis)
     direction = cos_a[:, None] * axis + np.sqrt(1 - cos_a**2)[:, None] * (
         np.cos(psi)[:, None] * au + np.sin(psi)[:, None] * av)
-    reach = rng.uniform(reach_mm[0], reach_mm[1], len(s))
-    return visible_faces(scene, Poses(position, direction, reach, s), fov_deg, near_mm=2.0)
+    reach = rng.uniform(config.camera_reach_mm[0], config.camera_reach_mm[1], len(s))
+    return visible_faces(scene, Poses(position, direction, reach, s), config.fov_deg, near_mm=2.0)
 
 
-def whole_partial(colon, seed: int = 0, density: float = 2.0, holes: str = "spheres", holes_per_m: float = 25.0,
-                  radius_mm=(4.0, 18.0)) -> WholePartial:
-    """Sphere-cropped partial cloud of a whole colon, with a withdrawal trajectory.
+#: The whole-colon hole models.
+WHOLE_HOLE_MODELS = ("spheres", "camera")
+
+
+def whole_partial(colon, seed: int = 0, holes: str = "spheres", config: WholeConfig | None = None) -> WholePartial:
+    """Partial cloud of a whole colon, with a withdrawal trajectory.
 
     Parameters
     ----------
@@ -97,30 +107,27 @@ def whole_partial(colon, seed: int = 0, density: float = 2.0, holes: str = "sphe
         Its centerline runs from the caecum (arc length 0) to the anus.
     seed : int
         Root seed; the draws descend from it (``seeding.rng(seed, "whole", ...)``).
-    density : float
-        Points per mm^2 of observed surface.
     holes : str
         ``"spheres"`` or ``"camera"`` (see the module's description).
-    holes_per_m : float
-        Hole spheres per metre of centerline (``spheres``).
-    radius_mm : (float, float)
-        Range of sphere radii, mm (uniform).
+    config : colonbench.datagen.config.WholeConfig, optional
+        Density and hole settings (its defaults when omitted).
     """
     from colonbench.errors import InputError
 
+    config = config or WholeConfig()
     v, f = np.asarray(colon.mesh.vertices), np.asarray(colon.mesh.faces)
     positions = colon.centerline.point_at(withdrawal(colon, seed))
     if holes == "spheres":
         rng = seeding.rng(seed, "whole", "holes")
-        count = max(int(round(holes_per_m * colon.centerline.length / 1000.0)), 1)
+        count = max(int(round(config.holes_per_m * colon.centerline.length / 1000.0)), 1)
         centres = sample_surface(rng, v, f, count=count)
-        radii = rng.uniform(radius_mm[0], radius_mm[1], count)
+        radii = rng.uniform(config.sphere_radius_mm[0], config.sphere_radius_mm[1], count)
         observed = ~inside_spheres(v[f].mean(axis=1), centres, radii)
         spheres = np.concatenate([centres, radii[:, None]], axis=1)
     elif holes == "camera":
-        observed = camera_observed(colon, seed)
+        observed = camera_observed(colon, seed, config)
         spheres = np.zeros((0, 4))
     else:
-        raise InputError(f"unknown whole-colon hole model {holes!r}; use spheres or camera")
-    pts = sample_surface(seeding.rng(seed, "whole", "points"), v, f[observed], density=density)
+        raise InputError(f"unknown whole-colon hole model {holes!r}; use one of {list(WHOLE_HOLE_MODELS)}")
+    pts = sample_surface(seeding.rng(seed, "whole", "points"), v, f[observed], density=config.point_density)
     return WholePartial(points=pts, positions=positions, observed=observed, spheres=spheres)

@@ -2,7 +2,8 @@
 
 from colonbench.augment import AugmentConfig
 from colonbench.datagen.config import describe as describe_config
-from colonbench.shards.schema import ATTRIBUTES, OPTIONAL_ATTRIBUTES, describe
+from colonbench.shards.schema import (ATTRIBUTES, COLON_ATTRIBUTES, COLON_FIELDS, COLON_OPTIONAL_ATTRIBUTES,
+                                      OPTIONAL_ATTRIBUTES, describe)
 
 
 def tables() -> str:
@@ -11,6 +12,12 @@ def tables() -> str:
     out += ["", "| file attribute | meaning |", "|---|---|"]
     out += [f"| `{k}` | {v} |" for k, v in ATTRIBUTES.items()]
     out += [f"| `{k}` (optional) | {v} |" for k, v in OPTIONAL_ATTRIBUTES.items()]
+    out += ["", "Whole-colon shards (`task: colon` manifests, `colonbench.shards.colonshard`):", "",
+            "| dataset | shape | dtype | unit | frame | meaning |", "|---|---|---|---|---|---|"]
+    out += [f"| {p} | {s} | {d} | {u} | {f} | {m} |" for p, s, d, u, f, m in describe(COLON_FIELDS)]
+    out += ["", "| whole-colon file attribute | meaning |", "|---|---|"]
+    out += [f"| `{k}` | {v} |" for k, v in COLON_ATTRIBUTES.items()]
+    out += [f"| `{k}` (optional) | {v} |" for k, v in COLON_OPTIONAL_ATTRIBUTES.items()]
     out += ["", "| augmentation field | default | limits | unit | meaning |", "|---|---|---|---|---|"]
     out += [f"| `{n}` | {d} | {lim} | {u} | {m} |" for n, d, lim, u, m in describe_config(AugmentConfig)]
     return "\n".join(out) + "\n"

@@ -38,12 +38,12 @@ def meshes(*names):
     return out
 
 
-def dump(name, description, seed, splits, overrides=None, axes="pca", mesh_names=()):
+def dump(name, description, seed, splits, overrides=None, axes="pca", mesh_names=(), task="segments"):
     grid = {"size": 64, "margin": 4, "min_extent_mm": 70.0}
     if axes != "pca":
         grid["axes"] = axes
     manifest = {"name": name, "description": description, "generator_version": __version__, "seed": seed,
-                "grid": grid, "config": GeneratorConfig.from_dict(overrides or {}).to_dict(), "splits": splits}
+                **({"task": task} if task != "segments" else {}), "grid": grid, "config": GeneratorConfig.from_dict(overrides or {}).to_dict(), "splits": splits}
     if mesh_names:
         manifest["meshes"] = meshes(*mesh_names)
     manifest["config"] = resolve(manifest, name)["config"]  # with the video section where a split uses it
@@ -124,3 +124,11 @@ dump("train-video", "Video partials for training (the video hole model on the wi
      {"train": split(24, 16, 3, 1, WIDE_NOISE, {"video": 1.0}, meshes=["gca00090", "gca00080"]),
       "validation": split(208, 4, 2, 1, WIDE_NOISE, {"video": 1.0})}, WIDE, axes="tube",
      mesh_names=["gca00090", "gca00080"])
+
+# ------------------------------------------------------------------ whole-colon benchmark (issue 12)
+whole = split(440, 4, None, 2, CLEAN, {"camera": 0.5, "spheres": 0.5}, meshes=["gca00060"])
+del whole["segments_per_length"]
+dump("colon-test", "The whole-colon benchmark (colonbench evaluate --task colon): two whole partial reconstructions "
+     "(withdrawal-camera or sphere holes, 2 points/mm^2, each with its withdrawal trajectory) of each of 4 of "
+     "paper.yaml's test colons and of the real held-out colon gca00060, with their exact per-face truth.",
+     20210901, {"test": whole}, mesh_names=["gca00060"], task="colon")

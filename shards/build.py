@@ -93,6 +93,10 @@ def build_shard(resolved: dict, unit: Unit, out_dir) -> dict:
     dict
         ``name``, ``samples``, ``segments``, ``seconds`` (per stage).
     """
+    if unit.whole:
+        from colonbench.shards.colonshard import build_colon_shard
+
+        return build_colon_shard(resolved, unit, out_dir)
     stages = _Stages()
     t = time.perf_counter()
     seed = resolved["seed"]

@@ -23,6 +23,7 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
 import h5py
+import numpy as np
 import yaml
 
 from colonbench._version import __version__
@@ -83,7 +84,8 @@ def _shard_ok(path: Path, digest: str) -> bool:
     """Whether an existing file under a shard's name is a finished shard of this manifest."""
     try:
         with h5py.File(path, "r") as h5:
-            return (h5.attrs.get("format") == schema.FORMAT and h5.attrs.get("manifest_sha256") == digest
+            return (h5.attrs.get("format") in (schema.FORMAT, schema.COLON_FORMAT)
+                    and h5.attrs.get("manifest_sha256") == digest
                     and "n_samples" in h5.attrs)
     except OSError:
         return False
@@ -209,10 +211,11 @@ def write_lock(resolved: dict, out: Path, hashes: dict | None = None) -> dict:
         old = previous.get(u.name, {})
         sha = old["sha256"] if old.get("bytes") == size and "sha256" in old else sha256_file(path)
         with h5py.File(path, "r") as h5:
-            n, m = int(h5.attrs["n_samples"]), int(h5.attrs["n_segments"])
+            n, m = int(h5.attrs["n_samples"]), int(h5.attrs.get("n_segments", 0))
+            whole = h5["samples/coverage"][()] if u.whole else None
         shards[u.name] = {"sha256": sha, "bytes": size, "samples": n, "segments": m, "split": u.split,
                           "colon_id": u.colon_id, "length_mm": u.length_mm}
-        per_split.setdefault(u.split, []).append(stats.shard_values(path))
+        per_split.setdefault(u.split, []).append(stats.shard_values(path) if whole is None else whole)
     split_info = {}
     for split in SPLITS:
         if split not in per_split:
@@ -222,7 +225,8 @@ def write_lock(resolved: dict, out: Path, hashes: dict | None = None) -> dict:
                              "segments": sum(s["segments"] for s in entries),
                              "colons": len({s["colon_id"] for s in entries}),
                              "bytes": sum(s["bytes"] for s in entries),
-                             "statistics": stats.summarize(per_split[split])}
+                             "statistics": stats.summarize(per_split[split]) if resolved.get("task") != "colon"
+                             else {"coverage": stats.quantiles(np.concatenate(per_split[split]))}}
     lock = {"format": LOCK_FORMAT, "format_version": LOCK_VERSION, "manifest_name": resolved["name"],
             "manifest_sha256": digest, "config_sha256": config_hash(resolved),
             "generator_version": __version__, "shard_format_version": schema.FORMAT_VERSION,
@@ -230,6 +234,6 @@ def write_lock(resolved: dict, out: Path, hashes: dict | None = None) -> dict:
     tmp = out / (LOCK_NAME + ".tmp")
     tmp.write_text(json.dumps(lock, indent=1) + "\n")
     os.replace(tmp, out / LOCK_NAME)
-    if split_info:
+    if split_info and resolved.get("task") != "colon":
         stats.plot({k: v["statistics"] for k, v in split_info.items()}, out / STATS_NAME)
     return lock

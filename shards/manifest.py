@@ -6,6 +6,7 @@ A manifest is a YAML file (see ``data_manifests/``)::
     description: a few seconds of data for tests
     generator_version: 0.1.0      # the colonbench version whose generator it was written for
     seed: 7                       # root seed of every random stream
+    task: segments                # segments (the default) or colon: whole-colon shards (see below)
     grid: {size: 64, margin: 4, min_extent_mm: 70, axes: tube}   # heatmap grid (colonbench.grid.fit_grid);
                                   # axes: tube (the tube's own axis) or pca (the default, as before 0.2)
     config:                       # the full generator config (colonbench.datagen.generate.GeneratorConfig)
@@ -37,6 +38,13 @@ when the data are made. The mesh is imported as colonoscopy sees it
 streams as a procedural colon index would, and must not fall in any split's
 procedural range.
 
+With ``task: colon`` a manifest makes one *whole-colon shard* per colon
+(:mod:`colonbench.shards.colonshard`): ``permutations`` whole partial
+reconstructions of it, with the whole-colon hole models (``spheres``,
+``camera``; drawn systematically, so that each colon gets each model in its
+share) and the config's ``whole`` section; ``segments_per_length`` and
+the grid do not apply.
+
 Colon ranges of different splits may not overlap, and a mesh may belong to
 one split only, so test colons never appear in training or validation. A *shard* is the samples of one colon at one
 segment length for one split; it is the unit of work and of storage.
@@ -66,7 +74,9 @@ from colonbench.grid import AXES, GRID_MARGIN, GRID_MIN_EXTENT_MM, GRID_SIZE
 #: The names a split may have.
 SPLITS = ("train", "validation", "test")
 _SPLIT_KEYS = {"colons", "meshes", "segments_per_length", "permutations", "hole_models", "noise_mm"}
-_TOP_KEYS = {"name", "description", "generator_version", "seed", "grid", "config", "splits", "meshes"}
+_TOP_KEYS = {"name", "description", "generator_version", "seed", "task", "grid", "config", "splits", "meshes"}
+#: What a manifest makes: segment shards (the paper's protocol; the default) or whole-colon shards.
+TASKS = ("segments", "colon")
 _MESH_KEYS = {"id", "mesh", "mesh_sha256", "centerline", "centerline_sha256"}
 
 
@@ -80,10 +90,16 @@ class Unit:
     #: For an imported colon: its name in the manifest's ``meshes``, and the entry with absolute paths.
     mesh: str | None = None
     source: tuple | None = None
+    #: A whole-colon shard (``task: colon``; ``length_mm`` is then 0).
+    whole: bool = False
 
     @property
     def name(self) -> str:
-        """Path of the shard below the dataset folder, e.g. ``train/colon-00012-60mm.h5``, ``test/mesh-x-60mm.h5``."""
+        """Path of the shard below the dataset folder, e.g. ``train/colon-00012-60mm.h5``, ``test/mesh-x-60mm.h5``;
+        whole-colon shards ``test/colon-00012.h5``, ``test/mesh-x.h5``."""
+        if self.whole:
+            return f"{self.split}/mesh-{self.mesh}.h5" if self.mesh is not None else \
+                f"{self.split}/colon-{self.colon_id:05d}.h5"
         if self.mesh is not None:
             return f"{self.split}/mesh-{self.mesh}-{self.length_mm:g}mm.h5"
         return f"{self.split}/colon-{self.colon_id:05d}-{self.length_mm:g}mm.h5"
@@ -177,6 +193,9 @@ def resolve(data: dict, source: str = "manifest") -> dict:
             raise InputError(f"{source}: {key!r} is required")
     name = str(data["name"])
     seed = _int(data["seed"], f"{source}: seed", 0)
+    task = data.get("task", "segments")
+    if task not in TASKS:
+        raise InputError(f"{source}: task {task!r} is not one of {list(TASKS)}")
     config = GeneratorConfig.from_dict(data.get("config"))
     grid = dict(data.get("grid") or {})
     bad = sorted(set(grid) - {"size", "margin", "min_extent_mm", "axes"})
@@ -219,6 +238,17 @@ def resolve(data: dict, source: str = "manifest") -> dict:
         count = _int(colons["count"], f"{where}.colons.count", 0 if names else 1)
         per_length = s.get("segments_per_length")
         per_length = None if per_length is None else _int(per_length, f"{where}.segments_per_length", 1)
+        if task == "colon":
+            from colonbench.datagen.wholecolon import WHOLE_HOLE_MODELS
+
+            if per_length is not None:
+                raise InputError(f"{where}.segments_per_length: a task: colon manifest makes whole colons, "
+                                 "not segments; leave it out")
+            models = s.get("hole_models", {"camera": 1.0})
+            bad = sorted(set(models) - set(WHOLE_HOLE_MODELS)) if isinstance(models, dict) else []
+            if bad:
+                raise InputError(f"{where}.hole_models: {bad} are not whole-colon hole models "
+                                 f"({list(WHOLE_HOLE_MODELS)})")
         splits[split] = {
             "colons": {"first": first, "count": count},
             **({"meshes": list(names)} if names else {}),
@@ -255,9 +285,13 @@ def resolve(data: dict, source: str = "manifest") -> dict:
     config_dict = config.to_dict()
     if any("video" in v["hole_models"] for v in splits.values()):  # spelled out where it is used
         config_dict["video"] = to_dict(config.video)
+    if task == "colon":  # spelled out where it is used
+        config_dict["whole"] = to_dict(config.whole)
     out = {"name": name, "description": str(data.get("description", "")),
            "generator_version": str(data.get("generator_version", __version__)), "seed": seed,
            "grid": grid, "config": config_dict, "splits": splits}
+    if task != "segments":  # only when set, so that manifests from before keep their hash
+        out = {"task": task, **out}
     if meshes:  # only when used, so that manifests from before keep their hash
         out["meshes"] = meshes
     return out
@@ -307,16 +341,18 @@ def units(resolved: dict, splits=None, base=".") -> list[Unit]:
 
     ``base`` is the folder that the manifest's mesh paths are relative to (the manifest file's).
     """
-    lengths = resolved["config"]["segments"]["lengths_mm"]
+    whole = resolved.get("task", "segments") == "colon"
+    lengths = [0.0] if whole else resolved["config"]["segments"]["lengths_mm"]
     out = []
     for split, s in resolved["splits"].items():
         if splits is not None and split not in splits:
             continue
         first, count = s["colons"]["first"], s["colons"]["count"]
-        out += [Unit(split, c, float(length)) for c in range(first, first + count) for length in lengths]
+        out += [Unit(split, c, float(length), whole=whole) for c in range(first, first + count) for length in lengths]
         for name in s.get("meshes", []):
             src = mesh_source(resolved, name, base)
-            out += [Unit(split, resolved["meshes"][name]["id"], float(length), name, src) for length in lengths]
+            out += [Unit(split, resolved["meshes"][name]["id"], float(length), name, src, whole=whole)
+                    for length in lengths]
     return out
 
 

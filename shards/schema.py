@@ -160,13 +160,66 @@ OPTIONAL_ATTRIBUTES = {
                    "the shard holds a video sample",
 }
 
+# --- whole-colon shards (the whole-colon benchmark, ``colonbench evaluate --task colon``) ---
+
+#: Value of the file attribute ``format`` of a whole-colon shard.
+COLON_FORMAT = "colonbench-colon-shard"
+#: Bumped whenever a whole-colon field is added, removed or changes meaning.
+COLON_FORMAT_VERSION = 1
+
+#: A whole-colon shard holds one colon (``colon/``: its true surface, once) and its partial reconstructions
+#: (``samples/``, ``N`` rows, one per hole permutation). ``F`` is the colon's face count; every face's observed
+#: flag is stored per sample, so the truth of any region of the colon can be counted exactly.
+COLON_FIELDS = (
+    Field("colon", "vertices", "float32", ("V", 3), "mm", "colon", "the complete (true) surface's vertices"),
+    Field("colon", "faces", "int32", ("F", 3), "-", "-", "the complete surface's triangles (0-based)"),
+    Field("colon", "centerline", "float32", ("C", 3), "mm", "colon",
+          "GT centerline from the caecum (arc length 0) to the anus, spacing <= 1 mm"),
+    Field("colon", "face_arclength", "float32", ("F",), "mm", "colon centerline arc length",
+          "arc length of the GT centerline point nearest to each face's centroid: the stretch of colon the face "
+          "belongs to (how a map's segments are scored)"),
+    Field("samples", "hole_model", "uint8", ("rows",), "-", "-",
+          "whole-colon hole model: 0 camera (a withdrawing colonoscope's views), 1 spheres (enum as samples/ of "
+          "segment shards)"),
+    Field("samples", "noise_mm", "float32", ("rows",), "mm", "-", "sigma of the Gaussian noise on the points"),
+    Field("samples", "coverage", "float64", ("rows",), "fraction", "-",
+          "GT whole-colon coverage: observed area / complete area"),
+    Field("samples", "observed_faces", "uint8", ("rows", "F"), "-", "-", "1 where the face was observed"),
+    Field("samples", "points", "float32", ("flat", 3), "mm", "colon",
+          "the partial reconstruction (a method's input), noise included", True),
+    Field("samples", "positions", "float32", ("flat", 3), "mm", "colon",
+          "camera positions of the withdrawal in time order, caecum to rectum (colonbench map --trajectory)", True),
+)
+
+#: File attributes every whole-colon shard carries.
+COLON_ATTRIBUTES = {
+    "format": f"always {COLON_FORMAT!r}",
+    "format_version": f"whole-colon shard format version (this one: {COLON_FORMAT_VERSION})",
+    "generator_version": "colonbench version that wrote the file",
+    "manifest_name": "name of the manifest",
+    "manifest_sha256": "hash of the resolved manifest",
+    "config_sha256": "hash of the full generator config",
+    "seed": "root seed of the dataset",
+    "split": "train, validation or test",
+    "colon_id": "procedural colon index, or the imported mesh's id",
+    "colon_source": "the imported colon mesh by its manifest name; '' for a procedural colon",
+    "colon_length_mm": "arc length of the GT centerline, mm",
+    "n_samples": "rows of samples/",
+}
+
+#: Attributes a whole-colon shard carries only where they apply.
+COLON_OPTIONAL_ATTRIBUTES = {
+    "collapsed_mm": "JSON list of the imported colon's collapsed stretches [s0, s1] (mm of arc length), which its "
+                    "surface and the truth leave out",
+}
+
 #: Options of every dataset: per-sample heatmap chunks, gzip level 4 with shuffle, no timestamps.
 COMPRESSION = {"compression": "gzip", "compression_opts": 4, "shuffle": True}
 
 
-def field(path: str) -> Field:
-    """The :class:`Field` stored at ``group/name``."""
-    for f in FIELDS:
+def field(path: str, fields=FIELDS) -> Field:
+    """The :class:`Field` stored at ``group/name`` (of segment shards, or of ``fields``)."""
+    for f in fields:
         if f.path == path:
             return f
     raise KeyError(path)
@@ -177,10 +230,10 @@ def hole_model_dtype():
     return h5py.enum_dtype(HOLE_MODEL_CODES, basetype="u1")
 
 
-def describe() -> list[tuple[str, str, str, str, str, str]]:
+def describe(fields=FIELDS) -> list[tuple[str, str, str, str, str, str]]:
     """Rows ``(path, shape, dtype, unit, frame, description)`` for the docs, offsets included."""
     rows = []
-    for f in FIELDS:
+    for f in fields:
         dims = [{"rows": "N" if f.group == "samples" else "M", "flat": "total"}.get(s, str(s)) for s in f.shape]
         shape = "(" + ", ".join(dims) + ("," if len(dims) == 1 else "") + ")"
         rows.append((f"`{f.path}`", shape, f.dtype, f.unit, f.frame, f.doc))
@@ -198,6 +251,8 @@ def check(h5: h5py.File) -> list[str]:
     line up, and that heatmaps and coverages are finite and within [0, 1].
     Heatmap values are read one sample at a time.
     """
+    if h5.attrs.get("format") == COLON_FORMAT:
+        return check_colon(h5)
     faults = []
     for key in ATTRIBUTES:
         if key not in h5.attrs:
@@ -266,4 +321,49 @@ def check(h5: h5py.File) -> list[str]:
             if not (np.all(np.isfinite(v)) and v.min() >= 0 and v.max() <= 1):
                 faults.append(f"samples/{name}[{i}] has values outside [0, 1]")
                 break
+    return faults
+
+
+def check_colon(h5: h5py.File) -> list[str]:
+    """Every way in which an open whole-colon shard departs from :data:`COLON_FIELDS`; empty when it conforms."""
+    faults = [f"attribute {key!r} is missing" for key in COLON_ATTRIBUTES if key not in h5.attrs]
+    if faults:
+        return faults
+    if int(h5.attrs["format_version"]) != COLON_FORMAT_VERSION:
+        return [f"format_version {int(h5.attrs['format_version'])} is not {COLON_FORMAT_VERSION}, the whole-colon "
+                "version this colonbench reads"]
+    n = int(h5.attrs["n_samples"])
+    sizes = {}
+    for f in COLON_FIELDS:
+        if f.path not in h5 or not isinstance(h5[f.path], h5py.Dataset):
+            faults.append(f"{f.path} is missing")
+            continue
+        ds = h5[f.path]
+        if ds.dtype != np.dtype(f.dtype):
+            faults.append(f"{f.path} has dtype {ds.dtype}, expected {f.dtype}")
+        dims = {"rows": n}
+        if f.ragged:
+            off = h5.get(f.path + "_offsets")
+            if off is None or off.shape != (n + 1,) or off[0] != 0 or np.any(np.diff(off[()]) < 0) \
+                    or off[-1] != ds.shape[0]:
+                faults.append(f"{f.path}_offsets is missing or does not run from 0 to the {ds.shape[0]} rows of "
+                              f"{f.path} in {n} rising steps")
+                continue
+            dims["flat"] = ds.shape[0]
+        for k, s in enumerate(f.shape):
+            if s in ("V", "F", "C"):
+                dims.setdefault(s, ds.shape[k] if ds.ndim > k else -1)
+                sizes.setdefault(s, dims[s])
+                dims[s] = sizes[s]
+        expected = tuple(dims.get(s, s) for s in f.shape)
+        if ds.shape != expected:
+            faults.append(f"{f.path} has shape {ds.shape}, expected {expected}")
+    if faults:
+        return faults
+    faces = h5["colon/faces"][()]
+    if len(faces) == 0 or faces.min() < 0 or faces.max() >= h5["colon/vertices"].shape[0]:
+        faults.append("colon/faces index vertices the colon does not have (or there are none)")
+    cov = h5["samples/coverage"][()]
+    if not np.all(np.isfinite(cov) & (cov >= 0) & (cov <= 1)):
+        faults.append("samples/coverage has values outside [0, 1]")
     return faults

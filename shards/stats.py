@@ -38,7 +38,8 @@ def shard_values(path) -> dict:
                 "noise_mm": smp["noise_mm"][()].astype(float), "hole_model": smp["hole_model"][()]}
 
 
-def _quantiles(x) -> dict:
+def quantiles(x) -> dict:
+    """mean, 5 / 50 / 95 % quantiles, min and max of ``x`` ({} when empty)."""
     if len(x) == 0:
         return {}
     q = np.quantile(x, [0.05, 0.5, 0.95])
@@ -55,14 +56,14 @@ def summarize(values: list[dict]) -> dict:
     noise, noise_counts = np.unique(cat["noise_mm"], return_counts=True)
     names = {v: k for k, v in HOLE_MODEL_CODES.items()}
     return {
-        "coverage": {**_quantiles(cat["coverage"]), "histogram": {
+        "coverage": {**quantiles(cat["coverage"]), "histogram": {
             "edges": COVERAGE_BINS.tolist(), "counts": np.histogram(cat["coverage"], COVERAGE_BINS)[0].tolist()}},
-        "holes_per_sample": {**_quantiles(cat["holes"]), "counts": hole_counts.tolist()},
-        "hole_size_pct": {**_quantiles(cat["hole_size_pct"]), "histogram": {
+        "holes_per_sample": {**quantiles(cat["holes"]), "counts": hole_counts.tolist()},
+        "hole_size_pct": {**quantiles(cat["hole_size_pct"]), "histogram": {
             "edges": HOLE_SIZE_BINS.tolist(),
             "counts": np.histogram(np.clip(cat["hole_size_pct"], 0, 100), HOLE_SIZE_BINS)[0].tolist()}},
-        "outside_grid": _quantiles(cat["outside_grid"]),
-        "voxel_mm": _quantiles(cat["voxel_mm"]),
+        "outside_grid": quantiles(cat["outside_grid"]),
+        "voxel_mm": quantiles(cat["voxel_mm"]),
         "hole_models": {names[int(m)]: int(c) for m, c in zip(models, model_counts)},
         "noise_mm": {f"{s:g}": int(c) for s, c in zip(noise, noise_counts)},
     }
