@@ -156,8 +156,10 @@ def cmd_generate(args):
                     progress=not args.quiet, allow_version_mismatch=args.allow_version_mismatch)
     for split, info in lock["splits"].items():
         cov = info["statistics"]["coverage"]
-        print(f"{split}: {info['samples']} samples of {info['segments']} segments from {info['colons']} colons, "
-              f"{info['bytes'] / 2**20:.1f} MiB, coverage mean {cov['mean']:.3f}")
+        what = (f"{info['samples']} samples of {info['segments']} segments" if info["segments"] else
+                f"{info['samples']} whole-colon reconstructions")
+        print(f"{split}: {what} from {info['colons']} colons, {info['bytes'] / 2**20:.1f} MiB, "
+              f"coverage mean {cov['mean']:.3f}")
     if lock["missing"]:
         print(f"{len(lock['missing'])} shard(s) of the manifest not generated (splits left out)")
     print(f"wrote {Path(args.out) / LOCK_NAME} in {time.perf_counter() - t:.1f} s")
@@ -288,6 +290,14 @@ def cmd_evaluate(args):
     from colonbench.benchmark.evaluate import evaluate, load_results
     from colonbench.benchmark.summary import summarize
 
+    from colonbench.benchmark.colon_evaluate import dataset_task
+
+    task = args.task or dataset_task(args.data)
+    if task != dataset_task(args.data):
+        raise ColonbenchError(f"{args.data} is a {dataset_task(args.data)} dataset; --task {task} needs a "
+                         f"{'task: colon' if task == 'colon' else 'segment'} manifest's data")
+    if task == "colon":
+        return _evaluate_colons(args)
     t = time.perf_counter()
     run = evaluate(args.data, _method_list(args.methods), args.out, noise=args.noise, split=args.split,
                    limit=args.limit, workers=args.workers, model=args.model, device=args.device,
@@ -306,6 +316,26 @@ def cmd_evaluate(args):
     print(f"wrote {run}/results/: {session['segments']} segment evaluations in {time.perf_counter() - t:.0f} s "
           f"with {session['workers']} worker(s), peak memory {session['peak_process_mib']} MiB per process; "
           f"tables: colonbench leaderboard {run} --out DIR")
+
+
+def _evaluate_colons(args):
+    """colonbench evaluate --task colon: map every whole-colon sample with every method and track."""
+    from colonbench.benchmark.colon_evaluate import evaluate_colons, load_colon_results
+    from colonbench.reports.colon_leaderboard import colon_table
+
+    t = time.perf_counter()
+    methods = _method_list(args.methods) if args.methods != "all" else ["completion", "thresholding", "unwrap",
+                                                                       "constant"]
+    run = evaluate_colons(args.data, methods, args.out, noise=args.noise, contexts=args.contexts,
+                          segment_mm=args.segment_length, split=args.split, limit=args.limit, workers=args.workers,
+                          model=args.model, device=args.device, noise_seed=args.noise_seed,
+                          progress=not args.quiet)
+    meta, segments, colons = load_colon_results(run)
+    tab = colon_table(segments, colons)
+    for _, r in tab.iterrows():
+        print(f"noise {r['noise_mm']:g} mm  {r['method']:<13} {r['track']:<14} segment MAE {r['segment_mae']:6.2f} "
+              f"points over {r['segments']} segments, whole colon |error| {r['whole_mae']:5.2f} points")
+    print(f"wrote {run}/results/ in {time.perf_counter() - t:.0f} s; tables: colonbench leaderboard {run} --out DIR")
 
 
 def cmd_leaderboard(args):
@@ -619,6 +649,13 @@ def build_parser() -> argparse.ArgumentParser:
                        "(default: small)")
     p.add_argument("--examples", type=int, default=3, help="segments whose meshes are kept for figures (default 3)")
     p.add_argument("--noise-seed", type=int, default=0, help="root seed of the input noise (default 0)")
+    p.add_argument("--task", choices=["segments", "colon"],
+                   help="segments (the paper's protocol) or colon (whole-colon maps, docs/mapping.md); "
+                        "default: what the dataset was made for")
+    p.add_argument("--contexts", type=_floats, default=[0.0, 15.0],
+                   help="--task colon: context margins, one track each, mm (0 = segment-only; default 0,15)")
+    p.add_argument("--segment-length", type=float, default=60.0,
+                   help="--task colon: segment arc length of the maps, mm (default 60)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_evaluate)
 

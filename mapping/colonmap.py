@@ -165,7 +165,7 @@ def clip_between(vertices: np.ndarray, faces: np.ndarray, line: np.ndarray, arc:
 
 
 def map_colon(points: np.ndarray, method, segment_mm: float = SEGMENT_MM, positions: np.ndarray | None = None,
-              progress: bool = True, context_mm: float = 0.0) -> dict:
+              progress: bool = True, context_mm: float = 0.0, pieces: list | None = None) -> dict:
     """The coverage map of a reconstruction.
 
     Parameters
@@ -188,6 +188,9 @@ def map_colon(points: np.ndarray, method, segment_mm: float = SEGMENT_MM, positi
         faces nearest to the segment's stretch of the centerline before the
         coverage is counted; a method without a completed mesh is then run on
         the segment alone.
+    pieces : list of colonbench.mapping.centerline.Piece, optional
+        ``colon_centerline(points)`` when the caller has it already (several
+        methods or tracks mapping the same reconstruction).
 
     Returns
     -------
@@ -215,7 +218,7 @@ def map_colon(points: np.ndarray, method, segment_mm: float = SEGMENT_MM, positi
         raise InputError(f"--context-mm must be 0 or more, got {context_mm}")
     seconds = {}
     t0 = time.perf_counter()
-    pieces = colon_centerline(points)
+    pieces = colon_centerline(points) if pieces is None else pieces
     pieces, orientation = orient(pieces, positions)
     seconds["centerline"] = time.perf_counter() - t0
     total = sum(p.length for p in pieces)

@@ -61,13 +61,26 @@ def map_mesh(segments, red_at: float = 0.5):
     return mesh
 
 
-def render_views(mesh, size: int = 640) -> list[np.ndarray]:
-    """Two (size, size, 3) uint8 renderings of ``mesh`` from either side of its broadest plane."""
+def render_views(mesh, size: int = 640, like=None, sides=(1.0, -1.0)) -> list[np.ndarray]:
+    """(size, size, 3) uint8 renderings of ``mesh`` from either side of its broadest plane.
+
+    Parameters
+    ----------
+    mesh : trimesh.Trimesh
+        Vertex- or face-coloured.
+    size : int
+        Image side, px.
+    like : trimesh.Trimesh, optional
+        Take the plane and the distance from this mesh instead (the same view of several meshes).
+    sides : tuple of float
+        ``1.0`` (front) and / or ``-1.0`` (back).
+    """
     from colonbench.offscreen import pyrender as _load
 
     pyrender = _load()
-    centre = mesh.vertices.mean(axis=0)
-    rel = mesh.vertices - centre
+    frame = mesh if like is None else like
+    centre = frame.vertices.mean(axis=0)
+    rel = frame.vertices - centre
     _, _, axes = np.linalg.svd(rel[:: max(1, len(rel) // 20000)], full_matrices=False)
     up, view = axes[1], axes[2]  # the second spread is up; look along the least spread
     extent = np.ptp(rel @ axes[:2].T, axis=0).max()
@@ -78,7 +91,7 @@ def render_views(mesh, size: int = 640) -> list[np.ndarray]:
     renderer = pyrender.OffscreenRenderer(size, size)
     images = []
     try:
-        for sign in (1.0, -1.0):
+        for sign in sides:
             z = sign * view
             x = np.cross(up, z)
             x /= np.linalg.norm(x)
@@ -119,5 +132,93 @@ def render_map(mesh, path, red_at: float = 0.5, size: int = 640) -> Path:
     fig.legend(handles=[Patch(color=np.array(HOLE_RGB) / 255, label="estimated holes")], loc="lower left")
     path = Path(path)
     fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
+
+#: Segment coverage errors beyond this are drawn in the end colours of the error scale, points.
+ERROR_SPAN = 20.0
+
+
+def _error_rgb(error_points) -> np.ndarray:
+    from matplotlib import colormaps
+
+    t = np.clip(0.5 + np.atleast_1d(np.asarray(error_points, float)) / (2 * ERROR_SPAN), 0.0, 1.0)
+    return (np.asarray(colormaps["RdBu_r"](t))[:, :3] * 255).round().astype(np.uint8)
+
+
+def map_truth_error(example, path, red_at: float = 0.5, size: int = 480) -> Path:
+    """A whole-colon benchmark figure: per track, the map, the truth and the error side by side.
+
+    Parameters
+    ----------
+    example : path
+        An ``examples/*.pkl`` of a whole-colon run (:mod:`colonbench.benchmark.colon_evaluate`).
+    path : path
+        The PNG to write.
+
+    The map is every segment's completed mesh coloured by its estimated coverage
+    (holes blue; for a method without a completed mesh, the true surface's
+    stretch of each segment coloured by its estimate); the truth is the true
+    surface, each map segment's stretch coloured by its true coverage and
+    unobserved faces blue; the error colours the same stretches by estimated -
+    true coverage (blue under, red over, grey without an estimate). All three
+    are seen from the same camera.
+    """
+    import pickle
+    from types import SimpleNamespace
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import trimesh
+    from matplotlib.colors import LinearSegmentedColormap, Normalize
+
+    with open(example, "rb") as fh:
+        ex = pickle.load(fh)
+    keys = [k for k in ex["maps"] if k.startswith("completion|")] or list(ex["maps"])[:1]
+    fs = ex["face_arclength"]
+    opaque = np.full((len(fs), 1), 255, np.uint8)
+
+    def surface(values, rgb, holes: bool = False):
+        """The true surface, each map segment's stretch coloured by ``rgb(value)`` (grey where NaN)."""
+        colour = np.tile(np.array(NONE_RGB, np.uint8), (len(fs), 1))
+        for k, (lo, hi) in enumerate(zip(m["true_start_mm"], m["true_end_mm"])):
+            if np.isfinite(values[k]):
+                colour[(fs >= lo) & (fs < hi)] = rgb(values[k])[0]
+        if holes:
+            colour[~ex["observed"]] = HOLE_RGB
+        mesh = trimesh.Trimesh(ex["vertices"], ex["faces"], process=False)
+        mesh.visual.face_colors = np.concatenate([colour, opaque], axis=1)
+        return mesh
+
+    truth_frame = trimesh.Trimesh(ex["vertices"], ex["faces"], process=False)
+    fig, axs = plt.subplots(len(keys), 3, figsize=(14, 4.8 * len(keys)), constrained_layout=True, squeeze=False)
+    for row, key in zip(axs, keys):
+        m = ex["maps"][key]
+        est = np.array([np.nan if r["coverage"] is None else r["coverage"] for r in m["segments"]], float)
+        truth = np.asarray(m["truth"], float)
+        segs = [SimpleNamespace(index=r["index"], coverage=r["coverage"], mesh=mesh)
+                for r, mesh in zip(m["segments"], m["meshes"])]
+        cov_rgb = lambda c: coverage_rgb(c, red_at)  # noqa: E731
+        if any(s.mesh for s in segs):
+            estimated = ("map: completed segments by estimated coverage, holes blue", map_mesh(segs, red_at))
+        else:
+            estimated = ("map: each stretch by its estimated coverage", surface(est, cov_rgb))
+        panels = [estimated, ("truth: true coverage, unobserved faces blue", surface(truth, cov_rgb, holes=True)),
+                  ("error: estimated - true", surface(100 * (est - truth), _error_rgb))]
+        for ax, (title, mesh) in zip(row, panels):
+            ax.imshow(render_views(mesh, size, like=truth_frame, sides=(1.0,))[0])
+            ax.set_title(f"{key.replace('|', ', ')}\n{title}", fontsize=9)
+            ax.set_axis_off()
+    cov = LinearSegmentedColormap.from_list("coverage", coverage_rgb(np.linspace(red_at, 1, 64), red_at) / 255.0)
+    fig.colorbar(plt.cm.ScalarMappable(norm=Normalize(red_at * 100, 100), cmap=cov), ax=axs[:, :2], shrink=0.6,
+                 label="coverage, % (blue: holes / unobserved)")
+    errmap = LinearSegmentedColormap.from_list("error", _error_rgb(np.linspace(-ERROR_SPAN, ERROR_SPAN, 64)) / 255.0)
+    fig.colorbar(plt.cm.ScalarMappable(norm=Normalize(-ERROR_SPAN, ERROR_SPAN), cmap=errmap), ax=axs[:, 2],
+                 shrink=0.6, label="coverage error, points")
+    path = Path(path)
+    fig.savefig(path, dpi=90)
     plt.close(fig)
     return path

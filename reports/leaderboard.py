@@ -124,11 +124,24 @@ def markdown(meta: dict, tab: pd.DataFrame) -> str:
 def write_leaderboard(run_dirs, out, figures: bool = True) -> dict:
     """Write ``leaderboard.md``, ``.csv`` and ``.json`` (and the figures) for runs on the same data.
 
+    Whole-colon runs (``evaluate --task colon``) get their own leaderboard
+    (:func:`colonbench.reports.colon_leaderboard.write_colon_leaderboard`).
+
     Returns
     -------
     dict
         ``{"markdown": text, "paths": [written files]}``.
     """
+    from colonbench.benchmark.colon_evaluate import is_colon_run
+
+    colon = [is_colon_run(r) for r in run_dirs]
+    if any(colon):
+        if not all(colon):
+            raise InputError("some runs are whole-colon runs (evaluate --task colon) and some segment runs; a "
+                             "leaderboard compares runs of one task")
+        from colonbench.reports.colon_leaderboard import write_colon_leaderboard
+
+        return write_colon_leaderboard(run_dirs, out, figures=figures)
     meta, results = merge_runs(run_dirs)
     tab = table(meta, results)
     out = Path(out)

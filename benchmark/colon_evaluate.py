@@ -1,0 +1,361 @@
+"""The whole-colon benchmark (``colonbench evaluate --task colon``): maps of whole reconstructions, scored exactly.
+
+Each sample of a whole-colon dataset (``task: colon`` manifests,
+:mod:`colonbench.shards.colonshard`) is one partial reconstruction of a whole
+colon with its withdrawal trajectory. For every method, noise level and
+*track* it is mapped with :func:`colonbench.mapping.colonmap.map_colon`
+(60 mm segments by default) and scored with
+:func:`colonbench.benchmark.colon_metrics.map_metrics` against the exact truth:
+
+* each segment the map reports against the true coverage of the same region
+  of the true surface (the faces whose true arc length lies between the true
+  arc lengths at its two plane points);
+* the whole-colon coverage against the observed share of the whole surface;
+* the map's centerline by precision / recall at 2 mm.
+
+Tracks: ``segment-only`` (context 0: each segment estimated on its own points,
+the paper's protocol) and ``context-<M>mm`` (the segment's points plus its
+neighbours' up to M mm beyond each plane, coverage counted between its planes).
+Both tracks map the same reconstruction with the same centerline, so their
+segments are the same and are compared one for one.
+
+A run folder holds::
+
+    run.json                              task "colon", data identity, noise, tracks, methods, versions
+    parts/<method>/<unit>.segments.csv    per-segment rows of one sample at one noise level (resume points)
+    parts/<method>/<unit>.colons.csv      its per-map rows
+    results/segments.csv, colons.csv      every row of every method, once all parts exist
+    examples/<method>/<unit>.npz          the first sample's maps, for the figure
+
+The noise is drawn as in the segment benchmark (stream ``("eval-noise", sigma in um, shard, index)``),
+the same cloud for every method, track and rerun.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import resource
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures.process import BrokenProcessPool
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from colonbench.benchmark.colon_metrics import END_SEEN, map_metrics
+from colonbench.benchmark.evaluate import (RUN_FILE, _init_worker, _method_record, _open_run, _WORKER, _write_csv,
+                                           _write_json, noisy, read_rows, select, versions)
+from colonbench.benchmark.registry import load_method
+from colonbench.errors import ColonbenchError, InputError
+from colonbench.folderlock import folder_lock
+
+#: Default context margins of the tracks, mm (0 = segment-only).
+CONTEXTS_MM = (0.0, 15.0)
+#: Per-segment columns of ``results/segments.csv``.
+SEGMENT_COLUMNS = ["method", "track", "context_mm", "shard", "colon", "index", "hole_model", "noise_mm", "segment",
+                   "piece", "start_mm", "end_mm", "true_start_mm", "true_end_mm", "points", "true_coverage",
+                   "coverage", "coverage_error", "end_seen", "end_unobserved", "seconds", "error"]
+#: Per-map columns of ``results/colons.csv``.
+COLON_COLUMNS = ["method", "track", "context_mm", "shard", "colon", "index", "hole_model", "noise_mm",
+                 "colon_length_mm", "segments", "estimated", "interruptions", "true_coverage", "coverage",
+                 "coverage_error", "segment_mae", "centerline_precision", "centerline_recall", "seconds", "error"]
+
+
+def track_name(context_mm: float) -> str:
+    """``segment-only`` for 0, ``context-<M>mm`` otherwise."""
+    return "segment-only" if context_mm == 0 else f"context-{context_mm:g}mm"
+
+
+_COLONS: dict = {}
+
+
+def _colon(data: str, shard_name: str):
+    """The shard and its colon's truth, kept for the next unit of the same shard in this process."""
+    from colonbench.shards.colonshard import ColonShard
+
+    key = (data, shard_name)
+    if key not in _COLONS:
+        _COLONS.clear()
+        shard = ColonShard(Path(data) / shard_name)
+        _COLONS[key] = (shard, shard.colon())
+    return _COLONS[key]
+
+
+def run_colon_unit(data: str, shard_name: str, index: int, sigma: float, noise_seed: int, names: list[str],
+                   contexts: list[float], segment_mm: float, example: str | None = None,
+                   methods: dict | None = None) -> dict:
+    """Map and score one whole-colon sample at one noise level with the named methods, every track.
+
+    Returns
+    -------
+    dict
+        ``{method: (segment rows, colon rows)}`` (lists of dicts, :data:`SEGMENT_COLUMNS`, :data:`COLON_COLUMNS`).
+    """
+    from colonbench.mapping.centerline import colon_centerline
+    from colonbench.mapping.colonmap import map_colon, whole_coverage
+
+    methods = methods if methods is not None else _WORKER["methods"]
+    shard, truth = _colon(data, shard_name)
+    sample = shard.sample(index)
+    points = noisy(sample["points"], sigma, noise_seed, shard_name, index)
+    ids = {"shard": shard_name, "colon": shard.name, "index": index, "hole_model": sample["hole_model"],
+           "noise_mm": sigma}
+    out, examples = {}, {}
+    t = time.perf_counter()
+    try:
+        pieces = colon_centerline(points)  # once for every method and track: the same segments
+    except ColonbenchError:
+        pieces = None  # map_colon raises it again, per map
+    centerline_s = time.perf_counter() - t
+    for name in names:
+        seg_rows, colon_rows = [], []
+        for context in contexts:
+            track = {"method": name, "track": track_name(context), "context_mm": context}
+            t = time.perf_counter()
+            try:
+                result = map_colon(points, methods[name], segment_mm=segment_mm, positions=sample["positions"],
+                                   progress=False, context_mm=context, pieces=pieces)
+            except ColonbenchError as exc:
+                colon_rows.append({**track, **ids, "colon_length_mm": float(shard.attrs["colon_length_mm"]),
+                                   "true_coverage": sample["coverage"], "error": str(exc)})
+                continue
+            seconds = time.perf_counter() - t + centerline_s  # the shared centerline counted in every map
+            segs = result["segments"]
+            rows = [s.row() for s in segs]
+            whole = whole_coverage(segs)
+            score = map_metrics(rows, whole, result["centerline"], truth["vertices"], truth["faces"],
+                                sample["observed_faces"], truth["centerline"], face_s=truth["face_arclength"])
+            for k, (s, r) in enumerate(zip(segs, rows)):
+                seen = score["end_seen"][k]
+                seg_rows.append({**track, **ids, "segment": s.index, "piece": s.piece, "start_mm": r["start_mm"],
+                                 "end_mm": r["end_mm"], "true_start_mm": score["true_start_mm"][k],
+                                 "true_end_mm": score["true_end_mm"][k], "points": s.points,
+                                 "true_coverage": score["segment_truth"][k], "coverage": r["coverage"],
+                                 "coverage_error": score["segment_errors"][k], "end_seen": seen,
+                                 "end_unobserved": bool(np.isfinite(seen) and seen < END_SEEN),
+                                 "seconds": s.seconds, "error": s.error or ""})
+            colon_rows.append({**track, **ids, "colon_length_mm": float(shard.attrs["colon_length_mm"]),
+                               "segments": len(segs), "estimated": sum(s.coverage is not None for s in segs),
+                               "interruptions": len(result["interruptions"]), "true_coverage": score["whole_truth"],
+                               "coverage": whole, "coverage_error": score["whole_error"],
+                               "segment_mae": score["segment_mae"],
+                               "centerline_precision": score["centerline_precision"],
+                               "centerline_recall": score["centerline_recall"], "seconds": seconds, "error": ""})
+            if example is not None:
+                examples[f"{name}|{track['track']}"] = (segs, score)
+        out[name] = (seg_rows, colon_rows)
+    if example is not None and examples:
+        _save_example(Path(example), truth, sample, examples)
+    return out
+
+
+def _save_example(path: Path, truth: dict, sample: dict, maps: dict):
+    """The truth and each map's segment meshes of one sample, for the figure (reports.colon_figures)."""
+    import pickle
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    keep = {"vertices": truth["vertices"].astype(np.float32), "faces": truth["faces"].astype(np.int32),
+            "face_arclength": truth["face_arclength"].astype(np.float32),
+            "observed": sample["observed_faces"], "maps": {}}
+    for key, (segs, score) in maps.items():
+        keep["maps"][key] = {"segments": [s.row() for s in segs], "meshes": [s.mesh for s in segs],
+                             "truth": score["segment_truth"], "true_start_mm": score["true_start_mm"],
+                             "true_end_mm": score["true_end_mm"]}
+    tmp = path.with_name(f".{path.name}.tmp")
+    with open(tmp, "wb") as fh:
+        pickle.dump(keep, fh, protocol=4)
+    tmp.replace(path)
+
+
+def _unit_key(shard_name: str, index: int, sigma: float) -> str:
+    return f"{Path(shard_name).with_suffix('').as_posix().replace('/', '__')}-{index}-noise{sigma:g}"
+
+
+def evaluate_colons(data, methods, out, noise=(0.0, 0.5), contexts=CONTEXTS_MM, segment_mm: float = 60.0,
+                    split: str = "test", limit: int | None = None, workers: int = 1, model=None,
+                    device: str = "cpu", noise_seed: int = 0, progress: bool = True) -> Path:
+    """Map every whole-colon sample of a split with every method and track; write (or finish) a run folder.
+
+    Parameters
+    ----------
+    data : path
+        A whole-colon dataset folder (``colonbench generate`` on a ``task: colon`` manifest).
+    methods : list of str
+        Registered names or ``module:Class`` specs; methods given ground truth (references) cannot map.
+    out : path
+        Run folder.
+    noise : sequence of float
+        Gaussian noise sigmas added to the reconstructions, mm.
+    contexts : sequence of float
+        Context margins, one track each, mm (0 = segment-only).
+    segment_mm : float
+        Segment arc length, mm.
+    split, limit, workers, model, device, noise_seed, progress
+        As for :func:`colonbench.benchmark.evaluate.evaluate`.
+
+    Returns
+    -------
+    Path
+        The run folder.
+    """
+    from colonbench.shards.colonshard import ColonShard
+
+    data, out = Path(data), Path(out)
+    if workers < 1:
+        raise InputError(f"--workers must be >= 1, got {workers}")
+    sigmas = sorted({float(s) for s in noise})
+    if not sigmas or any(s < 0 or not np.isfinite(s) for s in sigmas):
+        raise InputError(f"noise levels must be non-negative mm, got {list(noise)}")
+    contexts = sorted({float(c) for c in contexts})
+    if not contexts or any(c < 0 or not np.isfinite(c) for c in contexts):
+        raise InputError(f"context margins must be non-negative mm, got {list(contexts)}")
+    if not segment_mm > 0:
+        raise InputError(f"--segment-length must be positive, got {segment_mm}")
+    specs = [s.strip() for s in methods if s.strip()]
+    if not specs:
+        raise InputError("no methods given")
+    identity, picks = select(data, split, limit)
+    ColonShard(data / picks[0][0])  # a clear error for a segment dataset
+    options = {"model": str(model) if model is not None else None, "device": device}
+    t0 = time.perf_counter()
+    loaded = {}
+    for spec in specs:
+        m = load_method(spec, **options)
+        if getattr(m, "uses_truth", False):
+            raise InputError(f"method {m.name!r} is given ground truth per segment (a reference row of the segment "
+                             "benchmark); it cannot map a whole reconstruction")
+        if m.name in loaded:
+            raise InputError(f"two methods are named {m.name!r}; rename one")
+        loaded[m.name] = (spec, m)
+    records = {name: _method_record(spec, m) for name, (spec, m) in loaded.items()}
+    settings = {"task": "colon", "data": identity, "noise_mm": sigmas, "noise_seed": int(noise_seed),
+                "contexts_mm": contexts, "segment_mm": float(segment_mm), "thresholds_mm": [2.0]}
+    if out.is_dir() and not (out / RUN_FILE).exists() and any(not p.name.startswith(".") for p in out.iterdir()):
+        raise InputError(f"{out} is not empty and holds no {RUN_FILE}; give a new or empty run folder")
+    out.mkdir(parents=True, exist_ok=True)
+    with folder_lock(out, "evaluate", "evaluation"):
+        run = _open_run(out, settings, records)
+        run["versions"] = run.get("versions") or versions()
+        run["data_path"] = str(data)
+        _write_json(out / RUN_FILE, run)
+        for tmp in out.rglob(".*.tmp*"):
+            tmp.unlink()
+        return _run(out, run, data, picks, sigmas, contexts, segment_mm, loaded, options, workers, noise_seed,
+                    progress, t0)
+
+
+def _run(out, run, data, picks, sigmas, contexts, segment_mm, loaded, options, workers, noise_seed, progress,
+         t0) -> Path:
+    from tqdm.auto import tqdm
+
+    flat = [(n, i) for n, idx in picks for i in idx]
+    units, keys = [], []
+    for n, i in flat:
+        for s in sigmas:
+            key = _unit_key(n, i, s)
+            keys.append(key)
+            todo = [m for m in loaded if not (out / "parts" / m / f"{key}.colons.csv").exists()]
+            if todo:
+                example = str(out / "examples" / f"{key}.pkl") if (n, i) == flat[0] and s == sigmas[0] else None
+                units.append((n, i, s, todo, example, key))
+    bar = tqdm(total=len(units), unit="map", desc="evaluate colons", disable=None if progress else True,
+               dynamic_ncols=True)
+    args = lambda u: (str(data), u[0], u[1], u[2], noise_seed, u[3], contexts, segment_mm, u[4])  # noqa: E731
+    try:
+        if workers == 1 or len(units) <= 1:
+            methods = {n: m for n, (_, m) in loaded.items()}
+            for u in units:
+                _store(out, u[5], run_colon_unit(*args(u), methods=methods))
+                bar.update(1)
+        else:
+            ctx = multiprocessing.get_context("spawn")  # torch and HDF5 are not fork-safe
+            specs = [spec for spec, _ in loaded.values()]
+            with ProcessPoolExecutor(min(workers, len(units)), mp_context=ctx, initializer=_init_worker,
+                                     initargs=(specs, options, 1)) as pool:
+                futures = {pool.submit(run_colon_unit, *args(u)): u for u in units}
+                try:
+                    for f in as_completed(futures):
+                        _store(out, futures[f][5], f.result())
+                        bar.update(1)
+                except BrokenProcessPool:
+                    raise ColonbenchError("a worker process died (out of memory?); what was finished is kept, "
+                                          "rerun the same command (with fewer --workers) to resume") from None
+    finally:
+        bar.close()
+    for kind in ("segments", "colons"):
+        frames = [read_rows(out / "parts" / m / f"{k}.{kind}.csv") for m in loaded for k in keys]
+        _write_csv(out / "results" / f"{kind}.csv", pd.concat(frames, ignore_index=True))
+    wall = time.perf_counter() - t0
+    peak = max(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss,
+               resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss) / 1024
+    run["sessions"].append({"maps": len(units) * len(contexts), "wall_seconds": round(wall, 1), "workers": workers,
+                            "peak_process_mib": round(peak), "finished": time.strftime("%Y-%m-%dT%H:%M:%S")})
+    run["complete"] = True
+    _write_json(out / RUN_FILE, run)
+    return out
+
+
+def _store(out: Path, key: str, rows: dict):
+    for name, (seg_rows, colon_rows) in rows.items():
+        _write_csv(out / "parts" / name / f"{key}.segments.csv", pd.DataFrame(seg_rows, columns=SEGMENT_COLUMNS))
+        _write_csv(out / "parts" / name / f"{key}.colons.csv", pd.DataFrame(colon_rows, columns=COLON_COLUMNS))
+
+
+def is_colon_run(run_dir) -> bool:
+    """Whether a run folder holds a whole-colon run."""
+    import json
+
+    try:
+        return json.loads((Path(run_dir) / RUN_FILE).read_text()).get("task") == "colon"
+    except (OSError, ValueError):
+        return False
+
+
+def load_colon_results(run_dir) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
+    """A finished whole-colon run: its record, its per-segment rows and its per-map rows.
+
+    Raises
+    ------
+    InputError
+        Not a whole-colon run, or not finished.
+    """
+    import json
+
+    run_dir = Path(run_dir)
+    path = run_dir / RUN_FILE
+    if not path.is_file():
+        raise InputError(f"{run_dir}: not a colonbench run (no {RUN_FILE}); colonbench evaluate writes one")
+    run = json.loads(path.read_text())
+    if run.get("task") != "colon":
+        raise InputError(f"{run_dir}: a segment run, not a whole-colon run (colonbench evaluate --task colon)")
+    seg, col = run_dir / "results" / "segments.csv", run_dir / "results" / "colons.csv"
+    if not (run.get("complete") and seg.is_file() and col.is_file()):
+        raise InputError(f"{run_dir}: the run is not finished; rerun colonbench evaluate --task colon into it")
+    colons = read_rows(col)
+    expected = run["data"]["samples"] * len(run["noise_mm"]) * len(run["contexts_mm"]) * len(run["methods"])
+    if len(colons) != expected:
+        raise InputError(f"{col}: {len(colons)} rows, the run needs {expected}; rerun colonbench evaluate into it")
+    return run, read_rows(seg), colons
+
+
+def dataset_task(data) -> str:
+    """``"colon"`` for a whole-colon dataset folder (``task: colon``), ``"segments"`` otherwise.
+
+    Raises
+    ------
+    InputError
+        Not a generated dataset folder.
+    """
+    import yaml
+
+    from colonbench.shards.dataset import MANIFEST_NAME
+
+    path = Path(data) / MANIFEST_NAME
+    if not path.is_file():
+        raise InputError(f"{data}: not a dataset folder (no {MANIFEST_NAME}); generate the dataset first "
+                         "(colonbench generate)")
+    try:
+        return str((yaml.safe_load(path.read_text()) or {}).get("task", "segments"))
+    except (yaml.YAMLError, AttributeError) as exc:
+        raise InputError(f"{path}: unreadable ({exc})") from None

@@ -1,0 +1,208 @@
+"""The whole-colon leaderboard: tables from stored ``evaluate --task colon`` runs, never edited by hand.
+
+:func:`write_colon_leaderboard` writes, from runs on the same whole-colon data:
+
+* ``leaderboard.md``: per noise level, every method and track ranked by
+  segment coverage MAE, with the whole-colon coverage error, the centerline's
+  precision / recall at 2 mm and the seconds per map; then the *in-context vs
+  segment-only* table: the same segments, one for one, under both tracks, on
+  all segments and on those with an unobserved end, per colon source
+  (procedural colons, each imported colon);
+* ``leaderboard.csv``, ``leaderboard.json``: the same rows;
+* ``colon-maps.png``: one colon's map, truth and error side by side
+  (:func:`colonbench.reports.coverage_map.map_truth_error`).
+
+Errors are in percentage points (estimated - true). A segment has an
+*unobserved end* when less than half of the 10 mm band at one of its planes
+was seen (:mod:`colonbench.benchmark.colon_metrics`).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from colonbench.benchmark.colon_evaluate import load_colon_results
+from colonbench.errors import InputError
+
+#: Settings two whole-colon runs must share to be compared.
+SAME = ("data", "noise_mm", "noise_seed", "contexts_mm", "segment_mm", "thresholds_mm")
+
+
+def merge_colon_runs(run_dirs) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
+    """Per-segment and per-map rows of several whole-colon runs on the same data, and what they were."""
+    run_dirs = [Path(r) for r in run_dirs]
+    if not run_dirs:
+        raise InputError("no run folders given")
+    meta, segs, cols = None, [], []
+    for r in run_dirs:
+        run, s, c = load_colon_results(r)
+        if meta is None:
+            meta = {k: run[k] for k in SAME}
+            meta.update(methods={}, runs=[])
+        for k in SAME:
+            if json.dumps(run[k], sort_keys=True) != json.dumps(meta[k], sort_keys=True):
+                raise InputError(f"{r} was evaluated with other {k} than {run_dirs[0]} ({run[k]!r} vs {meta[k]!r}); "
+                                 "a leaderboard compares runs on the same data only")
+        for name, rec in run["methods"].items():
+            if name in meta["methods"]:
+                raise InputError(f"method {name!r} is in both {meta['methods'][name]['run']} and {r}; give each "
+                                 "method once")
+            meta["methods"][name] = {**rec, "run": str(r)}
+        meta["runs"].append({"path": str(r), "versions": run.get("versions", {}), "sessions": run.get("sessions", [])})
+        segs.append(s)
+        cols.append(c)
+    return meta, pd.concat(segs, ignore_index=True), pd.concat(cols, ignore_index=True)
+
+
+def _source(colon: pd.Series) -> pd.Series:
+    return colon.where(~colon.str.startswith("colon-"), "procedural")
+
+
+def colon_table(segments: pd.DataFrame, colons: pd.DataFrame) -> pd.DataFrame:
+    """One row per noise level, method and track: segment and whole-colon errors, centerline, speed.
+
+    Columns: ``noise_mm``, ``method``, ``track``, ``maps``, ``failed_maps``,
+    ``segments``, ``estimated``, ``segment_mae``, ``segment_median``,
+    ``segment_bias``, ``segment_q95`` (points, over estimated segments),
+    ``end_unobserved``, ``end_unobserved_mae``, ``whole_mae``, ``whole_bias``
+    (points), ``centerline_precision``, ``centerline_recall`` (means),
+    ``seconds_per_map``.
+    """
+    rows = []
+    keys = ["noise_mm", "method", "track"]
+    for key, c in colons.groupby(keys, sort=True):
+        s = segments[(segments[keys] == pd.Series(key, index=keys)).all(axis=1)]
+        err = s["coverage_error"].dropna().to_numpy() * 100
+        ends = s[s["end_unobserved"].astype(bool)]["coverage_error"].dropna().to_numpy() * 100
+        ok = c[c["error"] == ""]
+        whole = ok["coverage_error"].dropna().to_numpy()
+        rows.append({**dict(zip(keys, key)), "maps": len(c), "failed_maps": int((c["error"] != "").sum()),
+                     "segments": len(s), "estimated": len(err),
+                     "segment_mae": float(np.mean(np.abs(err))) if len(err) else math.nan,
+                     "segment_median": float(np.median(np.abs(err))) if len(err) else math.nan,
+                     "segment_bias": float(np.mean(err)) if len(err) else math.nan,
+                     "segment_q95": float(np.quantile(np.abs(err), 0.95)) if len(err) else math.nan,
+                     "end_unobserved": int(s["end_unobserved"].astype(bool).sum()),
+                     "end_unobserved_mae": float(np.mean(np.abs(ends))) if len(ends) else math.nan,
+                     "whole_mae": float(np.mean(np.abs(whole))) if len(whole) else math.nan,
+                     "whole_bias": float(np.mean(whole)) if len(whole) else math.nan,
+                     "centerline_precision": float(ok["centerline_precision"].mean()) if len(ok) else math.nan,
+                     "centerline_recall": float(ok["centerline_recall"].mean()) if len(ok) else math.nan,
+                     "seconds_per_map": float(ok["seconds"].mean()) if len(ok) else math.nan})
+    tab = pd.DataFrame(rows)
+    return tab.sort_values(["noise_mm", "segment_mae", "method", "track"], na_position="last").reset_index(drop=True)
+
+
+def context_table(segments: pd.DataFrame, baseline: str = "segment-only") -> pd.DataFrame:
+    """In-context vs segment-only on the same segments, one for one, per noise, method, context track and source.
+
+    A segment counts where both tracks estimated it. Columns: ``noise_mm``,
+    ``method``, ``track``, ``source`` (``procedural``, an imported colon's
+    name, or ``all``), ``segments``, ``segment_only_mae``, ``context_mae``,
+    ``ratio`` (context / segment-only), and the same three on the
+    ``end_unobserved`` segments.
+    """
+    ids = ["noise_mm", "method", "shard", "index", "segment"]
+    seg = segments.assign(source=_source(segments["colon"]))
+    base = seg[seg["track"] == baseline].set_index(ids)
+    rows = []
+    for track in sorted(set(seg["track"]) - {baseline}):
+        other = seg[seg["track"] == track].set_index(ids)
+        both = base[["coverage_error", "end_unobserved", "source"]].join(
+            other[["coverage_error"]].rename(columns={"coverage_error": "coverage_error_ctx"}), how="inner")
+        both = both.dropna(subset=["coverage_error", "coverage_error_ctx"])
+        both = both.reset_index()
+        for (noise, method), g in both.groupby(["noise_mm", "method"], sort=True):
+            for source, h in [("all", g)] + sorted(g.groupby("source")):
+                if source == "all" and g["source"].nunique() == 1:
+                    continue
+                e = h[h["end_unobserved"].astype(bool)]
+                a, b = 100 * h["coverage_error"].abs().mean(), 100 * h["coverage_error_ctx"].abs().mean()
+                ea = 100 * e["coverage_error"].abs().mean() if len(e) else math.nan
+                eb = 100 * e["coverage_error_ctx"].abs().mean() if len(e) else math.nan
+                rows.append({"noise_mm": noise, "method": method, "track": track, "source": source,
+                             "segments": len(h), "segment_only_mae": a, "context_mae": b,
+                             "ratio": b / a if a > 0 else math.nan, "end_unobserved": len(e),
+                             "end_segment_only_mae": ea, "end_context_mae": eb,
+                             "end_ratio": eb / ea if len(e) and ea > 0 else math.nan})
+    return pd.DataFrame(rows)
+
+
+def _f(x, digits=2) -> str:
+    return "n/a" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{x:.{digits}f}"
+
+
+def colon_markdown(meta: dict, tab: pd.DataFrame, ctx: pd.DataFrame) -> str:
+    """The whole-colon leaderboard as Markdown."""
+    d = meta["data"]
+    lines = ["# colonbench whole-colon leaderboard", "",
+             f"Data: manifest `{d['manifest_name']}` (sha256 {str(d['manifest_sha256'])[:12]}), split `{d['split']}`, "
+             f"{d['samples']} whole-colon reconstructions (samples sha256 {d['samples_sha256'][:12]}), mapped at "
+             f"{meta['segment_mm']:g} mm segments. Input noise: Gaussian, sigma in mm, seed {meta['noise_seed']}. "
+             "Coverage errors in percentage points (estimated - true): each segment against the true coverage of "
+             "the same stretch of the true surface, and the whole colon's; centerline precision / recall at 2 mm "
+             "(docs/mapping.md). Tracks: segment-only (each segment on its own points, the paper's protocol) and "
+             "context-M mm (the neighbours' points up to M mm beyond each plane too).", ""]
+    for noise, g in tab.groupby("noise_mm", sort=True):
+        lines += [f"## Noise sigma = {noise:g} mm", "",
+                  "| method | track | maps (failed) | segments (estimated) | segment MAE | median | bias | q95 | "
+                  "unobserved-end segments: n, MAE | whole colon: MAE, bias | centerline P / R | s/map |",
+                  "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+        for _, r in g.iterrows():
+            lines.append(f"| {r['method']} | {r['track']} | {r['maps']} ({r['failed_maps']}) | {r['segments']} "
+                         f"({r['estimated']}) | {_f(r['segment_mae'])} | {_f(r['segment_median'])} | "
+                         f"{_f(r['segment_bias'])} | {_f(r['segment_q95'])} | {r['end_unobserved']}, "
+                         f"{_f(r['end_unobserved_mae'])} | {_f(r['whole_mae'])}, {_f(r['whole_bias'])} | "
+                         f"{_f(r['centerline_precision'])} / {_f(r['centerline_recall'])} | "
+                         f"{_f(r['seconds_per_map'], 1)} |")
+        lines.append("")
+    if len(ctx):
+        lines += ["## In context vs segment-only, the same segments", "",
+                  "Segments estimated under both tracks, one for one; ratio = in-context MAE / segment-only MAE.", "",
+                  "| noise | method | track | colons | segments | segment-only MAE | in-context MAE | ratio | "
+                  "unobserved-end segments | segment-only | in-context | ratio |",
+                  "|---:|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
+        for _, r in ctx.iterrows():
+            lines.append(f"| {r['noise_mm']:g} | {r['method']} | {r['track']} | {r['source']} | {r['segments']} | "
+                         f"{_f(r['segment_only_mae'])} | {_f(r['context_mae'])} | {_f(r['ratio'])} | "
+                         f"{r['end_unobserved']} | {_f(r['end_segment_only_mae'])} | {_f(r['end_context_mae'])} | "
+                         f"{_f(r['end_ratio'])} |")
+        lines.append("")
+    lines += ["Runs: " + ", ".join(f"`{r['path']}`" for r in meta["runs"]) + ". Rebuild with "
+              "`colonbench leaderboard RUN... --out DIR`.", ""]
+    return "\n".join(lines)
+
+
+def write_colon_leaderboard(run_dirs, out, figures: bool = True) -> dict:
+    """Write ``leaderboard.md``, ``.csv``, ``.json`` (and ``colon-maps.png``) for whole-colon runs on the same data.
+
+    Returns
+    -------
+    dict
+        ``{"markdown": text, "paths": [written files]}``.
+    """
+    meta, segments, colons = merge_colon_runs(run_dirs)
+    tab, ctx = colon_table(segments, colons), context_table(segments)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    text = colon_markdown(meta, tab, ctx)
+    paths = [out / "leaderboard.md", out / "leaderboard.csv", out / "leaderboard.json"]
+    paths[0].write_text(text)
+    tab.to_csv(paths[1], index=False)
+    paths[2].write_text(json.dumps({"task": "colon", **{k: meta[k] for k in SAME}, "methods": meta["methods"],
+                                    "runs": meta["runs"], "rows": json.loads(tab.to_json(orient="records")),
+                                    "in_context": json.loads(ctx.to_json(orient="records"))}, indent=1))
+    if figures:
+        from colonbench.reports.coverage_map import map_truth_error
+
+        for r in meta["runs"]:
+            examples = sorted((Path(r["path"]) / "examples").glob("*.pkl"))
+            if examples:
+                paths.append(map_truth_error(examples[0], out / "colon-maps.png"))
+                break
+    return {"markdown": text, "paths": paths}

@@ -1,0 +1,153 @@
+"""The whole-colon benchmark: whole-colon shards, exact per-segment truth, evaluate --task colon, its leaderboard."""
+
+import json
+
+import h5py
+import numpy as np
+import pandas as pd
+import pytest
+from scipy.spatial import cKDTree
+from shapes import straight
+
+from colonbench.cli import main
+from colonbench.errors import InputError
+
+RADIUS = 15.0
+
+
+def _plane(z):
+    return {"point": [0.0, 0.0, float(z)], "normal": [0.0, 0.0, 1.0]}
+
+
+def test_segment_truth_and_unobserved_ends_on_a_tube_with_known_cuts():
+    """A straight tube, a quarter of the wall cut over 30 mm in one segment and the whole wall over the first
+    20 mm of the next: each segment's region gets its analytic coverage, and only the second has an unseen end."""
+    from colonbench.benchmark.colon_metrics import segment_truth
+    from colonbench.datagen.colon import tube_colon
+
+    line = straight(300.0)
+    tube = tube_colon(line, RADIUS, ring_spacing_mm=0.5, n_around=256)
+    c = tube.mesh.vertices[tube.mesh.faces].mean(axis=1)
+    ang = np.arctan2(c[:, 1], c[:, 0])
+    cut = ((c[:, 2] > 70) & (c[:, 2] < 100) & (ang > 0) & (ang < np.pi / 2)) | ((c[:, 2] > 120) & (c[:, 2] < 140))
+    segs = [{"plane_start": _plane(z), "plane_end": _plane(z + 60)} for z in range(0, 300, 60)]
+    t = segment_truth(tube.mesh.vertices, tube.mesh.faces, ~cut, line, segs)
+    assert t["truth"] == pytest.approx([1.0, 1 - 0.25 * 30 / 60, 1 - 20 / 60, 1.0, 1.0], abs=0.01)
+    assert t["true_start_mm"] == pytest.approx([0, 60, 120, 180, 240], abs=0.6)
+    assert t["end_seen"] == pytest.approx([1, 1, 0, 1, 1], abs=0.05)  # the planes land within 0.5 mm
+
+
+@pytest.fixture(scope="module")
+def colon_dataset(tmp_path_factory):
+    """A task: colon manifest of one short procedural colon, two whole partials (sphere and camera holes)."""
+    from colonbench.shards.dataset import generate
+
+    manifest = {"name": "colon-smoke", "seed": 3, "task": "colon",
+                "config": {"colon": {"length_mm": [450, 520], "ring_spacing_mm": 1.0, "edge_mm": 1.5}},
+                "splits": {"test": {"colons": {"first": 0, "count": 1}, "permutations": 2,
+                                    "hole_models": {"spheres": 0.5, "camera": 0.5}}}}
+    out = tmp_path_factory.mktemp("colon") / "data"
+    lock = generate(manifest, out, progress=False)
+    return out, lock
+
+
+def test_whole_colon_shards_hold_exact_truth(colon_dataset):
+    from colonbench.completion.surface import triangle_areas
+    from colonbench.shards.colonshard import ColonShard
+    from colonbench.shards.verify import verify
+
+    data, lock = colon_dataset
+    assert list(lock["shards"]) == ["test/colon-00000.h5"] and lock["splits"]["test"]["samples"] == 2
+    assert verify(data) == []
+    shard = ColonShard(data / "test/colon-00000.h5")
+    truth = shard.colon()
+    area = triangle_areas(truth["vertices"], truth["faces"])
+    centroids = truth["vertices"][truth["faces"]].mean(axis=1)
+    assert np.all(np.diff(truth["centerline"].arclength) <= 1.0 + 1e-6)
+    models = set()
+    for i in range(len(shard)):
+        s = shard.sample(i)
+        models.add(s["hole_model"])
+        assert s["coverage"] == pytest.approx(area[s["observed_faces"]].sum() / area.sum())
+        assert 0.5 < s["coverage"] < 1.0
+        _, face = cKDTree(centroids).query(s["points"])
+        assert s["observed_faces"][face].mean() > 0.97  # the cloud lies on observed faces only
+        # the trajectory withdraws: it ends near the rectum end of the true centerline
+        assert np.linalg.norm(s["positions"][-1] - truth["centerline"].points[-1]) < 5.0
+    assert models == {"spheres", "camera"}  # 2 permutations of a half-and-half mix: one of each
+
+def test_a_broken_whole_colon_shard_is_reported(colon_dataset, tmp_path):
+    import shutil
+
+    from colonbench.shards.verify import check_shard, verify
+
+    data, _ = colon_dataset
+    copy = tmp_path / "data"
+    shutil.copytree(data, copy)
+    path = copy / "test/colon-00000.h5"
+    assert check_shard(path) == []
+    with h5py.File(path, "r+") as h5:
+        h5["samples/coverage"][0] = 1.5
+        del h5["samples/positions_offsets"]
+    faults = check_shard(path)
+    assert any("positions_offsets" in f for f in faults)
+    assert any("sha256 differs" in f or "bytes" in f for f in verify(copy))
+
+
+def test_evaluate_colon_task_and_its_leaderboard(colon_dataset, tmp_path):
+    data, _ = colon_dataset
+    run = tmp_path / "run"
+    assert main(["evaluate", str(data), "--task", "colon", "--methods", "constant,thresholding", "--noise", "0",
+                 "--contexts", "0,15", "--out", str(run), "--quiet"]) == 0
+    colons = pd.read_csv(run / "results" / "colons.csv")
+    segments = pd.read_csv(run / "results" / "segments.csv")
+    assert len(colons) == 2 * 2 * 2  # samples x methods x tracks
+    assert set(colons["track"]) == {"segment-only", "context-15mm"}
+    assert (colons["error"].isna() | (colons["error"] == "")).all()
+    # the whole-colon truth is the shard's, and the tracks cut the same segments (one centerline per sample)
+    from colonbench.shards.colonshard import ColonShard
+
+    shard = ColonShard(data / "test/colon-00000.h5")
+    for _, r in colons.iterrows():
+        assert r["true_coverage"] == pytest.approx(shard.sample(int(r["index"]))["coverage"])
+    key = ["method", "index", "segment"]
+    a = segments[segments["track"] == "segment-only"].set_index(key).sort_index()
+    b = segments[segments["track"] == "context-15mm"].set_index(key).sort_index()
+    assert a.index.equals(b.index)
+    assert np.allclose(a["start_mm"], b["start_mm"]) and np.allclose(a["true_coverage"], b["true_coverage"])
+    # the constant guess errs by exactly its constant minus the truth
+    const = segments[segments["method"] == "constant"]
+    guess = const["coverage"].iloc[0]
+    assert np.allclose(const["coverage_error"], guess - const["true_coverage"], equal_nan=True)
+    assert segments["true_coverage"].between(0, 1).all()
+    # a rerun finds everything done
+    assert main(["evaluate", str(data), "--task", "colon", "--methods", "constant,thresholding", "--noise", "0",
+                 "--contexts", "0,15", "--out", str(run), "--quiet"]) == 0
+    out = tmp_path / "board"
+    assert main(["leaderboard", str(run), "--out", str(out)]) == 0
+    text = (out / "leaderboard.md").read_text()
+    assert "whole-colon leaderboard" in text and "In context vs segment-only" in text
+    rows = json.loads((out / "leaderboard.json").read_text())["rows"]
+    mine = [r for r in rows if r["method"] == "constant" and r["track"] == "segment-only"][0]
+    assert mine["segment_mae"] == pytest.approx(100 * np.nanmean(np.abs(
+        const[const["track"] == "segment-only"]["coverage_error"])))
+    assert (out / "colon-maps.png").stat().st_size > 10_000
+
+
+def test_colon_task_refuses_bad_input(colon_dataset, smoke_dataset, tmp_path, capsys):
+    from colonbench.shards.manifest import resolve
+
+    base = {"name": "x", "seed": 1, "task": "colon"}
+    with pytest.raises(InputError, match="not whole-colon hole models"):
+        resolve({**base, "splits": {"test": {"colons": {"first": 0, "count": 1}, "hole_models": {"video": 1}}}})
+    with pytest.raises(InputError, match="segments_per_length"):
+        resolve({**base, "splits": {"test": {"colons": {"first": 0, "count": 1}, "segments_per_length": 3}}})
+    with pytest.raises(InputError, match="task"):
+        resolve({**base, "task": "colons", "splits": {"test": {"colons": {"first": 0, "count": 1}}}})
+    smoke, _ = smoke_dataset
+    assert main(["evaluate", str(smoke), "--task", "colon", "--out", str(tmp_path / "r"), "--quiet"]) == 2
+    assert "segments dataset" in capsys.readouterr().err
+    data, _ = colon_dataset
+    assert main(["evaluate", str(data), "--task", "colon", "--methods", "gt-heatmap", "--out", str(tmp_path / "g"),
+                 "--quiet"]) == 2
+    assert "ground truth" in capsys.readouterr().err
