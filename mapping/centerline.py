@@ -32,7 +32,7 @@ so the lumen cannot be flood-filled as for a closed mesh
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy import ndimage
@@ -66,10 +66,15 @@ class Piece:
         The polyline, mm, 1 mm spacing, ordered along the colon.
     radius : float
         Median distance from the centerline to the wall, mm.
+    unseen : list of (float, float)
+        Arc-length intervals of the piece (mm from its first point) where it
+        runs along the camera trajectory over a stretch with no reconstruction
+        (:func:`bridge_by_trajectory`).
     """
 
     points: np.ndarray
     radius: float
+    unseen: list = field(default_factory=list)
 
     @property
     def length(self) -> float:
@@ -326,3 +331,72 @@ def colon_centerline(points, voxel_mm: float = VOXEL_MM, close_mm: float = CLOSE
         if len(mine):
             pieces[i] = Piece(resample(_extend(p.points, mine, p.radius), 1.0), p.radius)
     return _bridge(_chain(pieces), pts)
+
+
+def bridge_by_trajectory(pieces: list[Piece], positions: np.ndarray | None, reach: float = 1.5,
+                         max_detour: float = 3.0, smooth_mm: float = 5.0) -> list[Piece]:
+    """Consecutive pieces joined along the camera trajectory where it passes from one to the next.
+
+    Where the colon has no reconstruction over a stretch (a tracking loss, a
+    stretch the pipeline could not fuse) the pieces stay apart
+    (:func:`colon_centerline`). If the colonoscope went from the end of one
+    piece to the start of the next, the colon is continuous there: the pieces
+    are joined by the trajectory's path between them (only the poses that
+    bring it closer to the next piece, so that pushing the scope back in does
+    not fold the line; smoothed by ``smooth_mm``), and the stretch is recorded
+    in the joined piece's ``unseen`` as not reconstructed.
+
+    Parameters
+    ----------
+    pieces : list of Piece
+        Chained and oriented (:func:`colon_centerline`, then the map's orientation).
+    positions : (k, 3) float or None
+        Camera positions in time order, mm, the reconstruction's frame.
+    reach : float
+        The trajectory must come within ``reach`` radii (plus 5 mm) of both piece ends.
+    max_detour : float
+        A path longer than ``max_detour`` times the straight gap plus 50 mm is not used.
+    smooth_mm : float
+        Gaussian smoothing of the path, mm.
+
+    Returns
+    -------
+    list of Piece
+        Joined where the trajectory bridges a gap; the others as they were.
+    """
+    if positions is None or len(pieces) < 2 or len(positions) < 2:
+        return pieces
+    pos = np.asarray(positions, float)
+    out = [Piece(pieces[0].points, pieces[0].radius, list(pieces[0].unseen))]
+    for p in pieces[1:]:
+        prev = out[-1]
+        a, b = prev.points[-1], p.points[0]
+        near = reach * max(prev.radius, p.radius) + 5.0
+        da, db = np.linalg.norm(pos - a, axis=1), np.linalg.norm(pos - b, axis=1)
+        ta, tb = int(np.argmin(da)), int(np.argmin(db))
+        path = None
+        if da[ta] <= near and db[tb] <= near and ta != tb:
+            window = pos[min(ta, tb): max(ta, tb) + 1]
+            window = window if ta < tb else window[::-1]
+            to_b = np.linalg.norm(window - b, axis=1)
+            keep = to_b < np.minimum.accumulate(np.concatenate([[np.linalg.norm(a - b)], to_b[:-1]])) - 0.5
+            path = resample(np.concatenate([[a], window[keep], [b]]), 1.0)
+            if len(path) > 4:
+                inner = ndimage.gaussian_filter1d(path, smooth_mm, axis=0, mode="nearest")
+                inner[0], inner[-1] = a, b
+                path = resample(inner, 1.0)
+            gap = float(np.linalg.norm(b - a))
+            if np.linalg.norm(np.diff(path, axis=0), axis=1).sum() > max_detour * gap + 50.0:
+                path = None
+        if path is None:
+            out.append(Piece(p.points, p.radius, list(p.unseen)))
+            continue
+        s0 = prev.length
+        bridge = float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum())
+        joined = np.concatenate([prev.points, path[1:-1], p.points])
+        steps = np.linalg.norm(np.diff(joined, axis=0), axis=1)
+        keep = np.concatenate([[True], steps > 1e-6])
+        out[-1] = Piece(joined[keep], float(np.mean([prev.radius, p.radius])),
+                        prev.unseen + [(s0, s0 + bridge)] + [(s0 + bridge + u0, s0 + bridge + u1)
+                                                              for u0, u1 in p.unseen])
+    return out

@@ -2,7 +2,9 @@
 
 Steps: the reconstruction's centerline in uninterrupted pieces
 (:mod:`colonbench.mapping.centerline`); oriented from the rectum when a
-trajectory says where the withdrawal ended; cut into segments of a given arc
+trajectory says where the withdrawal ended; pieces joined along the
+trajectory where the scope passed a stretch with no reconstruction (that
+stretch counted unobserved); cut into segments of a given arc
 length by planes perpendicular to it; every point given to the segment of its
 nearest centerline point (the segment-only protocol's cut, by the nearest
 stretch so that a bend does not hand a neighbour's wall over); each segment
@@ -67,6 +69,8 @@ class Segment:
     seconds: float = 0.0
     error: str = ""
     mesh: tuple = field(default=(), repr=False)
+    #: Arc length of the segment that the trajectory passes with no reconstruction, mm (counted unobserved).
+    unreconstructed_mm: float = 0.0
 
     def row(self) -> dict:
         """The JSON / CSV row."""
@@ -75,7 +79,8 @@ class Segment:
                 "points": self.points, "coverage": _round(self.coverage, 4),
                 "hole_area_mm2": _round(self.hole_area_mm2, 1), "holes": self.holes,
                 "largest_hole_mm2": _round(self.largest_hole_mm2, 1), "area_mm2": _round(self.area_mm2, 1),
-                "seconds": round(self.seconds, 3), "error": self.error}
+                "unreconstructed_mm": round(self.unreconstructed_mm, 1), "seconds": round(self.seconds, 3),
+                "error": self.error}
 
 
 def _round(x, nd):
@@ -196,7 +201,8 @@ def map_colon(points: np.ndarray, method, segment_mm: float = SEGMENT_MM, positi
     -------
     dict
         ``segments`` (list of :class:`Segment`), ``centerline`` ((m, 3) mm),
-        ``arclength`` ((m,) mm), ``interruptions`` (list of dicts),
+        ``arclength`` ((m,) mm), ``interruptions`` (list of dicts), ``unreconstructed``
+        (stretches with no reconstruction that the trajectory bridges: ``from_mm``, ``to_mm``),
         ``orientation`` (str), ``seconds`` (per stage).
 
     Raises
@@ -210,7 +216,7 @@ def map_colon(points: np.ndarray, method, segment_mm: float = SEGMENT_MM, positi
 
     from colonbench.benchmark.registry import as_estimate
     from colonbench.errors import ColonbenchError
-    from colonbench.mapping.centerline import colon_centerline
+    from colonbench.mapping.centerline import bridge_by_trajectory, colon_centerline
 
     if segment_mm <= 0:
         raise InputError(f"--segment-length must be positive, got {segment_mm}")
@@ -220,6 +226,7 @@ def map_colon(points: np.ndarray, method, segment_mm: float = SEGMENT_MM, positi
     t0 = time.perf_counter()
     pieces = colon_centerline(points) if pieces is None else pieces
     pieces, orientation = orient(pieces, positions)
+    pieces = bridge_by_trajectory(pieces, positions)
     seconds["centerline"] = time.perf_counter() - t0
     total = sum(p.length for p in pieces)
     if total < 2 * segment_mm:
@@ -227,7 +234,7 @@ def map_colon(points: np.ndarray, method, segment_mm: float = SEGMENT_MM, positi
                          f"{segment_mm:g} mm: this looks like a single segment, not a colon; use colonbench "
                          "estimate for one segment")
     # one centerline: the pieces joined, arc length running on over the gaps
-    lines, arcs, owner, interruptions, spans = [], [], [], [], []
+    lines, arcs, owner, interruptions, spans, unseen = [], [], [], [], [], []
     s0 = 0.0
     for k, p in enumerate(pieces):
         if k:
@@ -242,6 +249,7 @@ def map_colon(points: np.ndarray, method, segment_mm: float = SEGMENT_MM, positi
         arcs.append(s)
         owner.append(np.full(len(s), k))
         spans.append((s[0], s[-1]))
+        unseen += [(s[0] + u0, s[0] + u1) for u0, u1 in p.unseen]
         s0 = s[-1]
     line, arc, owner = np.concatenate(lines), np.concatenate(arcs), np.concatenate(owner)
     t0 = time.perf_counter()
@@ -256,14 +264,24 @@ def map_colon(points: np.ndarray, method, segment_mm: float = SEGMENT_MM, positi
             mine = point_piece == k
             mask = mine & (point_s >= lo) & ((point_s < hi) | (last & (point_s <= hi)))
             ctx = mine & (point_s >= lo - context_mm) & (point_s <= hi + context_mm) if context_mm > 0 else mask
+            gap = sum(max(0.0, min(hi, u1) - max(lo, u0)) for u0, u1 in unseen)
             segments.append((Segment(index=len(segments), piece=k, start_mm=lo, end_mm=hi,
                                      plane_start=_frame(pa, ps, lo), plane_end=_frame(pa, ps, hi),
-                                     points=int(mask.sum())), mask, ctx, (pa, ps, last)))
+                                     points=int(mask.sum()), unreconstructed_mm=gap), mask, ctx,
+                             (pa, ps, last, pieces[k].radius)))
     seconds["cut"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     out = []
     name = getattr(method, "name", "method")
-    for seg, mask, ctx, (pa, ps, last) in tqdm(segments, desc="segments", unit="seg", disable=not progress):
+    for seg, mask, ctx, (pa, ps, last, radius) in tqdm(segments, desc="segments", unit="seg",
+                                                        disable=not progress):
+        length = seg.end_mm - seg.start_mm
+        if seg.points < MIN_POINTS and seg.unreconstructed_mm >= 0.5 * length:
+            # the scope passed, nothing was reconstructed: all of it unobserved (a tube of the colon's radius)
+            seg.coverage, seg.holes = 0.0, 1
+            seg.area_mm2 = seg.hole_area_mm2 = seg.largest_hole_mm2 = float(2 * np.pi * radius * length)
+            out.append(seg)
+            continue
         if seg.points < MIN_POINTS:
             seg.error = f"{seg.points} points, fewer than {MIN_POINTS}: not estimated"
             out.append(seg)
@@ -299,10 +317,30 @@ def map_colon(points: np.ndarray, method, segment_mm: float = SEGMENT_MM, positi
             index = np.full(len(est.mesh_vertices), -1)
             index[used] = np.arange(len(used))
             seg.mesh = (est.mesh_vertices[used], index[faces], est.hole_vertices[used])
+        if seg.unreconstructed_mm > 0:
+            _add_unreconstructed(seg, radius)
         out.append(seg)
     seconds["estimate"] = time.perf_counter() - t0
     return {"segments": out, "centerline": line, "arclength": arc, "interruptions": interruptions,
+            "unreconstructed": [{"from_mm": round(a, 2), "to_mm": round(b, 2)} for a, b in unseen],
             "orientation": orientation, "context_mm": float(context_mm), "seconds": seconds}
+
+
+def _add_unreconstructed(seg: Segment, radius: float) -> None:
+    """Count the segment's stretch with no reconstruction (the trajectory passes it) as unobserved.
+
+    The method estimated the reconstructed part; the stretch it could not see
+    adds a tube of the colon's ``radius`` and its length to the area, all of it
+    hole: coverage = observed / (estimated area + that tube).
+    """
+    gap_area = float(2 * np.pi * radius * seg.unreconstructed_mm)
+    seen_length = max(seg.end_mm - seg.start_mm - seg.unreconstructed_mm, 1e-6)
+    area = seg.area_mm2 if seg.area_mm2 else float(2 * np.pi * radius * seen_length)
+    hole = seg.hole_area_mm2 if seg.hole_area_mm2 is not None else (1.0 - seg.coverage) * area
+    seg.coverage = float((area - hole) / (area + gap_area))
+    if seg.area_mm2:
+        seg.area_mm2, seg.hole_area_mm2 = area + gap_area, hole + gap_area
+        seg.largest_hole_mm2 = max(seg.largest_hole_mm2 or 0.0, gap_area)
 
 
 def whole_coverage(segments: list[Segment]) -> float | None:
@@ -367,6 +405,7 @@ def write_map(result: dict, out, method_name: str, model: str | None, threshold:
                             "segments": [s.index for s in segs if s.coverage is not None and s.coverage < threshold]},
         "centerline_mm": round(float(result["arclength"][-1]), 1),
         "interruptions": result["interruptions"],
+        "unreconstructed": result.get("unreconstructed", []),
         "orientation": result["orientation"],
         "context_mm": result.get("context_mm", 0.0),
         "method": method_name, "model": model,

@@ -136,6 +136,39 @@ def test_interrupted_colon_is_split_and_reported(tmp_path):
     assert {seg.piece for seg in result["segments"]} == {0, 1}
 
 
+def test_a_trajectory_bridges_a_stretch_with_no_reconstruction():
+    """60 mm of a straight tube missing and the scope's path through it: one piece, the stretch reported, and
+    the segments over it count it unobserved (the method sees all of the rest: known coverage 0.5 and 0)."""
+    line = straight(360.0)
+    pts, s, _ = tube_cloud(line, density=1.0)
+    keep = (s < 150) | (s > 210)
+    # a withdrawal from z = 360 down to 0, pushed back in once, 2 mm off the axis
+    z = np.concatenate([np.arange(360.0, 100.0, -2.0), np.arange(100.0, 130.0, 2.0), np.arange(130.0, 0.0, -2.0)])
+    traj = np.stack([np.full_like(z, 2.0), np.zeros_like(z), z], axis=1)
+
+    class Full:  # every reconstructed segment fully seen: this test is about the stretch without points
+        name = "full"
+
+        def estimate(self, points):
+            return {"coverage": 1.0, "holes": np.zeros((0, 3)), "centerline": np.zeros((0, 3))}
+
+    from colonbench.mapping.colonmap import map_colon, whole_coverage
+
+    result = map_colon(pts[keep], Full(), segment_mm=60.0, positions=traj, progress=False)
+    assert result["interruptions"] == []
+    (gap,) = result["unreconstructed"]
+    # numbered from the rectum (z = 0): the missing stretch is z 150-210, from the rectum too
+    assert gap["from_mm"] == pytest.approx(150, abs=6) and gap["to_mm"] == pytest.approx(210, abs=6)
+    by_start = {round(seg.start_mm / 10) * 10: seg for seg in result["segments"]}
+    assert len(by_start) == 6
+    for start, truth in ((0, 1.0), (60, 1.0), (120, 0.5), (180, 0.5), (240, 1.0), (300, 1.0)):
+        assert by_start[start].coverage == pytest.approx(truth, abs=0.1), start
+    assert whole_coverage(result["segments"]) == pytest.approx(300 / 360, abs=0.06)
+    # with no trajectory the colon is split instead, and the stretch is left out of the map
+    split = map_colon(pts[keep], Full(), segment_mm=60.0, progress=False)
+    assert len(split["interruptions"]) == 1 and split["unreconstructed"] == []
+
+
 def test_bad_inputs_are_refused(tmp_path, capsys):
     line = straight(300.0)
     pts, _, _ = tube_cloud(line, density=0.5)
