@@ -333,8 +333,9 @@ def colon_centerline(points, voxel_mm: float = VOXEL_MM, close_mm: float = CLOSE
     return _bridge(_chain(pieces), pts)
 
 
-def bridge_by_trajectory(pieces: list[Piece], positions: np.ndarray | None, reach: float = 1.5,
-                         max_detour: float = 3.0, smooth_mm: float = 5.0) -> list[Piece]:
+def bridge_by_trajectory(pieces: list[Piece], positions: np.ndarray | None, cloud: np.ndarray | None = None,
+                         reach: float = 1.5, max_detour: float = 3.0, smooth_mm: float = 5.0,
+                         min_unseen_mm: float = 5.0) -> list[Piece]:
     """Consecutive pieces joined along the camera trajectory where it passes from one to the next.
 
     Where the colon has no reconstruction over a stretch (a tracking loss, a
@@ -343,8 +344,11 @@ def bridge_by_trajectory(pieces: list[Piece], positions: np.ndarray | None, reac
     piece to the start of the next, the colon is continuous there: the pieces
     are joined by the trajectory's path between them (only the poses that
     bring it closer to the next piece, so that pushing the scope back in does
-    not fold the line; smoothed by ``smooth_mm``), and the stretch is recorded
-    in the joined piece's ``unseen`` as not reconstructed.
+    not fold the line; smoothed by ``smooth_mm``). Where the path's 2 mm thick
+    cross-sections hold no point of the cloud within 1.5 radii for at least
+    ``min_unseen_mm`` (no wall on any side), the stretch is recorded in the joined piece's ``unseen`` as
+    not reconstructed; where the wall lines the path (a narrow or collapsed
+    stretch the lumen search lost), it is only joined.
 
     Parameters
     ----------
@@ -352,6 +356,8 @@ def bridge_by_trajectory(pieces: list[Piece], positions: np.ndarray | None, reac
         Chained and oriented (:func:`colon_centerline`, then the map's orientation).
     positions : (k, 3) float or None
         Camera positions in time order, mm, the reconstruction's frame.
+    cloud : (n, 3) float, optional
+        The reconstruction's points, mm (without them every joined stretch counts as unseen).
     reach : float
         The trajectory must come within ``reach`` radii (plus 5 mm) of both piece ends.
     max_detour : float
@@ -366,7 +372,11 @@ def bridge_by_trajectory(pieces: list[Piece], positions: np.ndarray | None, reac
     """
     if positions is None or len(pieces) < 2 or len(positions) < 2:
         return pieces
+    from scipy.spatial import cKDTree
+
     pos = np.asarray(positions, float)
+    cloud = None if cloud is None else np.asarray(cloud, float)
+    tree = cKDTree(cloud) if cloud is not None and len(cloud) else None
     out = [Piece(pieces[0].points, pieces[0].radius, list(pieces[0].unseen))]
     for p in pieces[1:]:
         prev = out[-1]
@@ -392,11 +402,31 @@ def bridge_by_trajectory(pieces: list[Piece], positions: np.ndarray | None, reac
             out.append(Piece(p.points, p.radius, list(p.unseen)))
             continue
         s0 = prev.length
-        bridge = float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum())
+        arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(path, axis=0), axis=1))])
+        bridge = float(arc[-1])
+        radius = max(prev.radius, p.radius)
+        empty = np.ones(len(path), bool)
+        if tree is not None:  # the wall lines a step: a point within 1.5 radii, in its 2 mm thick cross-section
+            tangent = np.gradient(path, axis=0)
+            tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-9)
+            for k, near_ids in enumerate(tree.query_ball_point(path, 1.5 * radius)):
+                if near_ids:
+                    empty[k] = not np.any(np.abs((cloud[near_ids] - path[k]) @ tangent[k]) < 1.0)
+        runs = []
+        k = 0
+        while k < len(path):  # runs of the path with no wall within 1.2 radii
+            if not empty[k]:
+                k += 1
+                continue
+            j = k
+            while j + 1 < len(path) and empty[j + 1]:
+                j += 1
+            if arc[j] - arc[k] >= min_unseen_mm:
+                runs.append((s0 + arc[k], s0 + arc[j]))
+            k = j + 1
         joined = np.concatenate([prev.points, path[1:-1], p.points])
         steps = np.linalg.norm(np.diff(joined, axis=0), axis=1)
         keep = np.concatenate([[True], steps > 1e-6])
         out[-1] = Piece(joined[keep], float(np.mean([prev.radius, p.radius])),
-                        prev.unseen + [(s0, s0 + bridge)] + [(s0 + bridge + u0, s0 + bridge + u1)
-                                                              for u0, u1 in p.unseen])
+                        prev.unseen + runs + [(s0 + bridge + u0, s0 + bridge + u1) for u0, u1 in p.unseen])
     return out

@@ -141,20 +141,36 @@ def windows(length: float, segment_mm: float) -> list[tuple[float, float]]:
 
 
 def orient(pieces: list, positions: np.ndarray | None) -> tuple[list, str]:
-    """The chained pieces turned so that the map starts at the rectum when the trajectory says where.
+    """The pieces ordered and turned so that the map starts at the rectum, when the trajectory says where.
 
-    A withdrawal ends at the rectum: the end of the chain nearer to the last
-    camera position is the rectum end.
+    A withdrawal ends at the rectum. With a trajectory each piece is turned
+    so that the camera passed its first point later than its last one, and
+    the pieces are ordered by when the camera passed them, latest first: the
+    trajectory, not the pieces' nearness, says which stretch follows which
+    (limbs of a colon can touch). Without one the chain is kept as found.
     """
+    from scipy.spatial import cKDTree
+
     from colonbench.mapping.centerline import Piece
 
     if positions is None:
         return pieces, "unknown (no trajectory): numbered from one end of the centerline"
-    first, last = pieces[0].points[0], pieces[-1].points[-1]
-    tip = positions[-1]
-    if np.linalg.norm(last - tip) < np.linalg.norm(first - tip):
-        pieces = [Piece(p.points[::-1].copy(), p.radius) for p in pieces[::-1]]
-    return pieces, "from the rectum (the end of the trajectory)"
+    tree = cKDTree(np.asarray(positions, float))
+    turned = []
+    for p in pieces:
+        _, (t0, t1) = tree.query(p.points[[0, -1]])
+        if t0 < t1:
+            p = Piece(p.points[::-1].copy(), p.radius, list(p.unseen))
+            t0, t1 = t1, t0
+        turned.append((t0, t1, p))
+    if len(turned) == 1:  # one piece: the end nearer to the last camera position is the rectum's
+        p = pieces[0]
+        tip = positions[-1]
+        if np.linalg.norm(p.points[-1] - tip) < np.linalg.norm(p.points[0] - tip):
+            p = Piece(p.points[::-1].copy(), p.radius, list(p.unseen))
+        return [p], "from the rectum (the end of the trajectory)"
+    turned.sort(key=lambda x: -(x[0] + x[1]))
+    return [p for _, _, p in turned], "from the rectum (the end of the trajectory; pieces ordered by it)"
 
 
 def clip_between(vertices: np.ndarray, faces: np.ndarray, line: np.ndarray, arc: np.ndarray, lo: float,
@@ -226,7 +242,7 @@ def map_colon(points: np.ndarray, method, segment_mm: float = SEGMENT_MM, positi
     t0 = time.perf_counter()
     pieces = colon_centerline(points) if pieces is None else pieces
     pieces, orientation = orient(pieces, positions)
-    pieces = bridge_by_trajectory(pieces, positions)
+    pieces = bridge_by_trajectory(pieces, positions, points)
     seconds["centerline"] = time.perf_counter() - t0
     total = sum(p.length for p in pieces)
     if total < 2 * segment_mm:

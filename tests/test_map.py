@@ -164,6 +164,22 @@ def test_a_trajectory_bridges_a_stretch_with_no_reconstruction():
     for start, truth in ((0, 1.0), (60, 1.0), (120, 0.5), (180, 0.5), (240, 1.0), (300, 1.0)):
         assert by_start[start].coverage == pytest.approx(truth, abs=0.1), start
     assert whole_coverage(result["segments"]) == pytest.approx(300 / 360, abs=0.06)
+    # pieces apart where the wall is there (a narrow stretch the lumen search lost) are joined, not unseen
+    from colonbench.mapping.centerline import Piece, bridge_by_trajectory
+
+    parts = [Piece(line.points[(line.arclength >= a) & (line.arclength <= b)], RADIUS) for a, b in ((0, 150),
+                                                                                                    (210, 360))]
+    (whole,) = bridge_by_trajectory(parts, traj[::-1], pts)
+    assert whole.unseen == [] and whole.length == pytest.approx(360, abs=3)
+    (gapped,) = bridge_by_trajectory(parts, traj[::-1], pts[keep])
+    assert len(gapped.unseen) == 1 and gapped.unseen[0][1] - gapped.unseen[0][0] == pytest.approx(60, abs=8)
+    # the trajectory, not the pieces' nearness, orders and turns them: rectum (its end) first
+    from colonbench.mapping.colonmap import orient
+
+    turned, how = orient([Piece(parts[0].points[::-1].copy(), RADIUS), parts[1]], traj)
+    assert "ordered" in how
+    # the withdrawal ends at z = 0: from there up to 150, then from 210 up to 360
+    assert [(round(p.points[0][2]), round(p.points[-1][2])) for p in turned] == [(0, 150), (210, 360)]
     # with no trajectory the colon is split instead, and the stretch is left out of the map
     split = map_colon(pts[keep], Full(), segment_mm=60.0, progress=False)
     assert len(split["interruptions"]) == 1 and split["unreconstructed"] == []
