@@ -487,7 +487,7 @@ def demo_map(out: Path, model=None, progress: bool = True) -> None:
     from colonbench.completion.method import DEFAULT_MODEL
     from colonbench.datagen.colon import generate_colon
     from colonbench.datagen.wholecolon import whole_partial
-    from colonbench.mapping.colonmap import map_colon, write_map
+    from colonbench.mapping.colonmap import CONTEXT_MM, map_colon, write_map
 
     t0 = time.perf_counter()
     colon = generate_colon(seed=0, colon_id=0)
@@ -496,7 +496,7 @@ def demo_map(out: Path, model=None, progress: bool = True) -> None:
     np.save(out / "reconstruction.npy", partial.points.astype(np.float32))
     np.save(out / "trajectory.npy", partial.positions)
     result = map_colon(partial.points, load_method("completion", model=model), positions=partial.positions,
-                       progress=progress)
+                       progress=progress, context_mm=CONTEXT_MM)
     _, summary = write_map(result, out, "completion", str(model or DEFAULT_MODEL))
     score = map_metrics([s.row() for s in result["segments"]], summary["coverage"], result["centerline"],
                         colon.mesh.vertices, colon.mesh.faces, partial.observed, colon.centerline)
@@ -509,6 +509,8 @@ def demo_map(out: Path, model=None, progress: bool = True) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from colonbench.mapping.colonmap import CONTEXT_MM
+
     parser = argparse.ArgumentParser(
         prog="colonbench",
         description="Synthetic colonoscopy coverage data and a benchmark of coverage-estimation methods. "
@@ -608,10 +610,10 @@ def build_parser() -> argparse.ArgumentParser:
                                         "trajectory (timestamp tx ty tz qx qy qz qw) or (k, 3) positions (.npy, "
                                         ".txt); the map is then numbered from the rectum (where it ends)")
     p.add_argument("--method", default="completion", help="method (default completion: the paper's)")
-    p.add_argument("--context-mm", type=float, default=0.0,
+    p.add_argument("--context-mm", type=float, default=CONTEXT_MM,
                    help="give the method the neighbours' points up to this far beyond each plane and count "
-                        "coverage on its completed surface between the planes only (default 0: each segment "
-                        "alone, the paper's protocol)")
+                        f"coverage on its completed surface between the planes only (default {CONTEXT_MM:g}; 0: "
+                        "each segment alone, the paper's segment-only protocol)")
     _add_model_args(p, "model .safetensors, or a shipped model by name (default: small)")
     p.add_argument("--no-figure", action="store_true", help="skip map.png (the headless rendering)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")

@@ -61,7 +61,7 @@ def map_mesh(segments, red_at: float = 0.5):
     return mesh
 
 
-def render_views(mesh, size: int = 640, like=None, sides=(1.0, -1.0)) -> list[np.ndarray]:
+def render_views(mesh, size: int = 640, like=None, sides=(1.0, -1.0), background=(1.0, 1.0, 1.0)) -> list[np.ndarray]:
     """(size, size, 3) uint8 renderings of ``mesh`` from either side of its broadest plane.
 
     Parameters
@@ -74,6 +74,8 @@ def render_views(mesh, size: int = 640, like=None, sides=(1.0, -1.0)) -> list[np
         Take the plane and the distance from this mesh instead (the same view of several meshes).
     sides : tuple of float
         ``1.0`` (front) and / or ``-1.0`` (back).
+    background : (3,) float
+        RGB in [0, 1].
     """
     from colonbench.offscreen import pyrender as _load
 
@@ -86,7 +88,7 @@ def render_views(mesh, size: int = 640, like=None, sides=(1.0, -1.0)) -> list[np
     extent = np.ptp(rel @ axes[:2].T, axis=0).max()
     yfov = np.deg2rad(40.0)
     distance = 0.6 * extent / np.tan(yfov / 2) + np.ptp(rel @ view)
-    scene = pyrender.Scene(ambient_light=np.full(3, 1.0), bg_color=[1.0, 1.0, 1.0, 1.0])
+    scene = pyrender.Scene(ambient_light=np.full(3, 1.0), bg_color=[*background, 1.0])
     scene.add(pyrender.Mesh.from_trimesh(mesh, smooth=False))
     renderer = pyrender.OffscreenRenderer(size, size)
     images = []
@@ -137,7 +139,7 @@ def render_map(mesh, path, red_at: float = 0.5, size: int = 640) -> Path:
 
 
 #: Segment coverage errors beyond this are drawn in the end colours of the error scale, points.
-ERROR_SPAN = 20.0
+ERROR_SPAN = 10.0
 
 
 def _error_rgb(error_points) -> np.ndarray:
@@ -208,8 +210,8 @@ def map_truth_error(example, path, red_at: float = 0.5, size: int = 480) -> Path
             estimated = ("map: each stretch by its estimated coverage", surface(est, cov_rgb))
         panels = [estimated, ("truth: true coverage, unobserved faces blue", surface(truth, cov_rgb, holes=True)),
                   ("error: estimated - true", surface(100 * (est - truth), _error_rgb))]
-        for ax, (title, mesh) in zip(row, panels):
-            ax.imshow(render_views(mesh, size, like=truth_frame, sides=(1.0,))[0])
+        for ax, (title, mesh), bg in zip(row, panels, ((1.0,) * 3, (1.0,) * 3, (0.45,) * 3)):
+            ax.imshow(render_views(mesh, size, like=truth_frame, sides=(1.0,), background=bg)[0])
             ax.set_title(f"{key.replace('|', ', ')}\n{title}", fontsize=9)
             ax.set_axis_off()
     cov = LinearSegmentedColormap.from_list("coverage", coverage_rgb(np.linspace(red_at, 1, 64), red_at) / 255.0)
