@@ -44,9 +44,9 @@ import numpy as np
 import pandas as pd
 
 from colonbench.benchmark.colon_metrics import END_SEEN, map_metrics
-from colonbench.benchmark.evaluate import (RUN_FILE, _init_worker, _method_record, _open_run, _WORKER, _write_csv,
-                                           _write_json, noisy, read_rows, select, versions)
-from colonbench.benchmark.registry import load_method
+from colonbench.benchmark.evaluate import (RUN_FILE, _init_worker, _WORKER, _write_csv, _write_json, begin_run,
+                                           check_run_folder, checked_arguments, load_methods, noisy, read_rows,
+                                           select)
 from colonbench.errors import ColonbenchError, InputError
 from colonbench.folderlock import folder_lock
 
@@ -202,45 +202,23 @@ def evaluate_colons(data, methods, out, noise=(0.0, 0.5), contexts=CONTEXTS_MM, 
     from colonbench.shards.colonshard import ColonShard
 
     data, out = Path(data), Path(out)
-    if workers < 1:
-        raise InputError(f"--workers must be >= 1, got {workers}")
-    sigmas = sorted({float(s) for s in noise})
-    if not sigmas or any(s < 0 or not np.isfinite(s) for s in sigmas):
-        raise InputError(f"noise levels must be non-negative mm, got {list(noise)}")
+    sigmas, specs = checked_arguments(workers, noise, methods)
     contexts = sorted({float(c) for c in contexts})
     if not contexts or any(c < 0 or not np.isfinite(c) for c in contexts):
         raise InputError(f"context margins must be non-negative mm, got {list(contexts)}")
     if not segment_mm > 0:
         raise InputError(f"--segment-length must be positive, got {segment_mm}")
-    specs = [s.strip() for s in methods if s.strip()]
-    if not specs:
-        raise InputError("no methods given")
     identity, picks = select(data, split, limit)
     ColonShard(data / picks[0][0])  # a clear error for a segment dataset
     options = {"model": str(model) if model is not None else None, "device": device}
     t0 = time.perf_counter()
-    loaded = {}
-    for spec in specs:
-        m = load_method(spec, **options)
-        if getattr(m, "uses_truth", False):
-            raise InputError(f"method {m.name!r} is given ground truth per segment (a reference row of the segment "
-                             "benchmark); it cannot map a whole reconstruction")
-        if m.name in loaded:
-            raise InputError(f"two methods are named {m.name!r}; rename one")
-        loaded[m.name] = (spec, m)
-    records = {name: _method_record(spec, m) for name, (spec, m) in loaded.items()}
+    loaded = load_methods(specs, options, refuse_truth="it cannot map a whole reconstruction (the segment "
+                                                       "benchmark's reference rows)")
     settings = {"task": "colon", "data": identity, "noise_mm": sigmas, "noise_seed": int(noise_seed),
                 "contexts_mm": contexts, "segment_mm": float(segment_mm), "thresholds_mm": [2.0]}
-    if out.is_dir() and not (out / RUN_FILE).exists() and any(not p.name.startswith(".") for p in out.iterdir()):
-        raise InputError(f"{out} is not empty and holds no {RUN_FILE}; give a new or empty run folder")
-    out.mkdir(parents=True, exist_ok=True)
+    check_run_folder(out)
     with folder_lock(out, "evaluate", "evaluation"):
-        run = _open_run(out, settings, records)
-        run["versions"] = run.get("versions") or versions()
-        run["data_path"] = str(data)
-        _write_json(out / RUN_FILE, run)
-        for tmp in out.rglob(".*.tmp*"):
-            tmp.unlink()
+        run = begin_run(out, settings, loaded, data)
         return _run(out, run, data, picks, sigmas, contexts, segment_mm, loaded, options, workers, noise_seed,
                     progress, t0)
 

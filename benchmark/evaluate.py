@@ -312,6 +312,52 @@ def _finalize(out: Path, run: dict, name: str, keys: list[str]) -> Path:
     return out / "results" / f"{name}.csv"
 
 
+def checked_arguments(workers: int, noise, methods) -> tuple[list[float], list[str]]:
+    """The sorted noise sigmas and the method specs of a run, or an :class:`InputError` saying what is wrong."""
+    if workers < 1:
+        raise InputError(f"--workers must be >= 1, got {workers}")
+    sigmas = sorted({float(s) for s in noise})
+    if not sigmas or any(s < 0 or not np.isfinite(s) for s in sigmas):
+        raise InputError(f"noise levels must be non-negative mm, got {list(noise)}")
+    specs = [s.strip() for s in methods if s.strip()]
+    if not specs:
+        raise InputError("no methods given")
+    return sigmas, specs
+
+
+def load_methods(specs: list[str], options: dict, refuse_truth: str | None = None) -> dict:
+    """``{name: (spec, method)}``; two methods of one name, or (with ``refuse_truth``, the reason) a method
+    given ground truth, are refused."""
+    loaded = {}
+    for spec in specs:
+        m = load_method(spec, **options)
+        if refuse_truth and getattr(m, "uses_truth", False):
+            raise InputError(f"method {m.name!r} is given ground truth per segment; {refuse_truth}")
+        if m.name in loaded:
+            raise InputError(f"two methods are named {m.name!r}; rename one")
+        loaded[m.name] = (spec, m)
+    return loaded
+
+
+def check_run_folder(out: Path) -> None:
+    """Create a run folder, refusing a non-empty folder that holds no run."""
+    if out.is_dir() and not (out / RUN_FILE).exists() and any(not p.name.startswith(".") for p in out.iterdir()):
+        raise InputError(f"{out} is not empty and holds no {RUN_FILE}; give a new or empty run folder")
+    out.mkdir(parents=True, exist_ok=True)
+
+
+def begin_run(out: Path, settings: dict, loaded: dict, data: Path) -> dict:
+    """Open (or extend) the run record of a locked run folder, write it, and clear leftovers of killed runs."""
+    records = {name: _method_record(spec, m) for name, (spec, m) in loaded.items()}
+    run = _open_run(out, settings, records)
+    run["versions"] = run.get("versions") or versions()
+    run["data_path"] = str(data)
+    _write_json(out / RUN_FILE, run)
+    for tmp in out.rglob(".*.tmp*"):
+        tmp.unlink()
+    return run
+
+
 def evaluate(data, methods, out, noise=(0.0, 0.5), split: str = "test", limit: int | None = None,
              workers: int = 1, model=None, device: str = "cpu", examples: int = 3, noise_seed: int = 0,
              progress: bool = True) -> Path:
@@ -346,36 +392,16 @@ def evaluate(data, methods, out, noise=(0.0, 0.5), split: str = "test", limit: i
         The run folder.
     """
     data, out = Path(data), Path(out)
-    if workers < 1:
-        raise InputError(f"--workers must be >= 1, got {workers}")
-    sigmas = sorted({float(s) for s in noise})
-    if not sigmas or any(s < 0 or not np.isfinite(s) for s in sigmas):
-        raise InputError(f"noise levels must be non-negative mm, got {list(noise)}")
-    specs = [s.strip() for s in methods if s.strip()]
-    if not specs:
-        raise InputError("no methods given")
+    sigmas, specs = checked_arguments(workers, noise, methods)
     identity, picks = select(data, split, limit)
     options = {"model": str(model) if model is not None else None, "device": device}
     t0 = time.perf_counter()
-    loaded = {}
-    for spec in specs:
-        m = load_method(spec, **options)
-        if m.name in loaded:
-            raise InputError(f"two methods are named {m.name!r}; rename one")
-        loaded[m.name] = (spec, m)
-    records = {name: _method_record(spec, m) for name, (spec, m) in loaded.items()}
+    loaded = load_methods(specs, options)
     settings = {"data": identity, "noise_mm": sigmas, "noise_seed": int(noise_seed),
                 "thresholds_mm": list(THRESHOLDS_MM)}
-    if out.is_dir() and not (out / RUN_FILE).exists() and any(not p.name.startswith(".") for p in out.iterdir()):
-        raise InputError(f"{out} is not empty and holds no {RUN_FILE}; give a new or empty run folder")
-    out.mkdir(parents=True, exist_ok=True)
+    check_run_folder(out)
     with folder_lock(out, "evaluate", "evaluation"):
-        run = _open_run(out, settings, records)
-        run["versions"] = run.get("versions") or versions()
-        run["data_path"] = str(data)
-        _write_json(out / RUN_FILE, run)
-        for tmp in out.rglob(".*.tmp-*"):
-            tmp.unlink()
+        run = begin_run(out, settings, loaded, data)
         return _run(out, run, data, picks, sigmas, loaded, options, workers, examples, noise_seed, progress, t0)
 
 

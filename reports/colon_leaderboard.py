@@ -28,6 +28,7 @@ import pandas as pd
 
 from colonbench.benchmark.colon_evaluate import load_colon_results
 from colonbench.errors import InputError
+from colonbench.reports.leaderboard import add_run
 
 #: Settings two whole-colon runs must share to be compared.
 SAME = ("data", "noise_mm", "noise_seed", "contexts_mm", "segment_mm", "thresholds_mm")
@@ -41,19 +42,7 @@ def merge_colon_runs(run_dirs) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
     meta, segs, cols = None, [], []
     for r in run_dirs:
         run, s, c = load_colon_results(r)
-        if meta is None:
-            meta = {k: run[k] for k in SAME}
-            meta.update(methods={}, runs=[])
-        for k in SAME:
-            if json.dumps(run[k], sort_keys=True) != json.dumps(meta[k], sort_keys=True):
-                raise InputError(f"{r} was evaluated with other {k} than {run_dirs[0]} ({run[k]!r} vs {meta[k]!r}); "
-                                 "a leaderboard compares runs on the same data only")
-        for name, rec in run["methods"].items():
-            if name in meta["methods"]:
-                raise InputError(f"method {name!r} is in both {meta['methods'][name]['run']} and {r}; give each "
-                                 "method once")
-            meta["methods"][name] = {**rec, "run": str(r)}
-        meta["runs"].append({"path": str(r), "versions": run.get("versions", {}), "sessions": run.get("sessions", [])})
+        meta = add_run(meta, run, r, run_dirs[0], SAME)
         segs.append(s)
         cols.append(c)
     return meta, pd.concat(segs, ignore_index=True), pd.concat(cols, ignore_index=True)

@@ -49,21 +49,33 @@ def merge_runs(run_dirs) -> tuple[dict, pd.DataFrame]:
     meta, frames = None, []
     for r in run_dirs:
         run, df = load_results(r)
-        if meta is None:
-            meta = {k: run[k] for k in SAME}
-            meta.update(methods={}, runs=[])
-        for k in SAME:
-            if json.dumps(run[k], sort_keys=True) != json.dumps(meta[k], sort_keys=True):
-                raise InputError(f"{r} was evaluated with other {k} than {run_dirs[0]} "
-                                 f"({run[k]!r} vs {meta[k]!r}); a leaderboard compares runs on the same data only")
-        for name, rec in run["methods"].items():
-            if name in meta["methods"]:
-                raise InputError(f"method {name!r} is in both {meta['methods'][name]['run']} and {r}; "
-                                 "give each method once")
-            meta["methods"][name] = {**rec, "run": str(r)}
-        meta["runs"].append({"path": str(r), "versions": run.get("versions", {}), "sessions": run.get("sessions", [])})
+        meta = add_run(meta, run, r, run_dirs[0], SAME)
         frames.append(df)
     return meta, pd.concat(frames, ignore_index=True)
+
+
+def add_run(meta: dict | None, run: dict, path, first, same) -> dict:
+    """``meta`` (started from ``run`` when None) with ``run``'s methods and record added.
+
+    Raises
+    ------
+    InputError
+        ``run`` differs from the first run in one of the settings ``same``, or names a method already there.
+    """
+    if meta is None:
+        meta = {k: run[k] for k in same}
+        meta.update(methods={}, runs=[])
+    for k in same:
+        if json.dumps(run[k], sort_keys=True) != json.dumps(meta[k], sort_keys=True):
+            raise InputError(f"{path} was evaluated with other {k} than {first} "
+                             f"({run[k]!r} vs {meta[k]!r}); a leaderboard compares runs on the same data only")
+    for name, rec in run["methods"].items():
+        if name in meta["methods"]:
+            raise InputError(f"method {name!r} is in both {meta['methods'][name]['run']} and {path}; "
+                             "give each method once")
+        meta["methods"][name] = {**rec, "run": str(path)}
+    meta["runs"].append({"path": str(path), "versions": run.get("versions", {}), "sessions": run.get("sessions", [])})
+    return meta
 
 
 def table(meta: dict, results: pd.DataFrame) -> pd.DataFrame:
@@ -101,7 +113,7 @@ def markdown(meta: dict, tab: pd.DataFrame) -> str:
                          f"{_f(r['coverage_median'])} | {_f(r['coverage_bias'])} | {_f(r['coverage_q95'])} | "
                          f"{r['coverage_undefined']} | {r['failed']} | {_f(r['seconds'], 3)} |")
         head = ["method"] + [f"{w} {pr} @{t:g}" for t in ths for w in ("holes", "centerline") for pr in ("P", "R")]
-        lines += ["", f"Precision (P) and recall (R), mean (median); undefined segments in the last column.", "",
+        lines += ["", "Precision (P) and recall (R), mean (median); undefined segments in the last column.", "",
                   "| " + " | ".join(head) + " | undefined (holes / centerline) |",
                   "|---|" + "---:|" * (len(head) - 1) + "---:|"]
         for _, r in g.iterrows():
