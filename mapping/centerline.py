@@ -16,7 +16,9 @@ so the lumen cannot be flood-filled as for a closed mesh
    (6-connected, at least ``min_piece_mm`` across): where the colon has no
    wall at all for a stretch, nothing is enclosed and the colon is
    *interrupted*. Pieces whose median depth is under half the longest one's
-   are channels, not lumen (inside a wall drawn as a shell), and dropped.
+   are channels, not lumen (inside a wall drawn as a shell), and dropped,
+   unless they are at least 100 mm long and lie apart from the wider ones
+   (a narrower stretch of the colon).
 4. In each piece, the minimal path between its two geodesic extremities with
    a speed that grows with the distance to the wall (fast marching, the
    recipe of :mod:`colonbench.paths`), smoothed, its last two sigmas (bent by
@@ -246,6 +248,33 @@ def _bridge(pieces: list[Piece], cloud: np.ndarray, covered: float = 0.9) -> lis
     return out
 
 
+def _drop_channels(pieces: list[tuple[Piece, float]], long_mm: float = 100.0, apart: float = 1.5) -> list[Piece]:
+    """The pieces that are stretches of the colon's lumen, not channels beside it.
+
+    A piece far narrower than the longest one (under half its median depth)
+    is a channel (the gap inside a wall drawn as a shell, a pocket between
+    folds) unless it is at least ``long_mm`` long and lies apart from the
+    wider pieces (at least ``apart`` of their radius from their centerlines
+    over 80 % of its length): then it is a narrower stretch of the colon (a
+    narrow limb of a real colon, a noisy reconstruction's thin lumen).
+    """
+    from scipy.spatial import cKDTree
+
+    longest = max(pieces, key=lambda p: p[0].length)[1]
+    wide = [p for p, depth in pieces if depth >= 0.5 * longest]
+    tree = cKDTree(np.concatenate([p.points for p in wide]))
+    radius = max(p.radius for p in wide)
+    kept = []
+    for p, depth in pieces:
+        if depth >= 0.5 * longest:
+            kept.append(p)
+        elif p.length >= long_mm:
+            d, _ = tree.query(p.points)
+            if np.mean(d > apart * radius) >= 0.8:
+                kept.append(p)
+    return kept
+
+
 def colon_centerline(points, voxel_mm: float = VOXEL_MM, close_mm: float = CLOSE_MM,
                      enclosed_share: float = ENCLOSED_SHARE, min_piece_mm: float = MIN_PIECE_MM,
                      smooth_mm: float = SMOOTH_MM) -> list[Piece]:
@@ -313,10 +342,7 @@ def colon_centerline(points, voxel_mm: float = VOXEL_MM, close_mm: float = CLOSE
         depth = float(np.median(depth))
         pieces.append((Piece(line, depth + close * voxel_mm), depth))
     if pieces:
-        # channels far narrower than the colon's lumen (the gap inside a wall drawn as a shell,
-        # a pocket between folds) are no stretch of it
-        longest = max(pieces, key=lambda p: p[0].length)[1]
-        pieces = [p for p, depth in pieces if depth >= 0.5 * longest]
+        pieces = _drop_channels(pieces)
     if not pieces:
         raise InputError("no stretch of lumen longer than "
                          f"{min_piece_mm:g} mm found: the points do not enclose a tube")

@@ -185,6 +185,20 @@ def test_a_trajectory_bridges_a_stretch_with_no_reconstruction():
     assert len(split["interruptions"]) == 1 and split["unreconstructed"] == []
 
 
+def test_a_long_narrow_stretch_apart_from_the_wide_lumen_is_kept():
+    """A wide tube (radius 25 mm) and, apart from it, a long tube of half its radius: the narrow one's enclosed
+    lumen is under half as deep, as a channel's would be, but it is long and lies apart: a stretch of colon."""
+    wide, _, _ = tube_cloud(straight(300.0), radius=25.0)
+    narrow, _, _ = tube_cloud(straight(200.0), radius=12.0, seed=2)
+    narrow = narrow + [120.0, 0.0, 50.0]
+    pieces = colon_centerline(np.concatenate([wide, narrow]))
+    assert len(pieces) == 2
+    for p in pieces:  # each follows its own axis
+        axis = 120.0 if p.radius < 18 else 0.0
+        assert np.median(np.hypot(p.points[:, 0] - axis, p.points[:, 1])) < 2.0
+    assert sorted(p.length for p in pieces) == pytest.approx([200, 300], abs=12)
+
+
 def test_bad_inputs_are_refused(tmp_path, capsys):
     line = straight(300.0)
     pts, _, _ = tube_cloud(line, density=0.5)
