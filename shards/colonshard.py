@@ -25,9 +25,8 @@ import numpy as np
 from colonbench import seeding
 from colonbench.errors import InputError
 from colonbench.shards import schema
-from colonbench.shards.writer import TMP_SUFFIX, _ragged
-
-_NAMES = {v: k for k, v in schema.HOLE_MODEL_CODES.items()}
+from colonbench.shards.reader import ragged_row, read_attrs
+from colonbench.shards.writer import TMP_SUFFIX, _ragged, publish
 
 
 def face_arclength(vertices: np.ndarray, faces: np.ndarray, centerline) -> np.ndarray:
@@ -64,6 +63,8 @@ def write_colon_shard(path, attrs: dict, vertices, faces, centerline, samples: l
         One per sample: ``hole_model`` (name), ``noise_mm``, ``coverage``,
         ``observed_faces`` ((f,) bool), ``points`` ((n, 3) mm), ``positions`` ((k, 3) mm).
     """
+    from colonbench.datagen.centerline import Centerline
+
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + f"{TMP_SUFFIX}{os.getpid()}")
@@ -72,8 +73,6 @@ def write_colon_shard(path, attrs: dict, vertices, faces, centerline, samples: l
     missing = sorted(set(schema.COLON_ATTRIBUTES) - set(attrs))
     if missing:
         raise ValueError(f"whole-colon shard attributes missing: {missing}")
-    from colonbench.datagen.centerline import Centerline
-
     stored = Centerline.from_points(np.asarray(centerline.points, np.float32))  # as it will be read back
     vertices = np.asarray(vertices, np.float32)
     columns = {
@@ -98,9 +97,7 @@ def write_colon_shard(path, attrs: dict, vertices, faces, centerline, samples: l
                 h5.create_dataset(f.path, data=data, track_times=False, **opts)
             for key, val in attrs.items():
                 h5.attrs[key] = val
-        with open(tmp, "rb+") as fh:
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
+        publish(tmp, path)
     finally:
         if tmp.exists():
             tmp.unlink()
@@ -123,11 +120,7 @@ class ColonShard:
 
     def __init__(self, path):
         self.path = Path(path)
-        try:
-            with h5py.File(self.path, "r") as h5:
-                self.attrs = {k: (v.item() if hasattr(v, "item") else v) for k, v in h5.attrs.items()}
-        except OSError as exc:
-            raise InputError(f"{self.path}: not a readable HDF5 file ({exc})") from None
+        self.attrs = read_attrs(self.path)
         if self.attrs.get("format") != schema.COLON_FORMAT:
             what = "a segment shard" if self.attrs.get("format") == schema.FORMAT else "not a colonbench shard"
             raise InputError(f"{self.path}: {what}, not a whole-colon shard (made from a manifest with task: colon)")
@@ -159,31 +152,12 @@ class ColonShard:
             raise IndexError(f"{self.path}: sample {i} out of range ({len(self)} samples)")
         with h5py.File(self.path, "r") as h5:
             smp = h5["samples"]
-
-            def rows(name):
-                off = smp[name + "_offsets"]
-                return smp[name][int(off[i]):int(off[i + 1])].astype(float)
-
-            return {"index": i, "points": rows("points"), "positions": rows("positions"),
+            return {"index": i, "points": ragged_row(smp, "points", i).astype(float),
+                    "positions": ragged_row(smp, "positions", i).astype(float),
                     "observed_faces": smp["observed_faces"][i].astype(bool),
-                    "hole_model": _NAMES[int(smp["hole_model"][i])], "noise_mm": float(smp["noise_mm"][i]),
+                    "hole_model": schema.HOLE_MODEL_NAMES[int(smp["hole_model"][i])],
+                    "noise_mm": float(smp["noise_mm"][i]),
                     "coverage": float(smp["coverage"][i])}
-
-
-def stratified_draw(mix: dict, n: int, k: int, root_seed: int, *path):
-    """The ``k``-th of ``n`` choices from a ``{choice: weight}`` mix, drawn systematically.
-
-    One uniform offset ``u`` is drawn from the stream ``path``; draw ``k`` takes
-    the choice at ``(u + k) / n`` of the cumulative weights. Every choice then
-    comes ``n * weight`` times, rounded up or down, so that each colon gets
-    each hole model in its share (2 permutations of a half-and-half mix: one of
-    each), and the choice of each draw is still random.
-    """
-    keys = list(mix)
-    u = seeding.rng(root_seed, "mix", *path).random()
-    cum = np.cumsum([mix[key] for key in keys])
-    r = ((u + k) / n) % 1.0
-    return keys[min(int(np.searchsorted(cum, r * cum[-1], side="right")), len(keys) - 1)]
 
 
 def build_colon_shard(resolved: dict, unit, out_dir) -> dict:
@@ -210,7 +184,7 @@ def build_colon_shard(resolved: dict, unit, out_dir) -> dict:
     from colonbench.datagen.generate import GeneratorConfig, procedural_colon
     from colonbench.datagen.wholecolon import whole_partial
     from colonbench.shards.build import check_mesh_files, mesh_colon
-    from colonbench.shards.manifest import config_hash, draw_mix, manifest_hash
+    from colonbench.shards.manifest import config_hash, draw_mix, manifest_hash, stratified_draw
 
     t0 = time.perf_counter()
     seed = resolved["seed"]

@@ -32,7 +32,7 @@ from colonbench.folderlock import folder_lock
 from colonbench.shards import schema, stats
 from colonbench.shards.build import build_shard
 from colonbench.shards.writer import TMP_SUFFIX
-from colonbench.shards.manifest import SPLITS, config_hash, dumps, load, manifest_hash, resolve, units
+from colonbench.shards.manifest import SPLITS, config_hash, dumps, load, manifest_hash, resolve, task, units
 from colonbench.shards.schema import LOCK_NAME, sha256_file
 
 MANIFEST_NAME = "manifest.yaml"
@@ -200,6 +200,7 @@ def write_lock(resolved: dict, out: Path, hashes: dict | None = None) -> dict:
     has none, is hashed here.
     """
     digest = manifest_hash(resolved)
+    whole = task(resolved) == "colon"
     previous = _locked_shards(out) if hashes is None else hashes
     shards, missing, per_split = {}, [], {}
     for u in units(resolved):
@@ -212,10 +213,10 @@ def write_lock(resolved: dict, out: Path, hashes: dict | None = None) -> dict:
         sha = old["sha256"] if old.get("bytes") == size and "sha256" in old else sha256_file(path)
         with h5py.File(path, "r") as h5:
             n, m = int(h5.attrs["n_samples"]), int(h5.attrs.get("n_segments", 0))
-            whole = h5["samples/coverage"][()] if u.whole else None
+            values = h5["samples/coverage"][()] if whole else None
         shards[u.name] = {"sha256": sha, "bytes": size, "samples": n, "segments": m, "split": u.split,
                           "colon_id": u.colon_id, "length_mm": u.length_mm}
-        per_split.setdefault(u.split, []).append(stats.shard_values(path) if whole is None else whole)
+        per_split.setdefault(u.split, []).append(values if whole else stats.shard_values(path))
     split_info = {}
     for split in SPLITS:
         if split not in per_split:
@@ -225,15 +226,16 @@ def write_lock(resolved: dict, out: Path, hashes: dict | None = None) -> dict:
                              "segments": sum(s["segments"] for s in entries),
                              "colons": len({s["colon_id"] for s in entries}),
                              "bytes": sum(s["bytes"] for s in entries),
-                             "statistics": stats.summarize(per_split[split]) if resolved.get("task") != "colon"
-                             else {"coverage": stats.quantiles(np.concatenate(per_split[split]))}}
+                             "statistics": {"coverage": stats.quantiles(np.concatenate(per_split[split]))}
+                             if whole else stats.summarize(per_split[split])}
     lock = {"format": LOCK_FORMAT, "format_version": LOCK_VERSION, "manifest_name": resolved["name"],
             "manifest_sha256": digest, "config_sha256": config_hash(resolved),
-            "generator_version": __version__, "shard_format_version": schema.FORMAT_VERSION,
+            "generator_version": __version__,
+            "shard_format_version": schema.COLON_FORMAT_VERSION if whole else schema.FORMAT_VERSION,
             "splits": split_info, "missing": missing, "shards": shards}
     tmp = out / (LOCK_NAME + ".tmp")
     tmp.write_text(json.dumps(lock, indent=1) + "\n")
     os.replace(tmp, out / LOCK_NAME)
-    if split_info and resolved.get("task") != "colon":
+    if split_info and not whole:
         stats.plot({k: v["statistics"] for k, v in split_info.items()}, out / STATS_NAME)
     return lock

@@ -193,9 +193,9 @@ def resolve(data: dict, source: str = "manifest") -> dict:
             raise InputError(f"{source}: {key!r} is required")
     name = str(data["name"])
     seed = _int(data["seed"], f"{source}: seed", 0)
-    task = data.get("task", "segments")
-    if task not in TASKS:
-        raise InputError(f"{source}: task {task!r} is not one of {list(TASKS)}")
+    kind = task(data)
+    if kind not in TASKS:
+        raise InputError(f"{source}: task {kind!r} is not one of {list(TASKS)}")
     config = GeneratorConfig.from_dict(data.get("config"))
     grid = dict(data.get("grid") or {})
     bad = sorted(set(grid) - {"size", "margin", "min_extent_mm", "axes"})
@@ -238,7 +238,7 @@ def resolve(data: dict, source: str = "manifest") -> dict:
         count = _int(colons["count"], f"{where}.colons.count", 0 if names else 1)
         per_length = s.get("segments_per_length")
         per_length = None if per_length is None else _int(per_length, f"{where}.segments_per_length", 1)
-        if task == "colon":
+        if kind == "colon":
             from colonbench.datagen.wholecolon import WHOLE_HOLE_MODELS
 
             if per_length is not None:
@@ -285,16 +285,21 @@ def resolve(data: dict, source: str = "manifest") -> dict:
     config_dict = config.to_dict()
     if any("video" in v["hole_models"] for v in splits.values()):  # spelled out where it is used
         config_dict["video"] = to_dict(config.video)
-    if task == "colon":  # spelled out where it is used
+    if kind == "colon":  # spelled out where it is used
         config_dict["whole"] = to_dict(config.whole)
     out = {"name": name, "description": str(data.get("description", "")),
            "generator_version": str(data.get("generator_version", __version__)), "seed": seed,
            "grid": grid, "config": config_dict, "splits": splits}
-    if task != "segments":  # only when set, so that manifests from before keep their hash
-        out = {"task": task, **out}
+    if kind != "segments":  # only when set, so that manifests from before keep their hash
+        out = {"task": kind, **out}
     if meshes:  # only when used, so that manifests from before keep their hash
         out["meshes"] = meshes
     return out
+
+
+def task(manifest: dict) -> str:
+    """What a (resolved) manifest makes: ``"segments"`` (when it names no task) or ``"colon"``."""
+    return manifest.get("task", "segments")
 
 
 def load(path) -> dict:
@@ -341,7 +346,7 @@ def units(resolved: dict, splits=None, base=".") -> list[Unit]:
 
     ``base`` is the folder that the manifest's mesh paths are relative to (the manifest file's).
     """
-    whole = resolved.get("task", "segments") == "colon"
+    whole = task(resolved) == "colon"
     lengths = [0.0] if whole else resolved["config"]["segments"]["lengths_mm"]
     out = []
     for split, s in resolved["splits"].items():
@@ -363,9 +368,25 @@ def pick_segments(n_windows: int, per_length: int | None) -> list[int]:
     return sorted({int(round(x)) for x in np.linspace(0, n_windows - 1, per_length)})
 
 
-def draw_mix(mix: dict, root_seed: int, *path):
-    """A choice from a ``{choice: weight}`` mix, drawn from its own stream ``("mix", *path)``."""
+def _pick(mix: dict, r: float):
+    """The choice of a ``{choice: weight}`` mix at ``r`` in [0, 1) of its cumulative weights."""
     keys = list(mix)
-    r = seeding.rng(root_seed, "mix", *path).random()
     cum = np.cumsum([mix[k] for k in keys])
     return keys[min(int(np.searchsorted(cum, r * cum[-1], side="right")), len(keys) - 1)]
+
+
+def draw_mix(mix: dict, root_seed: int, *path):
+    """A choice from a ``{choice: weight}`` mix, drawn from its own stream ``("mix", *path)``."""
+    return _pick(mix, seeding.rng(root_seed, "mix", *path).random())
+
+
+def stratified_draw(mix: dict, n: int, k: int, root_seed: int, *path):
+    """The ``k``-th of ``n`` choices from a ``{choice: weight}`` mix, drawn systematically.
+
+    One uniform offset ``u`` is drawn from the stream ``("mix", *path)``; draw
+    ``k`` takes the choice at ``(u + k) / n`` of the cumulative weights. Every
+    choice then comes ``n * weight`` times, rounded up or down (2 draws of a
+    half-and-half mix: one of each), and the choice of each draw is still random.
+    """
+    u = seeding.rng(root_seed, "mix", *path).random()
+    return _pick(mix, ((u + k) / n) % 1.0)

@@ -28,13 +28,20 @@ from colonbench.grid import Grid
 from colonbench.shards import schema
 from colonbench.shards.schema import LOCK_NAME
 
-_NAMES = {v: k for k, v in schema.HOLE_MODEL_CODES.items()}
-
-
-def _rows(group, name, i):
+def ragged_row(group, name: str, i: int) -> np.ndarray:
+    """Row ``i`` of the ragged field ``name`` of an open HDF5 group (through ``<name>_offsets``)."""
     off = group[name + "_offsets"]
     a, b = int(off[i]), int(off[i + 1])
     return group[name][a:b]
+
+
+def read_attrs(path: Path) -> dict:
+    """The file attributes of an HDF5 file as Python values, or an :class:`InputError` if it cannot be read."""
+    try:
+        with h5py.File(path, "r") as h5:
+            return {k: (v.item() if hasattr(v, "item") else v) for k, v in h5.attrs.items()}
+    except OSError as exc:
+        raise InputError(f"{path}: not a readable HDF5 file ({exc})") from None
 
 
 class Shard:
@@ -50,14 +57,9 @@ class Shard:
         self.path = Path(path)
         self._h5 = None
         self._pid = None
-        try:
-            with h5py.File(self.path, "r") as h5:
-                faults = [] if h5.attrs.get("format") == schema.FORMAT else ["not a colonbench shard"]
-                self.attrs = {k: (v.item() if hasattr(v, "item") else v) for k, v in h5.attrs.items()}
-        except OSError as exc:
-            raise InputError(f"{self.path}: not a readable HDF5 file ({exc})") from None
-        if faults:
-            raise InputError(f"{self.path}: {faults[0]}")
+        self.attrs = read_attrs(self.path)
+        if self.attrs.get("format") != schema.FORMAT:
+            raise InputError(f"{self.path}: not a colonbench shard")
         if int(self.attrs.get("format_version", -1)) != schema.FORMAT_VERSION:
             raise InputError(f"{self.path}: shard format version {self.attrs.get('format_version')}, "
                              f"this colonbench reads version {schema.FORMAT_VERSION}")
@@ -117,8 +119,8 @@ class Shard:
         """Segment row ``m``: ``segment_id``, ``window_mm``, ``complete_area_mm2``, ``vertices``, ``faces``, ``centerline``."""
         seg = self.h5["segments"]
         return {"segment_id": int(seg["segment_id"][m]), "window_mm": seg["window_mm"][m],
-                "complete_area_mm2": float(seg["complete_area_mm2"][m]), "vertices": _rows(seg, "vertices", m),
-                "faces": _rows(seg, "faces", m), "centerline": _rows(seg, "centerline", m)}
+                "complete_area_mm2": float(seg["complete_area_mm2"][m]), "vertices": ragged_row(seg, "vertices", m),
+                "faces": ragged_row(seg, "faces", m), "centerline": ragged_row(seg, "centerline", m)}
 
     def geometry(self, i: int) -> dict:
         """Sample ``i`` without heatmaps: points, its segment's mesh and centerline, GT values, ids (mm)."""
@@ -127,12 +129,12 @@ class Shard:
         m = int(smp["segment"][i])
         out = {"shard": self.path.name, "index": i, "split": self.attrs["split"],
                "colon_id": int(self.attrs["colon_id"]), "length_mm": float(self.attrs["length_mm"]),
-               "permutation": int(smp["permutation"][i]), "hole_model": _NAMES[int(smp["hole_model"][i])],
+               "permutation": int(smp["permutation"][i]), "hole_model": schema.HOLE_MODEL_NAMES[int(smp["hole_model"][i])],
                "noise_mm": float(smp["noise_mm"][i]), "coverage": float(smp["coverage"][i]),
                "outside_grid": float(smp["outside_grid"][i]), "grid_affine": smp["grid_affine"][i],
-               "partial_points": _rows(smp, "partial_points", i), "hole_points": _rows(smp, "hole_points", i),
-               "observed_faces": _rows(smp, "observed_faces", i).astype(bool),
-               "hole_areas_mm2": _rows(smp, "hole_areas_mm2", i)}
+               "partial_points": ragged_row(smp, "partial_points", i), "hole_points": ragged_row(smp, "hole_points", i),
+               "observed_faces": ragged_row(smp, "observed_faces", i).astype(bool),
+               "hole_areas_mm2": ragged_row(smp, "hole_areas_mm2", i)}
         out.update(self.segment(m))
         return out
 

@@ -55,6 +55,8 @@ FORMAT_VERSION = 1
 #: Hole models, as stored in the enum ``samples/hole_model``.
 HOLE_MODEL_CODES = {"camera": 0, "spheres": 1, "camera+spheres": 2, "camera+end": 3, "spheres+end": 4,
                     "camera+spheres+end": 5, "video": 6}
+#: The hole model of each stored code.
+HOLE_MODEL_NAMES = {v: k for k, v in HOLE_MODEL_CODES.items()}
 
 
 @dataclass(frozen=True)
@@ -217,9 +219,9 @@ COLON_OPTIONAL_ATTRIBUTES = {
 COMPRESSION = {"compression": "gzip", "compression_opts": 4, "shuffle": True}
 
 
-def field(path: str, fields=FIELDS) -> Field:
-    """The :class:`Field` stored at ``group/name`` (of segment shards, or of ``fields``)."""
-    for f in fields:
+def field(path: str) -> Field:
+    """The :class:`Field` stored at ``group/name``."""
+    for f in FIELDS:
         if f.path == path:
             return f
     raise KeyError(path)
@@ -341,7 +343,7 @@ def check_colon(h5: h5py.File) -> list[str]:
         ds = h5[f.path]
         if ds.dtype != np.dtype(f.dtype):
             faults.append(f"{f.path} has dtype {ds.dtype}, expected {f.dtype}")
-        dims = {"rows": n}
+        dims = {"rows": n, **sizes}
         if f.ragged:
             off = h5.get(f.path + "_offsets")
             if off is None or off.shape != (n + 1,) or off[0] != 0 or np.any(np.diff(off[()]) < 0) \
@@ -350,11 +352,9 @@ def check_colon(h5: h5py.File) -> list[str]:
                               f"{f.path} in {n} rising steps")
                 continue
             dims["flat"] = ds.shape[0]
-        for k, s in enumerate(f.shape):
-            if s in ("V", "F", "C"):
-                dims.setdefault(s, ds.shape[k] if ds.ndim > k else -1)
-                sizes.setdefault(s, dims[s])
-                dims[s] = sizes[s]
+        for k, s in enumerate(f.shape):  # V, F, C: the size the first dataset with that dimension has
+            if s in ("V", "F", "C") and s not in dims:
+                dims[s] = sizes[s] = ds.shape[k] if ds.ndim > k else -1
         expected = tuple(dims.get(s, s) for s in f.shape)
         if ds.shape != expected:
             faults.append(f"{f.path} has shape {ds.shape}, expected {expected}")

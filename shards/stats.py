@@ -7,7 +7,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from colonbench.shards.schema import HOLE_MODEL_CODES
+from colonbench.shards.schema import HOLE_MODEL_NAMES
 
 #: Coverage histogram bin edges (fraction).
 COVERAGE_BINS = np.linspace(0.0, 1.0, 21)
@@ -54,7 +54,6 @@ def summarize(values: list[dict]) -> dict:
     hole_counts = np.bincount(cat["holes"].astype(int)) if len(cat["holes"]) else np.zeros(0, int)
     models, model_counts = np.unique(cat["hole_model"], return_counts=True)
     noise, noise_counts = np.unique(cat["noise_mm"], return_counts=True)
-    names = {v: k for k, v in HOLE_MODEL_CODES.items()}
     return {
         "coverage": {**quantiles(cat["coverage"]), "histogram": {
             "edges": COVERAGE_BINS.tolist(), "counts": np.histogram(cat["coverage"], COVERAGE_BINS)[0].tolist()}},
@@ -64,7 +63,7 @@ def summarize(values: list[dict]) -> dict:
             "counts": np.histogram(np.clip(cat["hole_size_pct"], 0, 100), HOLE_SIZE_BINS)[0].tolist()}},
         "outside_grid": quantiles(cat["outside_grid"]),
         "voxel_mm": quantiles(cat["voxel_mm"]),
-        "hole_models": {names[int(m)]: int(c) for m, c in zip(models, model_counts)},
+        "hole_models": {HOLE_MODEL_NAMES[int(m)]: int(c) for m, c in zip(models, model_counts)},
         "noise_mm": {f"{s:g}": int(c) for s, c in zip(noise, noise_counts)},
     }
 

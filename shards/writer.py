@@ -29,6 +29,14 @@ def _ragged(rows, dtype, tail):
     return flat.astype(dtype, copy=False), offsets
 
 
+def publish(tmp: Path, path: Path) -> Path:
+    """Flush a finished file written under ``tmp`` to disk and rename it to ``path`` (atomic on one file system)."""
+    with open(tmp, "rb+") as fh:
+        os.fsync(fh.fileno())
+    os.replace(tmp, path)
+    return path
+
+
 class ShardWriter:
     """Write a shard under a temporary name; :meth:`close` renames it to ``path`` once complete.
 
@@ -122,10 +130,7 @@ class ShardWriter:
         for key, val in attrs.items():
             self.h5.attrs[key] = val
         self.h5.close()
-        with open(self.tmp, "rb+") as fh:
-            os.fsync(fh.fileno())
-        os.replace(self.tmp, self.path)
-        return self.path
+        return publish(self.tmp, self.path)
 
     def abort(self):
         """Close and delete the temporary file."""
