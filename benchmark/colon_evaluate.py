@@ -25,7 +25,7 @@ A run folder holds::
     parts/<method>/<unit>.segments.csv    per-segment rows of one sample at one noise level (resume points)
     parts/<method>/<unit>.colons.csv      its per-map rows
     results/segments.csv, colons.csv      every row of every method, once all parts exist
-    examples/<method>/<unit>.npz          the first sample's maps, for the figure
+    examples/<unit>.pkl                   the first sample's truth and maps, for the figure
 
 The noise is drawn as in the segment benchmark (stream ``("eval-noise", sigma in um, shard, index)``),
 the same cloud for every method, track and rerun.
@@ -33,25 +33,25 @@ the same cloud for every method, track and rerun.
 
 from __future__ import annotations
 
-import multiprocessing
 import resource
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
-from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
 from colonbench.benchmark.colon_metrics import END_SEEN, map_metrics
-from colonbench.benchmark.evaluate import (RUN_FILE, _init_worker, _WORKER, _write_csv, _write_json, begin_run,
-                                           check_run_folder, checked_arguments, load_methods, noisy, read_rows,
-                                           select)
+from colonbench.benchmark.evaluate import (RUN_FILE, _WORKER, _write_csv, _write_json, begin_run, check_run_folder,
+                                           checked_arguments, load_methods, noisy, read_rows, run_units, select)
 from colonbench.errors import ColonbenchError, InputError
 from colonbench.folderlock import folder_lock
+from colonbench.mapping.colonmap import CONTEXT_MM, SEGMENT_MM
 
-#: Default context margins of the tracks, mm (0 = segment-only).
-CONTEXTS_MM = (0.0, 15.0)
+#: Default context margins of the tracks, mm: segment-only and ``colonbench map``'s default.
+CONTEXTS_MM = (0.0, CONTEXT_MM)
+#: The methods ``--methods all`` maps with: registry.DEFAULT_METHODS less those given ground truth (they cannot
+#: map) and ``unwrap-pca`` (the segment benchmark's ablation of unwrap's centerline).
+ALL_METHODS = ("completion", "thresholding", "unwrap", "constant")
 #: Per-segment columns of ``results/segments.csv``.
 SEGMENT_COLUMNS = ["method", "track", "context_mm", "shard", "colon", "index", "hole_model", "noise_mm", "segment",
                    "piece", "start_mm", "end_mm", "true_start_mm", "true_end_mm", "points", "true_coverage",
@@ -151,7 +151,8 @@ def run_colon_unit(data: str, shard_name: str, index: int, sigma: float, noise_s
 
 
 def _save_example(path: Path, truth: dict, sample: dict, maps: dict):
-    """The truth and each map's segment meshes of one sample, for the figure (reports.colon_figures)."""
+    """The truth and each map's segment meshes of one sample, for the figure
+    (:func:`colonbench.reports.coverage_map.map_truth_error`)."""
     import pickle
 
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -172,7 +173,7 @@ def _unit_key(shard_name: str, index: int, sigma: float) -> str:
     return f"{Path(shard_name).with_suffix('').as_posix().replace('/', '__')}-{index}-noise{sigma:g}"
 
 
-def evaluate_colons(data, methods, out, noise=(0.0, 0.5), contexts=CONTEXTS_MM, segment_mm: float = 60.0,
+def evaluate_colons(data, methods, out, noise=(0.0, 0.5), contexts=CONTEXTS_MM, segment_mm: float = SEGMENT_MM,
                     split: str = "test", limit: int | None = None, workers: int = 1, model=None,
                     device: str = "cpu", noise_seed: int = 0, progress: bool = True) -> Path:
     """Map every whole-colon sample of a split with every method and track; write (or finish) a run folder.
@@ -241,24 +242,9 @@ def _run(out, run, data, picks, sigmas, contexts, segment_mm, loaded, options, w
                dynamic_ncols=True)
     args = lambda u: (str(data), u[0], u[1], u[2], noise_seed, u[3], contexts, segment_mm, u[4])  # noqa: E731
     try:
-        if workers == 1 or len(units) <= 1:
-            methods = {n: m for n, (_, m) in loaded.items()}
-            for u in units:
-                _store(out, u[5], run_colon_unit(*args(u), methods=methods))
-                bar.update(1)
-        else:
-            ctx = multiprocessing.get_context("spawn")  # torch and HDF5 are not fork-safe
-            specs = [spec for spec, _ in loaded.values()]
-            with ProcessPoolExecutor(min(workers, len(units)), mp_context=ctx, initializer=_init_worker,
-                                     initargs=(specs, options, 1)) as pool:
-                futures = {pool.submit(run_colon_unit, *args(u)): u for u in units}
-                try:
-                    for f in as_completed(futures):
-                        _store(out, futures[f][5], f.result())
-                        bar.update(1)
-                except BrokenProcessPool:
-                    raise ColonbenchError("a worker process died (out of memory?); what was finished is kept, "
-                                          "rerun the same command (with fewer --workers) to resume") from None
+        for u, rows in run_units(run_colon_unit, units, args, loaded, options, workers):
+            _store(out, u[5], rows)
+            bar.update(1)
     finally:
         bar.close()
     for kind in ("segments", "colons"):
@@ -328,12 +314,13 @@ def dataset_task(data) -> str:
     import yaml
 
     from colonbench.shards.dataset import MANIFEST_NAME
+    from colonbench.shards.manifest import task
 
     path = Path(data) / MANIFEST_NAME
     if not path.is_file():
         raise InputError(f"{data}: not a dataset folder (no {MANIFEST_NAME}); generate the dataset first "
                          "(colonbench generate)")
     try:
-        return str((yaml.safe_load(path.read_text()) or {}).get("task", "segments"))
+        return str(task(yaml.safe_load(path.read_text()) or {}))
     except (yaml.YAMLError, AttributeError) as exc:
         raise InputError(f"{path}: unreadable ({exc})") from None

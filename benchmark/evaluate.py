@@ -405,6 +405,35 @@ def evaluate(data, methods, out, noise=(0.0, 0.5), split: str = "test", limit: i
         return _run(out, run, data, picks, sigmas, loaded, options, workers, examples, noise_seed, progress, t0)
 
 
+def run_units(fn, units: list, args, loaded: dict, options: dict, workers: int):
+    """Yield ``(unit, fn(*args(unit), methods=...))`` for every unit, in this process or in ``workers`` processes.
+
+    Each worker process loads the methods once (``_init_worker``, one torch
+    thread) and ``fn`` finds them there; results come back as they finish.
+
+    Raises
+    ------
+    ColonbenchError
+        A worker died; what was finished has been yielded.
+    """
+    if workers == 1 or len(units) <= 1:
+        methods = {n: m for n, (_, m) in loaded.items()}
+        for u in units:
+            yield u, fn(*args(u), methods=methods)
+        return
+    ctx = multiprocessing.get_context("spawn")  # torch and HDF5 are not fork-safe
+    specs = [spec for spec, _ in loaded.values()]
+    with ProcessPoolExecutor(min(workers, len(units)), mp_context=ctx, initializer=_init_worker,
+                             initargs=(specs, options, 1)) as pool:
+        futures = {pool.submit(fn, *args(u)): u for u in units}
+        try:
+            for f in as_completed(futures):
+                yield futures[f], f.result()
+        except BrokenProcessPool:
+            raise ColonbenchError("a worker process died (out of memory?); what was finished is kept, "
+                                  "rerun the same command (with fewer --workers) to resume") from None
+
+
 def _run(out, run, data, picks, sigmas, loaded, options, workers, examples, noise_seed, progress, t0) -> Path:
     flat = [(n, i) for n, idx in picks for i in idx]
     ex_keys = {flat[k] for k in np.unique(np.linspace(0, len(flat) - 1, examples).astype(int))} if examples else set()
@@ -423,24 +452,9 @@ def _run(out, run, data, picks, sigmas, loaded, options, workers, examples, nois
     bar = tqdm(total=total, unit="segment", desc="evaluate", disable=None if progress else True, dynamic_ncols=True)
     args = lambda u: (str(data), u[0], u[1], u[2], noise_seed, u[3], u[4], str(out))  # noqa: E731
     try:
-        if workers == 1 or len(units) <= 1:
-            methods = {n: m for n, (_, m) in loaded.items()}
-            for u in units:
-                _store(out, u, run_unit(*args(u), methods=methods))
-                bar.update(len(u[1]))
-        else:
-            ctx = multiprocessing.get_context("spawn")  # torch and HDF5 are not fork-safe
-            specs = [spec for spec, _ in loaded.values()]
-            with ProcessPoolExecutor(min(workers, len(units)), mp_context=ctx, initializer=_init_worker,
-                                     initargs=(specs, options, 1)) as pool:
-                futures = {pool.submit(run_unit, *args(u)): u for u in units}
-                try:
-                    for f in as_completed(futures):
-                        _store(out, futures[f], f.result())
-                        bar.update(len(futures[f][1]))
-                except BrokenProcessPool:
-                    raise ColonbenchError("a worker process died (out of memory?); what was finished is kept, "
-                                          "rerun the same command (with fewer --workers) to resume") from None
+        for u, rows in run_units(run_unit, units, args, loaded, options, workers):
+            _store(out, u, rows)
+            bar.update(len(u[1]))
     finally:
         bar.close()
     for name in loaded:

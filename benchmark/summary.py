@@ -33,16 +33,25 @@ def metric_columns(thresholds=THRESHOLDS_MM) -> list[str]:
             for pr in ("precision", "recall")]
 
 
-def _stats(g: pd.DataFrame, metrics: list[str]) -> dict:
-    err = g["coverage_error"].to_numpy(float)
+def error_stats(errors) -> dict:
+    """``mae``, ``median``, ``bias``, ``q95`` in percentage points of coverage errors given as fractions.
+
+    NaN errors (no estimate) are left out; all four are NaN when none is left.
+    """
+    err = np.asarray(errors, float)
     ok = err[~np.isnan(err)]
     a = np.abs(ok)
+    if not len(a):
+        return {"mae": np.nan, "median": np.nan, "bias": np.nan, "q95": np.nan}
+    return {"mae": 100 * float(a.mean()), "median": 100 * float(np.median(a)), "bias": 100 * float(ok.mean()),
+            "q95": 100 * float(np.quantile(a, 0.95))}
+
+
+def _stats(g: pd.DataFrame, metrics: list[str]) -> dict:
+    err = g["coverage_error"].to_numpy(float)
     row = {"segments": len(g), "failed": int(g["error"].fillna("").astype(str).ne("").sum()),
            "coverage_undefined": int(np.isnan(err).sum()),
-           "coverage_mae": 100 * float(a.mean()) if len(a) else np.nan,
-           "coverage_median": 100 * float(np.median(a)) if len(a) else np.nan,
-           "coverage_bias": 100 * float(ok.mean()) if len(a) else np.nan,
-           "coverage_q95": 100 * float(np.quantile(a, 0.95)) if len(a) else np.nan,
+           **{f"coverage_{k}": v for k, v in error_stats(err).items()},
            "seconds": float(g["seconds"].mean())}
     for m in metrics:
         v = g[m].to_numpy(float)

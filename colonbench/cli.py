@@ -287,15 +287,15 @@ def _method_list(text: str) -> list[str]:
 
 def cmd_evaluate(args):
     """Evaluate methods on a dataset's test shards into a run folder (resumable)."""
+    from colonbench.benchmark.colon_evaluate import dataset_task
     from colonbench.benchmark.evaluate import evaluate, load_results
     from colonbench.benchmark.summary import summarize
 
-    from colonbench.benchmark.colon_evaluate import dataset_task
-
-    task = args.task or dataset_task(args.data)
-    if task != dataset_task(args.data):
-        raise ColonbenchError(f"{args.data} is a {dataset_task(args.data)} dataset; --task {task} needs a "
-                         f"{'task: colon' if task == 'colon' else 'segment'} manifest's data")
+    made_for = dataset_task(args.data)
+    task = args.task or made_for
+    if task != made_for:
+        raise ColonbenchError(f"{args.data} is a {made_for} dataset; --task {task} needs a "
+                              f"{'task: colon' if task == 'colon' else 'segment'} manifest's data")
     if task == "colon":
         return _evaluate_colons(args)
     t = time.perf_counter()
@@ -320,12 +320,11 @@ def cmd_evaluate(args):
 
 def _evaluate_colons(args):
     """colonbench evaluate --task colon: map every whole-colon sample with every method and track."""
-    from colonbench.benchmark.colon_evaluate import evaluate_colons, load_colon_results
+    from colonbench.benchmark.colon_evaluate import ALL_METHODS, evaluate_colons, load_colon_results
     from colonbench.reports.colon_leaderboard import colon_table
 
     t = time.perf_counter()
-    methods = _method_list(args.methods) if args.methods != "all" else ["completion", "thresholding", "unwrap",
-                                                                       "constant"]
+    methods = list(ALL_METHODS) if args.methods == "all" else _method_list(args.methods)
     run = evaluate_colons(args.data, methods, args.out, noise=args.noise, contexts=args.contexts,
                           segment_mm=args.segment_length, split=args.split, limit=args.limit, workers=args.workers,
                           model=args.model, device=args.device, noise_seed=args.noise_seed,
@@ -509,7 +508,7 @@ def demo_map(out: Path, model=None, progress: bool = True) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from colonbench.mapping.colonmap import CONTEXT_MM
+    from colonbench.mapping.colonmap import CONTEXT_MM, SEGMENT_MM
 
     parser = argparse.ArgumentParser(
         prog="colonbench",
@@ -605,7 +604,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("reconstruction", help="the reconstruction, mm: points or a mesh (.ply, .obj, .npy, .xyz)")
     p.add_argument("--out", required=True, help="output folder: segments.json/.csv, centerline.npy, summary.json, "
                                                 "map.ply, map.glb, map.png")
-    p.add_argument("--segment-length", type=_positive(float), default=60.0, help="segment arc length, mm (default 60)")
+    p.add_argument("--segment-length", type=_positive(float), default=SEGMENT_MM,
+                   help=f"segment arc length, mm (default {SEGMENT_MM:g})")
     p.add_argument("--trajectory", help="camera positions of the run that made it, same frame and unit: a TUM "
                                         "trajectory (timestamp tx ty tz qx qy qz qw) or (k, 3) positions (.npy, "
                                         ".txt); the map is then numbered from the rectum (where it ends)")
@@ -654,10 +654,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--task", choices=["segments", "colon"],
                    help="segments (the paper's protocol) or colon (whole-colon maps, docs/mapping.md); "
                         "default: what the dataset was made for")
-    p.add_argument("--contexts", type=_floats, default=[0.0, 15.0],
-                   help="--task colon: context margins, one track each, mm (0 = segment-only; default 0,15)")
-    p.add_argument("--segment-length", type=float, default=60.0,
-                   help="--task colon: segment arc length of the maps, mm (default 60)")
+    p.add_argument("--contexts", type=_floats, default=[0.0, CONTEXT_MM],
+                   help=f"--task colon: context margins, one track each, mm (0 = segment-only; default 0,"
+                        f"{CONTEXT_MM:g})")
+    p.add_argument("--segment-length", type=float, default=SEGMENT_MM,
+                   help=f"--task colon: segment arc length of the maps, mm (default {SEGMENT_MM:g})")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_evaluate)
 

@@ -438,18 +438,9 @@ def bridge_by_trajectory(pieces: list[Piece], positions: np.ndarray | None, clou
             for k, near_ids in enumerate(tree.query_ball_point(path, 1.5 * radius)):
                 if near_ids:
                     empty[k] = not np.any(np.abs((cloud[near_ids] - path[k]) @ tangent[k]) < 1.0)
-        runs = []
-        k = 0
-        while k < len(path):  # runs of the path with no wall within 1.2 radii
-            if not empty[k]:
-                k += 1
-                continue
-            j = k
-            while j + 1 < len(path) and empty[j + 1]:
-                j += 1
-            if arc[j] - arc[k] >= min_unseen_mm:
-                runs.append((s0 + arc[k], s0 + arc[j]))
-            k = j + 1
+        label, _ = ndimage.label(empty)  # the runs of the path with no wall
+        runs = [(s0 + arc[r.start], s0 + arc[r.stop - 1]) for (r,) in ndimage.find_objects(label)
+                if arc[r.stop - 1] - arc[r.start] >= min_unseen_mm]
         joined = np.concatenate([prev.points, path[1:-1], p.points])
         steps = np.linalg.norm(np.diff(joined, axis=0), axis=1)
         keep = np.concatenate([[True], steps > 1e-6])

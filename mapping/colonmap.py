@@ -158,20 +158,23 @@ def orient(pieces: list, positions: np.ndarray | None) -> tuple[list, str]:
 
     if positions is None:
         return pieces, "unknown (no trajectory): numbered from one end of the centerline"
+
+    def turn(p):
+        return Piece(p.points[::-1].copy(), p.radius, list(p.unseen))
+
+    if len(pieces) == 1:  # one piece: the end nearer to the last camera position is the rectum's
+        (p,) = pieces
+        tip = positions[-1]
+        if np.linalg.norm(p.points[-1] - tip) < np.linalg.norm(p.points[0] - tip):
+            p = turn(p)
+        return [p], "from the rectum (the end of the trajectory)"
     tree = cKDTree(np.asarray(positions, float))
     turned = []
     for p in pieces:
         _, (t0, t1) = tree.query(p.points[[0, -1]])
         if t0 < t1:
-            p = Piece(p.points[::-1].copy(), p.radius, list(p.unseen))
-            t0, t1 = t1, t0
+            p, t0, t1 = turn(p), t1, t0
         turned.append((t0, t1, p))
-    if len(turned) == 1:  # one piece: the end nearer to the last camera position is the rectum's
-        p = pieces[0]
-        tip = positions[-1]
-        if np.linalg.norm(p.points[-1] - tip) < np.linalg.norm(p.points[0] - tip):
-            p = Piece(p.points[::-1].copy(), p.radius, list(p.unseen))
-        return [p], "from the rectum (the end of the trajectory)"
     turned.sort(key=lambda x: -(x[0] + x[1]))
     return [p for _, _, p in turned], "from the rectum (the end of the trajectory; pieces ordered by it)"
 

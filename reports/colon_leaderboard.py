@@ -23,10 +23,10 @@ import json
 import math
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 
 from colonbench.benchmark.colon_evaluate import load_colon_results
+from colonbench.benchmark.summary import error_stats
 from colonbench.errors import InputError
 from colonbench.reports.leaderboard import add_run
 
@@ -66,20 +66,15 @@ def colon_table(segments: pd.DataFrame, colons: pd.DataFrame) -> pd.DataFrame:
     keys = ["noise_mm", "method", "track"]
     for key, c in colons.groupby(keys, sort=True):
         s = segments[(segments[keys] == pd.Series(key, index=keys)).all(axis=1)]
-        err = s["coverage_error"].dropna().to_numpy() * 100
-        ends = s[s["end_unobserved"].astype(bool)]["coverage_error"].dropna().to_numpy() * 100
+        ends = s["end_unobserved"].astype(bool)
         ok = c[c["error"] == ""]
-        whole = ok["coverage_error"].dropna().to_numpy()
+        whole = error_stats(ok["coverage_error"] / 100)  # stored in points
         rows.append({**dict(zip(keys, key)), "maps": len(c), "failed_maps": int((c["error"] != "").sum()),
-                     "segments": len(s), "estimated": len(err),
-                     "segment_mae": float(np.mean(np.abs(err))) if len(err) else math.nan,
-                     "segment_median": float(np.median(np.abs(err))) if len(err) else math.nan,
-                     "segment_bias": float(np.mean(err)) if len(err) else math.nan,
-                     "segment_q95": float(np.quantile(np.abs(err), 0.95)) if len(err) else math.nan,
-                     "end_unobserved": int(s["end_unobserved"].astype(bool).sum()),
-                     "end_unobserved_mae": float(np.mean(np.abs(ends))) if len(ends) else math.nan,
-                     "whole_mae": float(np.mean(np.abs(whole))) if len(whole) else math.nan,
-                     "whole_bias": float(np.mean(whole)) if len(whole) else math.nan,
+                     "segments": len(s), "estimated": int(s["coverage_error"].notna().sum()),
+                     **{f"segment_{k}": v for k, v in error_stats(s["coverage_error"]).items()},
+                     "end_unobserved": int(ends.sum()),
+                     "end_unobserved_mae": error_stats(s[ends]["coverage_error"])["mae"],
+                     "whole_mae": whole["mae"], "whole_bias": whole["bias"],
                      "centerline_precision": float(ok["centerline_precision"].mean()) if len(ok) else math.nan,
                      "centerline_recall": float(ok["centerline_recall"].mean()) if len(ok) else math.nan,
                      "seconds_per_map": float(ok["seconds"].mean()) if len(ok) else math.nan})
@@ -111,9 +106,8 @@ def context_table(segments: pd.DataFrame, baseline: str = "segment-only") -> pd.
                 if source == "all" and g["source"].nunique() == 1:
                     continue
                 e = h[h["end_unobserved"].astype(bool)]
-                a, b = 100 * h["coverage_error"].abs().mean(), 100 * h["coverage_error_ctx"].abs().mean()
-                ea = 100 * e["coverage_error"].abs().mean() if len(e) else math.nan
-                eb = 100 * e["coverage_error_ctx"].abs().mean() if len(e) else math.nan
+                a, b = error_stats(h["coverage_error"])["mae"], error_stats(h["coverage_error_ctx"])["mae"]
+                ea, eb = error_stats(e["coverage_error"])["mae"], error_stats(e["coverage_error_ctx"])["mae"]
                 rows.append({"noise_mm": noise, "method": method, "track": track, "source": source,
                              "segments": len(h), "segment_only_mae": a, "context_mae": b,
                              "ratio": b / a if a > 0 else math.nan, "end_unobserved": len(e),
