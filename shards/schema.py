@@ -211,8 +211,8 @@ COLON_ATTRIBUTES = {
 
 #: Attributes a whole-colon shard carries only where they apply.
 COLON_OPTIONAL_ATTRIBUTES = {
-    "collapsed_mm": "JSON list of the imported colon's collapsed stretches [s0, s1] (mm of arc length), which its "
-                    "surface and the truth leave out",
+    "collapsed_mm": "JSON list of the imported colon's collapsed stretches [s0, s1] (mm of arc length: where its "
+                    "lumen is narrower than the import's limit; their surface stays in the truth)",
 }
 
 #: Options of every dataset: per-sample heatmap chunks, gzip level 4 with shuffle, no timestamps.
