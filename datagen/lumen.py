@@ -54,6 +54,10 @@ CHAMBER_MM = 60.0
 END_SEAL_MM = 20.0
 #: Gaussian smoothing of the midline before and after re-centring, mm.
 SMOOTH_MM = 6.0
+#: The re-centred line's radius of curvature is at least this share of the lumen's local radius.
+MIN_TURN_RATIO = 0.5
+#: Length over which the line's turning is measured, mm.
+CURVATURE_WINDOW_MM = 3.0
 
 
 @dataclass
@@ -328,23 +332,96 @@ def recentre(cavity: np.ndarray, origin: np.ndarray, voxel: float, midline, iter
         s, cen, area = cross_sections(cavity, origin, voxel, line, max_radius_mm=max_radius_mm)
         radius = np.sqrt(area / np.pi)
         good = np.isfinite(cen[:, 0]) & (radius >= min_radius_mm)
-        pts = line.point_at(s)
+        pts, tangent = line.point_at(s), line.tangent_at(s)
         # move by a smoothed displacement (median then Gaussian along the line, at most half the radius):
         # moving each point to its own centroid lets an oblique or pocketed section make the line zig-zag
         move = np.where(good[:, None], np.nan_to_num(cen - pts), 0.0)
         width = max(3, int(round(2 * smooth_mm / SECTION_STEP_MM)) | 1)
         move = ndimage.median_filter(move, size=(width, 1), mode="nearest")
         move = ndimage.gaussian_filter1d(move, smooth_mm / SECTION_STEP_MM, axis=0, mode="nearest")
+        # only across the line: a move along it (the filters mix in the neighbours' moves at a bend) lets
+        # points overtake each other, and the line folds back on itself in a cusp
+        move -= (move * tangent).sum(axis=1, keepdims=True) * tangent
         norm = np.linalg.norm(move, axis=1)
         move *= np.minimum(1.0, 0.5 * np.maximum(radius, min_radius_mm) / np.maximum(norm, 1e-12))[:, None]
-        line = _smooth_polyline(pts + move, smooth_mm)
-    line = line.resample(0.5)
-    s, _, area = cross_sections(cavity, origin, voxel, line, max_radius_mm=max_radius_mm)
-    radius_s = np.sqrt(area / np.pi)
+        line = _smooth_polyline(_unfold(pts + move, tangent), smooth_mm)
+    # twice: the sections of the smoothed line can be wider than those the limit was set by
+    for _ in range(2):
+        line = limit_curvature(line, lambda q, s=s, r=np.maximum(radius, min_radius_mm): np.interp(q, s, r))
+        line = line.resample(0.5)
+        s, _, area = cross_sections(cavity, origin, voxel, line, max_radius_mm=max_radius_mm)
+        radius = np.sqrt(area / np.pi)
+    radius_s = radius
     radius = np.interp(line.arclength, s, radius_s)
     bad = radius_s < min_radius_mm
     collapsed = _intervals(s, bad)
     return line, np.where(radius >= min_radius_mm, radius, 0.0), collapsed
+
+
+def turning_radius(line: Centerline, window_mm: float = CURVATURE_WINDOW_MM) -> np.ndarray:
+    """(n,) radius of curvature at each point of ``line``, mm: the window's length over the angle it turns.
+
+    Measured over ``window_mm`` (centred on the point, shortened at the ends) rather than from second
+    differences, which a 1 mm polyline makes noisy.
+    """
+    s = line.arclength
+    a = line.tangent_at(np.clip(s - window_mm / 2, 0, s[-1]))
+    b = line.tangent_at(np.clip(s + window_mm / 2, 0, s[-1]))
+    span = np.minimum(s + window_mm / 2, s[-1]) - np.maximum(s - window_mm / 2, 0.0)
+    angle = np.arccos(np.clip((a * b).sum(axis=1), -1.0, 1.0))
+    return np.where(angle > 1e-9, span / np.maximum(angle, 1e-9), np.inf)
+
+
+def limit_curvature(line: Centerline, radius, ratio: float = MIN_TURN_RATIO, sigma_mm: float = 3.0,
+                    max_rounds: int = 200) -> Centerline:
+    """Smooth ``line`` where it turns more sharply than the lumen around it allows.
+
+    The centerline of a tube cannot bend with a radius of curvature below
+    the tube's own radius without its cross-sections overlapping inside the
+    lumen; a bend sharper than ``ratio`` times the local lumen radius is a
+    kink of the re-centring (a section's middle jumping between two lobes
+    of a flattened section, or into a pocket). Such stretches are smoothed
+    again, a little at a time (a Gaussian of ``sigma_mm``, blended in where
+    the line is too sharp), until none is left or ``max_rounds`` have run;
+    the rest of the line is not moved.
+
+    Parameters
+    ----------
+    line : Centerline
+    radius : callable
+        ``radius(s)``: the lumen's equivalent radius (mm) at arc lengths ``s`` of ``line`` (mm).
+    ratio : float
+        Smallest radius of curvature, as a share of the local lumen radius.
+    """
+    line = line.resample(1.0)
+    for _ in range(max_rounds):
+        too_sharp = turning_radius(line) < ratio * radius(line.arclength)
+        if not too_sharp.any():
+            break
+        pts = line.points
+        weight = np.clip(ndimage.gaussian_filter1d(too_sharp.astype(float), sigma_mm, mode="constant") * 3.0, 0, 1)
+        weight[[0, -1]] = 0.0
+        smooth = ndimage.gaussian_filter1d(pts, sigma_mm, axis=0, mode="nearest")
+        line = Centerline.from_points(pts + weight[:, None] * (smooth - pts)).resample(1.0)
+    return line
+
+
+def _unfold(points: np.ndarray, tangent: np.ndarray) -> np.ndarray:
+    """The moved points without those that step back along the line they were moved from.
+
+    ``points`` are the moved section points in order, ``tangent`` the unit tangents of the old line at
+    them; a point that does not lie ahead of the last one kept, along its own old tangent, is dropped
+    (ends kept), so that the new line cannot fold back.
+    """
+    keep = [0]
+    for i in range(1, len(points) - 1):
+        if (points[i] - points[keep[-1]]) @ tangent[i] > 0.0:
+            keep.append(i)
+    if len(points) > 1:
+        if len(keep) > 1 and (points[-1] - points[keep[-1]]) @ tangent[-1] <= 0.0:
+            keep.pop()
+        keep.append(len(points) - 1)
+    return points[keep]
 
 
 def _intervals(s: np.ndarray, flag: np.ndarray, pad: float = SECTION_STEP_MM) -> list:

@@ -20,7 +20,7 @@ from colonbench.grid import fit_grid, principal_axes, tube_axes
 from colonbench.shards.manifest import resolve
 from colonbench.shards.schema import sha256_file
 from conftest import MANIFESTS
-from shapes import straight
+from shapes import arc, straight
 
 WIDE = MANIFESTS / "wide.yaml"
 
@@ -324,3 +324,48 @@ def test_real_colon_segments_hold_only_their_own_stretch(real_dir):
         span = np.ptp(seg.mesh.vertices, axis=0).max()
         assert span < (s1 - s0) + 4 * r + 40.0, (s0, s1, span)
         assert seg.area < 4 * 2 * np.pi * r * (s1 - s0), (s0, s1, seg.area)
+
+
+
+def test_curvature_limit_rounds_a_kink_and_leaves_the_rest():
+    # two straight legs meeting at a right angle: the re-centring's kink, in a 20 mm lumen
+    from colonbench.datagen.centerline import Centerline
+    from colonbench.datagen.lumen import MIN_TURN_RATIO, limit_curvature, turning_radius
+
+    t = np.arange(0.0, 100.0, 0.5)
+    corner = Centerline.from_points(np.concatenate([np.stack([t, 0 * t, 0 * t], 1),
+                                                    np.stack([100 + 0 * t, t, 0 * t], 1)]))
+    assert turning_radius(corner).min() < 3.0
+    line = limit_curvature(corner, lambda s: np.full_like(s, 20.0))
+    assert turning_radius(line).min() >= 0.95 * MIN_TURN_RATIO * 20.0
+    # far from the corner the legs stay where they were
+    far = np.linalg.norm(line.points - [100.0, 0.0, 0.0], axis=1) > 40.0
+    assert np.abs(np.minimum(np.abs(line.points[far, 1]), np.abs(line.points[far, 0] - 100.0))).max() < 0.05
+    # a bend the lumen allows (radius 30 mm in a 20 mm lumen) is not touched
+    gentle = arc(30.0, np.pi / 2, spacing=1.0)
+    kept = limit_curvature(gentle, lambda s: np.full_like(s, 20.0))
+    assert np.abs(np.linalg.norm(kept.points[:, :2], axis=1) - 30.0).max() < 1e-6
+
+
+def test_moved_points_that_step_back_are_dropped():
+    from colonbench.datagen.lumen import _unfold
+
+    pts = np.array([[0.0, 0, 0], [2, 0, 0], [4, 1, 0], [3, 3, 0], [6, 0, 0], [8, 0, 0]])
+    tangent = np.tile([1.0, 0, 0], (len(pts), 1))
+    assert np.array_equal(_unfold(pts, tangent), pts[[0, 1, 2, 4, 5]])
+
+
+@pytest.mark.slow
+def test_real_colon_centerline_has_no_kinks(real_dir):
+    # gca00060's re-centred line had folded back on itself (a 172 degree turn within 3 mm at 873 mm) and
+    # kinked at two more places; the segments cut there had planes at random angles
+    from colonbench.datagen.lumen import MIN_TURN_RATIO, turning_radius
+    from colonbench.datagen.realmesh import load_centerline, load_mesh
+
+    lumen = import_lumen(load_mesh(real_dir / "gca00060_large_intestine_mm.ply"),
+                         load_centerline(real_dir / "gca00060_path_mm.npy").points)
+    inner = lumen.radius > 0
+    ratio = turning_radius(lumen.centerline)[inner] / lumen.radius[inner]
+    assert np.quantile(ratio, 0.001) >= 0.8 * MIN_TURN_RATIO
+    turn = np.degrees(3.0 / turning_radius(lumen.centerline).min())
+    assert turn < 45.0
