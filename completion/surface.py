@@ -30,6 +30,7 @@ from scipy import ndimage
 from scipy.spatial import cKDTree
 from skimage.measure import marching_cubes
 
+from colonbench.completion.centerline import resample
 from colonbench.grid import Grid
 from colonbench.heatmaps import distance_to, voxelize_polyline
 
@@ -50,6 +51,31 @@ DENSITY_NEIGHBOURS = 8
 DENSITY_POINTS = 2000
 #: Faces closer than this to an end plane are dropped, voxels.
 END_INSET = 1.0
+#: The end planes' normals are fitted to the centerline's points this far from each end, voxels.
+END_REACH = 5.0
+#: Cut rims (:func:`rim_planes`): points within this distance of a supporting plane touch it, voxels ...
+RIM_BAND = 1.5
+#: ... planes within this angle of the centerline's end tangent are tried, degrees ...
+RIM_CAP_DEG = 60.0
+#: ... this many of them ...
+RIM_DIRECTIONS = 300
+#: ... and a rim must fill this share of the sectors around the centerline's end.
+RIM_MIN_SHARE = 0.5
+#: Sectors around the centerline's end that a rim is counted in.
+RIM_SECTORS = 24
+#: Each end's rim is searched among the points nearest to this share of the centerline at that end.
+RIM_END_SHARE = 0.35
+#: The supporting plane lies at the cloud's this-many-th farthest point (a few outliers do not hold it).
+RIM_OUTLIERS = 3
+#: Fewer points than this (near an end, or touching a plane) are no rim.
+RIM_MIN_POINTS = 50
+RIM_MIN_TOUCHING = 20
+#: The rim's plane is refined this many times by least squares, each fit within this angle of the
+#: winning direction (degrees) ...
+RIM_REFINE = 3
+RIM_FIT_DEG = 15.0
+#: The rim replaces the centerline's end plane where the line ends at least this far inside it, voxels.
+RIM_BEYOND = 1.0
 
 
 @dataclass
@@ -183,37 +209,155 @@ def mesh_coverage(vertices: np.ndarray, faces: np.ndarray, hole: np.ndarray) -> 
     return float((area * observed).sum() / total) if total > 0 else float("nan")
 
 
-def end_planes(centerline_vox: np.ndarray, reach: float = 3.0) -> list[tuple[np.ndarray, np.ndarray]]:
+def end_planes(centerline_vox: np.ndarray, reach: float = END_REACH) -> list[tuple[np.ndarray, np.ndarray]]:
     """The segment's two end planes: (point, inward normal) at each end of the centerline.
 
-    The normal is the direction from the end to the centerline point ``reach``
-    voxels along it (the end tangent, robust to the last voxel's wobble).
+    The normal is the principal direction of the centerline's points between
+    1 and ``1 + reach`` voxels from the end (arc length), pointed inwards: a
+    least-squares end tangent that leaves out the end point itself. The end
+    point is a voxel of the ridge, kept in place while the line is smoothed,
+    so the line curls into it; the direction from it to a single point 3
+    voxels along (our first version) turned with that wobble, and on a curled
+    end of a wide segment the plane clipped away most of the mesh.
     """
     c = np.asarray(centerline_vox, dtype=float)
     if len(c) < 2:
         return []
     s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(c, axis=0), axis=1))])
     planes = []
-    for end, target in ((0, min(reach, s[-1])), (-1, max(s[-1] - reach, 0.0))):
-        inner = np.array([np.interp(target, s, c[:, i]) for i in range(3)])
-        n = inner - c[end]
+    from_end = {0: s, -1: s[-1] - s}
+    for end in (0, -1):
+        d = from_end[end]
+        near = (d >= 1.0) & (d <= 1.0 + reach)
+        pts = c[near] if near.sum() >= 3 else c[d <= 1.0 + reach]
+        inward = pts.mean(axis=0) - c[end]
+        if len(pts) >= 3:
+            axis = np.linalg.svd(pts - pts.mean(axis=0), full_matrices=False)[2][0]
+            n = axis if axis @ inward >= 0 else -axis
+        else:
+            n = inward
         if np.linalg.norm(n) > 0:
             planes.append((c[end], n / np.linalg.norm(n)))
     return planes
 
 
-def clip_to_segment(vertices: np.ndarray, faces: np.ndarray, centerline_vox: np.ndarray, inset: float = END_INSET):
+def _basis(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit vectors that make a right-handed orthonormal frame with the unit vector ``axis``."""
+    u = np.cross(axis, [1.0, 0.0, 0.0] if abs(axis[0]) < 0.9 else [0.0, 1.0, 0.0])
+    u /= np.linalg.norm(u)
+    return u, np.cross(axis, u)
+
+
+def cap_directions(axis: np.ndarray, max_deg: float, n: int) -> np.ndarray:
+    """(n, 3) unit vectors spread evenly (a Fibonacci spiral) over the cap within ``max_deg`` of ``axis``."""
+    a = np.asarray(axis, float) / np.linalg.norm(axis)
+    u, v = _basis(a)
+    i = np.arange(n) + 0.5
+    z = 1.0 - (1.0 - np.cos(np.radians(max_deg))) * i / n
+    r = np.sqrt(np.clip(1.0 - z * z, 0.0, None))
+    phi = np.pi * (1.0 + np.sqrt(5.0)) * i
+    return z[:, None] * a + (r * np.cos(phi))[:, None] * u + (r * np.sin(phi))[:, None] * v
+
+
+def rim_planes(centerline_vox: np.ndarray, partial_vox: np.ndarray, band: float = RIM_BAND,
+               cap_deg: float = RIM_CAP_DEG, min_share: float = RIM_MIN_SHARE) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The segment's cutting planes found from its cloud's cut rims, where they are seen (voxels).
+
+    A segment is cut from the colon by two planes, so where an end was
+    observed the partial cloud stops there in a rim of points all round the
+    tube, in one plane: of the cloud's supporting planes (all its points on
+    one side) at that end, the cut is the one that touches it all round. The
+    estimated centerline's end (:func:`end_planes`) misses it: the network's
+    ridge fades before the segment ends (on the real colon its line ends a
+    median 9 mm short of the cut, its end tangent 32 degrees off), and
+    the mesh between the two was clipped away.
+
+    At each end the cloud's points whose nearest centerline point lies in the
+    last :data:`RIM_END_SHARE` of its length are searched: for
+    :data:`RIM_DIRECTIONS` outward directions within ``cap_deg`` of the end
+    tangent, the supporting plane (at the :data:`RIM_OUTLIERS`-th farthest
+    point, so that a few outliers do not hold it) and the points within
+    ``band`` voxels of it. The direction whose touching points fill the most of
+    :data:`RIM_SECTORS` sectors around the centerline's end wins (then the most
+    points): a plane touching the side wall along a strip has many points
+    but in few sectors. It is accepted if they fill at least ``min_share`` of
+    the sectors; the plane is then fitted to those points (least squares, if
+    within 15 degrees of the winning direction). Otherwise, an unobserved or
+    ragged end, the end keeps :func:`end_planes`' plane.
+
+    Returns
+    -------
+    list of (point, inward unit normal), one per end (as :func:`end_planes`).
+    """
+    planes = end_planes(centerline_vox)
+    pts = np.asarray(partial_vox, float)
+    if len(planes) != 2 or len(pts) < RIM_MIN_POINTS:
+        return planes
+    dense = resample(np.asarray(centerline_vox, float), 0.25)
+    _, nearest = cKDTree(dense).query(pts)
+    out = []
+    for k, (point, normal) in enumerate(planes):
+        near = nearest <= RIM_END_SHARE * len(dense) if k == 0 else nearest >= (1 - RIM_END_SHARE) * len(dense)
+        x = pts[near]
+        if len(x) < RIM_MIN_POINTS:
+            out.append((point, normal))
+            continue
+        # coarse: the directions are ~6 degrees apart, so the touching band is twice as wide
+        dirs = cap_directions(-normal, cap_deg, RIM_DIRECTIONS)
+        proj = x @ dirs.T
+        touch = proj > -np.partition(-proj, RIM_OUTLIERS, axis=0)[RIM_OUTLIERS] - 2 * band
+        best = (0, 0, -1)
+        for j in np.flatnonzero(touch.sum(axis=0) >= RIM_MIN_TOUCHING):
+            best = max(best, (_sectors(x[touch[:, j]] - point, dirs[j]), int(touch[:, j].sum()), int(j)))
+        if best[2] < 0:
+            out.append((point, normal))
+            continue
+        # fine: the plane fitted to the touching points, its own supporting plane, a few times over
+        outward, rim = dirs[best[2]], x[touch[:, best[2]]]
+        for _ in range(RIM_REFINE):
+            fitted = np.linalg.svd(rim - rim.mean(axis=0), full_matrices=False)[2][2]
+            fitted = fitted if fitted @ outward >= 0 else -fitted
+            if fitted @ dirs[best[2]] < np.cos(np.radians(RIM_FIT_DEG)):
+                break
+            outward, rim = fitted, _touching(x, fitted, band)
+        rim = _touching(x, outward, band)
+        if len(rim) < RIM_MIN_TOUCHING or _sectors(rim - point, outward) < min_share * RIM_SECTORS:
+            out.append((point, normal))
+            continue
+        centre = rim.mean(axis=0)
+        # where the line reaches the cut, its own plane is as good (and exact on the GT heatmap)
+        out.append((centre, -outward) if (centre - point) @ outward > RIM_BEYOND else (point, normal))
+    return out
+
+
+def _touching(points: np.ndarray, outward: np.ndarray, band: float) -> np.ndarray:
+    """The points within ``band`` of the supporting plane of ``points`` whose outward normal is ``outward``."""
+    p = points @ outward
+    return points[p > -np.partition(-p, RIM_OUTLIERS)[RIM_OUTLIERS] - band]
+
+
+def _sectors(offsets: np.ndarray, axis: np.ndarray) -> int:
+    """How many of :data:`RIM_SECTORS` equal sectors around ``axis`` the (k, 3) ``offsets`` fall in."""
+    u, v = _basis(axis)
+    sector = np.floor((np.arctan2(offsets @ v, offsets @ u) + np.pi) / (2 * np.pi) * RIM_SECTORS)
+    return len(np.unique(sector))
+
+
+def clip_to_segment(vertices: np.ndarray, faces: np.ndarray, centerline_vox: np.ndarray, inset: float = END_INSET,
+                    planes: list | None = None):
     """Drop the faces beyond the planes perpendicular to the centerline at its ends (how segments are cut).
 
     Marching cubes on a heatmap runs on past the cut planes by a voxel or two;
     those strips have no partial points and would count as holes (the paper's
     "nonexistent holes at the extremities"). The planes are moved ``inset``
     voxels inwards, where the surface curls as the heatmap's shell ends.
+    ``planes`` (point, inward normal) replace those planes when given
+    (:func:`rim_planes`).
     """
     if len(faces) == 0:
         return vertices, faces
     keep_v = np.ones(len(vertices), bool)
-    for point, normal in end_planes(centerline_vox):
+    for point, normal in end_planes(centerline_vox) if planes is None else planes:
         keep_v &= (vertices - point) @ normal >= inset
     keep_f = keep_v[faces].all(axis=1)
     used = np.unique(faces[keep_f])
@@ -229,6 +373,7 @@ def complete(heatmap: np.ndarray, centerline_vox: np.ndarray, partial_vox: np.nd
     ``distance`` is the hole distance in voxels (default: the paper's sqrt(2)/2).
     """
     field, mask = resigned_field(heatmap, centerline_vox)
-    verts, faces = clip_to_segment(*extract_mesh(field, mask), centerline_vox)
+    verts, faces = clip_to_segment(*extract_mesh(field, mask), centerline_vox,
+                                   planes=rim_planes(centerline_vox, partial_vox))
     hole = hole_vertices(verts, partial_vox, HOLE_DISTANCE if distance is None else distance)
     return Completion(verts, faces, hole, mesh_coverage(verts, faces, hole))

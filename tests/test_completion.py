@@ -94,6 +94,67 @@ def test_a_cut_window_is_found_as_a_hole_of_its_area():
     assert inside.mean() > 0.95
 
 
+
+def test_end_planes_follow_the_axis_when_the_last_voxel_wobbles():
+    # a straight centerline along z whose end voxel sits 1.5 voxels to the side, as a ridge's last voxel
+    # can: the planes stay perpendicular to the axis, and a tube clipped by them keeps its whole length
+    from colonbench.completion.surface import clip_to_segment, end_planes
+
+    line = np.stack([np.full(41, 32.0), np.full(41, 32.0), np.arange(10.0, 51.0)], 1)
+    line[-1, 0] += 1.5
+    line[0, 1] -= 1.5
+    planes = end_planes(line)
+    assert len(planes) == 2
+    for (point, normal), inward in zip(planes, ([0, 0, 1.0], [0, 0, -1.0])):
+        assert np.degrees(np.arccos(normal @ inward)) < 8.0
+    colon, grid, pts, hm = tube_heatmaps(straight(63.0), UNIT)
+    comp = complete(hm.target, extract_centerline(hm.target), grid.to_voxel(pts))
+    v, f = clip_to_segment(comp.vertices, comp.faces, line)
+    z = v[f].mean(axis=1)[:, 2]
+    assert z.min() < 12.0 and z.max() > 48.0
+    assert triangle_areas(v, f).sum() == pytest.approx(2 * np.pi * R * 38.0, rel=0.05)
+
+
+def _cut_tube_cloud(z0=10.0, z1=50.0, radius=R, density=2.0, tilt_deg=0.0, seed=0):
+    """Points on a tube along z (voxel units, axis at x = y = 32) cut at z0 and by a plane through
+    (32, 32, z1) tilted by ``tilt_deg`` about x; the far plane's outward unit normal."""
+    rng = np.random.default_rng(seed)
+    n = int(density * 2 * np.pi * radius * (z1 - z0 + radius))
+    theta, z = rng.uniform(0, 2 * np.pi, n), rng.uniform(z0, z1 + radius, n)
+    pts = np.stack([32 + radius * np.cos(theta), 32 + radius * np.sin(theta), z], 1)
+    t = np.radians(tilt_deg)
+    out = np.array([0.0, -np.sin(t), np.cos(t)])
+    return pts[(pts - [32, 32, z1]) @ out <= 0], out
+
+
+@pytest.mark.parametrize("tilt", [0.0, 20.0])
+def test_cut_rims_give_the_planes_a_short_centerline_misses(tilt):
+    # the network's ridge fades before the segment ends: its centerline stops 8 voxels short of each cut;
+    # the cloud's rims give the cuts back (the far one tilted by `tilt` degrees)
+    from colonbench.completion.surface import rim_planes
+
+    pts, far = _cut_tube_cloud(tilt_deg=tilt)
+    line = np.stack([np.full(25, 32.0), np.full(25, 32.0), np.linspace(18.0, 42.0, 25)], 1)
+    (p0, n0), (p1, n1) = rim_planes(line, pts)
+    assert np.degrees(np.arccos(n0 @ [0, 0, 1.0])) < 3.0 and abs(p0[2] - 10.0) < 1.0
+    assert np.degrees(np.arccos(n1 @ -far)) < 3.0 and abs((p1 - [32, 32, 50.0]) @ far) < 1.0
+    # where the line reaches the cut, its own planes are kept
+    full = np.stack([np.full(41, 32.0), np.full(41, 32.0), np.linspace(10.5, 49.5, 41)], 1)
+    (q0, m0), _ = rim_planes(full, _cut_tube_cloud()[0])
+    assert np.allclose(q0, full[0]) and np.allclose(m0, [0, 0, 1.0], atol=1e-6)
+
+
+def test_an_unseen_end_keeps_the_centerline_plane():
+    # the last 15 voxels before the far cut seen on one side only: no rim there
+    from colonbench.completion.surface import end_planes, rim_planes
+
+    pts, _ = _cut_tube_cloud()
+    pts = pts[(pts[:, 2] < 35.0) | (pts[:, 0] > 32.0 + 10.0)]
+    line = np.stack([np.full(25, 32.0), np.full(25, 32.0), np.linspace(18.0, 42.0, 25)], 1)
+    rims, ends = rim_planes(line, pts), end_planes(line)
+    assert abs(rims[0][0][2] - 10.0) < 1.0
+    assert np.allclose(rims[1][0], ends[1][0]) and np.allclose(rims[1][1], ends[1][1])
+
 @pytest.mark.parametrize("density", [0.5, 2.0, 8.0])
 def test_a_cut_window_in_a_sparse_or_dense_cloud_is_a_hole_of_its_area(density):
     # the same window, the surface sampled uniformly at random at `density` points/mm^2 (a reconstruction's
