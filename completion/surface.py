@@ -304,24 +304,26 @@ def rim_planes(centerline_vox: np.ndarray, partial_vox: np.ndarray, band: float 
             continue
         # coarse: the directions are ~6 degrees apart, so the touching band is twice as wide
         dirs = cap_directions(-normal, cap_deg, RIM_DIRECTIONS)
-        proj = x @ dirs.T
-        touch = proj > -np.partition(-proj, RIM_OUTLIERS, axis=0)[RIM_OUTLIERS] - 2 * band
-        best = (0, 0, -1)
-        for j in np.flatnonzero(touch.sum(axis=0) >= RIM_MIN_TOUCHING):
-            best = max(best, (_sectors(x[touch[:, j]] - point, dirs[j]), int(touch[:, j].sum()), int(j)))
-        if best[2] < 0:
+        proj = dirs @ x.T                                           # (directions, points)
+        touch = proj > -np.partition(-proj, RIM_OUTLIERS, axis=1)[:, RIM_OUTLIERS:RIM_OUTLIERS + 1] - 2 * band
+        count = touch.sum(axis=1)
+        touch[count < RIM_MIN_TOUCHING] = False
+        sectors = _sectors(x - point, dirs, touch)
+        if not sectors.any():
             out.append((point, normal))
             continue
+        best = int(np.lexsort((np.arange(len(dirs)), count, sectors))[-1])
         # fine: the plane fitted to the touching points, its own supporting plane, a few times over
-        outward, rim = dirs[best[2]], x[touch[:, best[2]]]
+        outward, rim = dirs[best], x[touch[best]]
         for _ in range(RIM_REFINE):
             fitted = np.linalg.svd(rim - rim.mean(axis=0), full_matrices=False)[2][2]
             fitted = fitted if fitted @ outward >= 0 else -fitted
-            if fitted @ dirs[best[2]] < np.cos(np.radians(RIM_FIT_DEG)):
+            if fitted @ dirs[best] < np.cos(np.radians(RIM_FIT_DEG)):
                 break
             outward, rim = fitted, _touching(x, fitted, band)
         rim = _touching(x, outward, band)
-        if len(rim) < RIM_MIN_TOUCHING or _sectors(rim - point, outward) < min_share * RIM_SECTORS:
+        if len(rim) < RIM_MIN_TOUCHING or \
+                _sectors(rim - point, outward[None], np.ones((1, len(rim)), bool))[0] < min_share * RIM_SECTORS:
             out.append((point, normal))
             continue
         centre = rim.mean(axis=0)
@@ -336,11 +338,20 @@ def _touching(points: np.ndarray, outward: np.ndarray, band: float) -> np.ndarra
     return points[p > -np.partition(-p, RIM_OUTLIERS)[RIM_OUTLIERS] - band]
 
 
-def _sectors(offsets: np.ndarray, axis: np.ndarray) -> int:
-    """How many of :data:`RIM_SECTORS` equal sectors around ``axis`` the (k, 3) ``offsets`` fall in."""
-    u, v = _basis(axis)
-    sector = np.floor((np.arctan2(offsets @ v, offsets @ u) + np.pi) / (2 * np.pi) * RIM_SECTORS)
-    return len(np.unique(sector))
+def _sectors(offsets: np.ndarray, axes: np.ndarray, members: np.ndarray) -> np.ndarray:
+    """(d,) int: for each of the (d, 3) unit ``axes``, how many of :data:`RIM_SECTORS` equal sectors
+    around it its member ``offsets`` (rows of (k, 3) where ``members`` (d, k) is true) fall in."""
+    j, i = np.nonzero(members)
+    ref = np.where(np.abs(axes[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    u = np.cross(axes, ref)
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    v = np.cross(axes, u)
+    o = offsets[i]
+    angle = np.arctan2(np.einsum("ij,ij->i", o, v[j]), np.einsum("ij,ij->i", o, u[j]))
+    sector = np.floor((angle + np.pi) / (2 * np.pi) * RIM_SECTORS).astype(int) % RIM_SECTORS
+    filled = np.zeros((len(axes), RIM_SECTORS), bool)
+    filled[j, sector] = True
+    return filled.sum(axis=1)
 
 
 def clip_to_segment(vertices: np.ndarray, faces: np.ndarray, centerline_vox: np.ndarray, inset: float = END_INSET,
