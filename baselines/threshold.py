@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from colonbench.completion.centerline import extract_centerline, resample
-from colonbench.completion.surface import END_INSET, HOLE_DISTANCE, hole_vertices, rim_planes
+from colonbench.completion.surface import END_INSET, HOLE_DISTANCE, end_planes, hole_vertices, rim_planes
 from colonbench.estimate import Estimate
 from colonbench.grid import Grid
 
@@ -27,7 +27,8 @@ THRESHOLD = 0.1
 
 
 def threshold_coverage(heatmap: np.ndarray, grid: Grid, points, threshold: float = THRESHOLD,
-                       method: str = "thresholding", centerline_vox: np.ndarray | None = None) -> Estimate:
+                       method: str = "thresholding", centerline_vox: np.ndarray | None = None,
+                       cut_rims: bool = True) -> Estimate:
     """Coverage, hole points and centerline from a target heatmap by thresholding (points and results in mm).
 
     Parameters
@@ -40,11 +41,13 @@ def threshold_coverage(heatmap: np.ndarray, grid: Grid, points, threshold: float
     threshold : float
     centerline_vox : (m, 3) float, optional
         Centerline in voxels, if already extracted from the same heatmap.
+    cut_rims : bool
+        Cut at the cloud's cut rims where found, as the full method does.
     """
     cl = extract_centerline(heatmap) if centerline_vox is None else np.asarray(centerline_vox, float)
     vox = np.argwhere(np.asarray(heatmap) < threshold).astype(float)
     partial = grid.to_voxel(np.asarray(points, dtype=float))
-    for point, normal in rim_planes(cl, partial):
+    for point, normal in rim_planes(cl, partial) if cut_rims else end_planes(cl):
         vox = vox[(vox - point) @ normal >= END_INSET]
     hole = hole_vertices(vox, partial, HOLE_DISTANCE, false_hole_rate=None)  # the baseline as the paper ran it
     coverage = float(1.0 - hole.mean()) if len(vox) else float("nan")
@@ -67,11 +70,12 @@ class ThresholdMethod:
 
     name = "thresholding"
 
-    def __init__(self, model=None, device: str = "cpu", threshold: float = THRESHOLD):
+    def __init__(self, model=None, device: str = "cpu", threshold: float = THRESHOLD, cut_rims: bool = True):
         from colonbench.completion.method import shared_predictor
 
         self.predictor = shared_predictor(model, device)
         self.threshold = float(threshold)
+        self.cut_rims = cut_rims
         self.version = f"{self.predictor.version},threshold={self.threshold:g}"
 
     def estimate(self, points) -> Estimate:
@@ -79,4 +83,4 @@ class ThresholdMethod:
         from colonbench.completion.method import on_prediction
 
         return on_prediction(self.predictor, points, "threshold", lambda pts, p: threshold_coverage(
-            p.heatmap, p.grid, pts, self.threshold, self.name, p.centerline_vox))
+            p.heatmap, p.grid, pts, self.threshold, self.name, p.centerline_vox, self.cut_rims))

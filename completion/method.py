@@ -231,9 +231,10 @@ class CompletionMethod:
 
     name = "completion"
 
-    def __init__(self, model=None, device: str = "cpu", hole_distance: float | None = None):
+    def __init__(self, model=None, device: str = "cpu", hole_distance: float | None = None, cut_rims: bool = True):
         self.predictor = shared_predictor(model, device)
         self.hole_distance = hole_distance
+        self.cut_rims = cut_rims
         self.version = self.predictor.version
         self.meta = self.predictor.meta
 
@@ -249,13 +250,15 @@ class CompletionMethod:
         t1 = time.perf_counter()
         p = self.predictor(pts)
         cl = p.centerline_vox
-        est = from_heatmap(p.heatmap, p.grid, pts, self.name, self.hole_distance, centerline_vox=cl)
+        est = from_heatmap(p.heatmap, p.grid, pts, self.name, self.hole_distance, centerline_vox=cl,
+                           cut_rims=self.cut_rims)
         est.seconds = {"check": t1 - t0, **p.seconds, **{k: v for k, v in est.seconds.items() if k != "centerline"}}
         return est
 
 
 def from_heatmap(heatmap: np.ndarray, grid: Grid, points, method: str = "completion",
-                 hole_distance: float | None = None, centerline_vox: np.ndarray | None = None) -> Estimate:
+                 hole_distance: float | None = None, centerline_vox: np.ndarray | None = None,
+                 cut_rims: bool = True) -> Estimate:
     """Steps after the network: centerline, completed mesh, holes and coverage of a target heatmap.
 
     Parameters
@@ -267,12 +270,15 @@ def from_heatmap(heatmap: np.ndarray, grid: Grid, points, method: str = "complet
         The partial cloud, mm.
     centerline_vox : (m, 3) float, optional
         Its centerline in voxels, if already extracted.
+    cut_rims : bool
+        Clip the mesh at the cloud's cut rims where found (docs/method.md step 5); off where the
+        caller clips at planes it knows (``colonbench map``).
     """
     t0 = time.perf_counter()
     cl_vox = extract_centerline(heatmap) if centerline_vox is None else centerline_vox
     t1 = time.perf_counter()
     pts = np.asarray(points, dtype=float)
-    comp = complete(heatmap, cl_vox, grid.to_voxel(pts), hole_distance)
+    comp = complete(heatmap, cl_vox, grid.to_voxel(pts), hole_distance, cut_rims)
     t2 = time.perf_counter()
     verts = grid.to_mm(comp.vertices) if len(comp.vertices) else np.zeros((0, 3))
     cl = resample(grid.to_mm(cl_vox), CENTERLINE_SPACING_MM) if len(cl_vox) else np.zeros((0, 3))

@@ -378,13 +378,14 @@ def clip_to_segment(vertices: np.ndarray, faces: np.ndarray, centerline_vox: np.
 
 
 def complete(heatmap: np.ndarray, centerline_vox: np.ndarray, partial_vox: np.ndarray,
-             distance: float | None = None) -> Completion:
+             distance: float | None = None, cut_rims: bool = True) -> Completion:
     """Mesh, holes and coverage of a segment from its target heatmap, centerline and partial cloud (voxels).
 
-    ``distance`` is the hole distance in voxels (default: the paper's sqrt(2)/2).
+    ``distance`` is the hole distance in voxels (default: the paper's sqrt(2)/2). ``cut_rims``: clip
+    at the cloud's cut rims where they are found (:func:`rim_planes`), else at the centerline's ends.
     """
     field, mask = resigned_field(heatmap, centerline_vox)
-    verts, faces = clip_to_segment(*extract_mesh(field, mask), centerline_vox,
-                                   planes=rim_planes(centerline_vox, partial_vox))
+    planes = rim_planes(centerline_vox, partial_vox) if cut_rims else None
+    verts, faces = clip_to_segment(*extract_mesh(field, mask), centerline_vox, planes=planes)
     hole = hole_vertices(verts, partial_vox, HOLE_DISTANCE if distance is None else distance)
     return Completion(verts, faces, hole, mesh_coverage(verts, faces, hole))

@@ -248,3 +248,24 @@ def test_whole_partials_hold_points_on_observed_faces_only():
         assert part.positions[0][2] < 5 and part.positions[-1][2] > 235  # caecum (arc length 0) to rectum
     with pytest.raises(InputError, match="hole model"):
         whole_partial(colon, holes="video")
+
+
+def test_the_map_clips_at_its_own_planes_not_at_cut_rims():
+    # the map splits a reconstruction by arc length, not by planes, so its segments' clouds end in no
+    # planar rim: the completion method's rim search is off while it maps, and back on afterwards
+    from colonbench.completion.method import CompletionMethod
+    from colonbench.mapping.colonmap import map_colon
+
+    class Spy(CompletionMethod):
+        seen: list = []
+
+        def estimate(self, points):
+            self.seen.append(self.cut_rims)
+            return super().estimate(points)
+
+    pts, _, _ = tube_cloud(straight(200.0), density=1.0)
+    spy = Spy()
+    result = map_colon(pts, spy, segment_mm=60.0, progress=False, context_mm=15.0)
+    assert len(result["segments"]) >= 3 and not any(seg.error for seg in result["segments"])
+    assert spy.seen and not any(spy.seen)
+    assert spy.cut_rims is True
