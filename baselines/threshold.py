@@ -9,7 +9,7 @@ sqrt(2)/2 voxel from every partial point are hole voxels, and
 As the paper notes, such a surface varies in thickness, which is what the
 mesh step fixes. For a fair comparison the surface voxels are cut at the
 same segment end planes as the mesh of the full method
-(:func:`colonbench.completion.surface.rim_planes`), so the two differ only in
+(:func:`colonbench.completion.surface.segment_planes`), so the two differ only in
 the step the paper compares.
 """
 
@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from colonbench.completion.centerline import extract_centerline, resample
-from colonbench.completion.surface import END_INSET, HOLE_DISTANCE, end_planes, hole_vertices, rim_planes
+from colonbench.completion.surface import END_INSET, HOLE_DISTANCE, hole_vertices, segment_planes
 from colonbench.estimate import Estimate
 from colonbench.grid import Grid
 
@@ -47,7 +47,7 @@ def threshold_coverage(heatmap: np.ndarray, grid: Grid, points, threshold: float
     cl = extract_centerline(heatmap) if centerline_vox is None else np.asarray(centerline_vox, float)
     vox = np.argwhere(np.asarray(heatmap) < threshold).astype(float)
     partial = grid.to_voxel(np.asarray(points, dtype=float))
-    for point, normal in rim_planes(cl, partial) if cut_rims else end_planes(cl):
+    for point, normal in segment_planes(cl, partial, cut_rims):
         vox = vox[(vox - point) @ normal >= END_INSET]
     hole = hole_vertices(vox, partial, HOLE_DISTANCE, false_hole_rate=None)  # the baseline as the paper ran it
     coverage = float(1.0 - hole.mean()) if len(vox) else float("nan")

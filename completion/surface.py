@@ -241,17 +241,18 @@ def end_planes(centerline_vox: np.ndarray, reach: float = END_REACH) -> list[tup
     return planes
 
 
-def _basis(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Two unit vectors that make a right-handed orthonormal frame with the unit vector ``axis``."""
-    u = np.cross(axis, [1.0, 0.0, 0.0] if abs(axis[0]) < 0.9 else [0.0, 1.0, 0.0])
-    u /= np.linalg.norm(u)
-    return u, np.cross(axis, u)
+def _bases(axes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(d, 3) each: two unit vectors that make a right-handed orthonormal frame with each (d, 3) unit axis."""
+    ref = np.where(np.abs(axes[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    u = np.cross(axes, ref)
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    return u, np.cross(axes, u)
 
 
 def cap_directions(axis: np.ndarray, max_deg: float, n: int) -> np.ndarray:
     """(n, 3) unit vectors spread evenly (a Fibonacci spiral) over the cap within ``max_deg`` of ``axis``."""
     a = np.asarray(axis, float) / np.linalg.norm(axis)
-    u, v = _basis(a)
+    (u,), (v,) = _bases(a[None])
     i = np.arange(n) + 0.5
     z = 1.0 - (1.0 - np.cos(np.radians(max_deg))) * i / n
     r = np.sqrt(np.clip(1.0 - z * z, 0.0, None))
@@ -280,10 +281,15 @@ def rim_planes(centerline_vox: np.ndarray, partial_vox: np.ndarray, band: float 
     ``band`` voxels of it. The direction whose touching points fill the most of
     :data:`RIM_SECTORS` sectors around the centerline's end wins (then the most
     points): a plane touching the side wall along a strip has many points
-    but in few sectors. It is accepted if they fill at least ``min_share`` of
-    the sectors; the plane is then fitted to those points (least squares, if
-    within 15 degrees of the winning direction). Otherwise, an unobserved or
-    ragged end, the end keeps :func:`end_planes`' plane.
+    but in few sectors. The directions are about 6 degrees apart, so this
+    coarse search counts the points within twice ``band``. The plane is then
+    fitted to its touching points by least squares, and its own supporting
+    plane's points within ``band`` refitted, :data:`RIM_REFINE` times (each fit
+    within :data:`RIM_FIT_DEG` of the winning direction). The rim is accepted
+    if its points fill at least ``min_share`` of the sectors and it lies more
+    than :data:`RIM_BEYOND` beyond the line's end (where the line reaches the
+    cut, its own plane is as good). Otherwise, an unobserved or ragged end,
+    the end keeps :func:`end_planes`' plane.
 
     Returns
     -------
@@ -342,16 +348,19 @@ def _sectors(offsets: np.ndarray, axes: np.ndarray, members: np.ndarray) -> np.n
     """(d,) int: for each of the (d, 3) unit ``axes``, how many of :data:`RIM_SECTORS` equal sectors
     around it its member ``offsets`` (rows of (k, 3) where ``members`` (d, k) is true) fall in."""
     j, i = np.nonzero(members)
-    ref = np.where(np.abs(axes[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
-    u = np.cross(axes, ref)
-    u /= np.linalg.norm(u, axis=1, keepdims=True)
-    v = np.cross(axes, u)
+    u, v = _bases(axes)
     o = offsets[i]
     angle = np.arctan2(np.einsum("ij,ij->i", o, v[j]), np.einsum("ij,ij->i", o, u[j]))
     sector = np.floor((angle + np.pi) / (2 * np.pi) * RIM_SECTORS).astype(int) % RIM_SECTORS
     filled = np.zeros((len(axes), RIM_SECTORS), bool)
     filled[j, sector] = True
     return filled.sum(axis=1)
+
+
+def segment_planes(centerline_vox: np.ndarray, partial_vox: np.ndarray, cut_rims: bool = True) -> list:
+    """The planes a completed segment is clipped at: :func:`rim_planes`, or with ``cut_rims`` off
+    :func:`end_planes` (the caller clips at planes it knows)."""
+    return rim_planes(centerline_vox, partial_vox) if cut_rims else end_planes(centerline_vox)
 
 
 def clip_to_segment(vertices: np.ndarray, faces: np.ndarray, centerline_vox: np.ndarray, inset: float = END_INSET,
@@ -385,7 +394,7 @@ def complete(heatmap: np.ndarray, centerline_vox: np.ndarray, partial_vox: np.nd
     at the cloud's cut rims where they are found (:func:`rim_planes`), else at the centerline's ends.
     """
     field, mask = resigned_field(heatmap, centerline_vox)
-    planes = rim_planes(centerline_vox, partial_vox) if cut_rims else None
-    verts, faces = clip_to_segment(*extract_mesh(field, mask), centerline_vox, planes=planes)
+    verts, faces = clip_to_segment(*extract_mesh(field, mask), centerline_vox,
+                                   planes=segment_planes(centerline_vox, partial_vox, cut_rims))
     hole = hole_vertices(verts, partial_vox, HOLE_DISTANCE if distance is None else distance)
     return Completion(verts, faces, hole, mesh_coverage(verts, faces, hole))

@@ -351,11 +351,9 @@ def recentre(cavity: np.ndarray, origin: np.ndarray, voxel: float, midline, iter
         line = line.resample(0.5)
         s, _, area = cross_sections(cavity, origin, voxel, line, max_radius_mm=max_radius_mm)
         radius = np.sqrt(area / np.pi)
-    radius_s = radius
-    radius = np.interp(line.arclength, s, radius_s)
-    bad = radius_s < min_radius_mm
-    collapsed = _intervals(s, bad)
-    return line, np.where(radius >= min_radius_mm, radius, 0.0), collapsed
+    collapsed = _intervals(s, radius < min_radius_mm)
+    along = np.interp(line.arclength, s, radius)
+    return line, np.where(along >= min_radius_mm, along, 0.0), collapsed
 
 
 def turning_radius(line: Centerline, window_mm: float = CURVATURE_WINDOW_MM) -> np.ndarray:

@@ -13,10 +13,9 @@ estimated by a method on its own points alone; results written.
 
 from __future__ import annotations
 
-from contextlib import contextmanager
-
 import json
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -200,7 +199,7 @@ def known_planes(method):
     The map splits the reconstruction by the arc length of each point's nearest centerline point, not
     by planes, so a segment's cloud does not end in a planar rim, and the map clips the completed
     surface at its own planes. On the whole-colon benchmark the rims, searched for anyway, cost the
-    real colon's segments 2-3 points (docs/mapping.md).
+    real colon's segments 1.8-3.0 points (docs/mapping.md).
     """
     saved = getattr(method, "cut_rims", None)
     if saved is not None:

@@ -307,14 +307,21 @@ def test_resolving_a_resolved_manifest_keeps_its_hash(name):
     assert manifest_hash(resolve(yaml.safe_load(dumps(resolved)))) == manifest_hash(resolved)
 
 
+@pytest.fixture(scope="module")
+def gca00060(real_dir):
+    """The real CT colon gca00060 imported as colonoscopy sees it (about 20 s; shared by the tests below)."""
+    from colonbench.datagen.realmesh import import_colon
+
+    return import_colon(real_dir / "gca00060_large_intestine_mm.ply", real_dir / "gca00060_path_mm.npy", lumen=True)
+
+
 @pytest.mark.slow
-def test_real_colon_segments_hold_only_their_own_stretch(real_dir):
+def test_real_colon_segments_hold_only_their_own_stretch(gca00060):
     # gca00060 bends sharply at its caecum and flexures: the two cutting planes of a segment there form a
     # wedge whose far side holds wall of another stretch, connected to this segment's wall
     from colonbench.datagen.generate import PreparedColon
-    from colonbench.datagen.realmesh import import_colon
 
-    colon = import_colon(real_dir / "gca00060_large_intestine_mm.ply", real_dir / "gca00060_path_mm.npy", lumen=True)
+    colon = gca00060
     prepared = PreparedColon(colon)
     wins, skipped = prepared.usable_windows(70.0, 10.0)
     assert len(wins) >= 10 and skipped                      # the open rectum end is left out
@@ -356,16 +363,13 @@ def test_moved_points_that_step_back_are_dropped():
 
 
 @pytest.mark.slow
-def test_real_colon_centerline_has_no_kinks(real_dir):
+def test_real_colon_centerline_has_no_kinks(gca00060):
     # gca00060's re-centred line had folded back on itself (a 172 degree turn within 3 mm at 873 mm) and
     # kinked at two more places; the segments cut there had planes at random angles
     from colonbench.datagen.lumen import MIN_TURN_RATIO, turning_radius
-    from colonbench.datagen.realmesh import load_centerline, load_mesh
 
-    lumen = import_lumen(load_mesh(real_dir / "gca00060_large_intestine_mm.ply"),
-                         load_centerline(real_dir / "gca00060_path_mm.npy").points)
-    inner = lumen.radius > 0
-    ratio = turning_radius(lumen.centerline)[inner] / lumen.radius[inner]
+    inner = gca00060.radius > 0
+    ratio = turning_radius(gca00060.centerline)[inner] / gca00060.radius[inner]
     assert np.quantile(ratio, 0.001) >= 0.8 * MIN_TURN_RATIO
-    turn = np.degrees(3.0 / turning_radius(lumen.centerline).min())
+    turn = np.degrees(3.0 / turning_radius(gca00060.centerline).min())
     assert turn < 45.0
