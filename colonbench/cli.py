@@ -186,7 +186,7 @@ def cmd_train(args):
     cfg = TrainConfig(network=args.network, batch_size=args.batch_size, lr=args.lr, epochs=args.epochs,
                       augment_prob=args.augment_prob, seed=args.seed, workers=args.workers, flips=args.flips,
                       checkpoint_minutes=args.checkpoint_minutes, max_minutes=args.max_minutes,
-                      init=args.init, init_sha256=_model_sha256(args.init))
+                      keep_epochs=args.keep_epochs, init=args.init, init_sha256=_model_sha256(args.init))
     command = "colonbench train " + " ".join(sys.argv[2:]) if len(sys.argv) > 2 else ""
     result = train(args.data, args.out, cfg, device=args.device, progress=not args.quiet, command=command)
     how = {"time": "time budget reached; run the same command to resume",
@@ -586,6 +586,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--max-minutes", type=_positive(float), help="stop cleanly after this long (resume later)")
     p.add_argument("--checkpoint-minutes", type=_positive(float), default=10.0,
                    help="rewrite last.pt this often (default 10)")
+    p.add_argument("--keep-epochs", action="store_true",
+                   help="also keep every epoch's weights (epoch-NNN.safetensors), to choose one afterwards by "
+                        "the validation split's coverage error (colonbench evaluate DATA --split validation)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_train)
 

@@ -15,7 +15,12 @@ epoch and writes into ``RUN``:
 ``best.safetensors``
     the weights with the lowest validation loss, with the network
     configuration and a description of the run in the file's metadata
-    (:func:`colonbench.completion.network.save_model`).
+    (:func:`colonbench.completion.network.save_model`);
+``epoch-NNN.safetensors``
+    with ``keep_epochs``: every epoch's weights, the same metadata, so that a
+    checkpoint can be chosen afterwards by the coverage error on the
+    validation split (``colonbench evaluate RUN_DATA --split validation
+    --model RUN/epoch-NNN.safetensors``) rather than by the L2 alone.
 
 Running the same command again resumes from ``last.pt`` exactly where it
 stopped (the epoch's sample order is drawn from the seed, so the remaining
@@ -70,6 +75,7 @@ class TrainConfig:
     lr_factor: float = 0.5
     checkpoint_minutes: float = 10.0
     max_minutes: float | None = None
+    keep_epochs: bool = False
     augment: dict = field(default_factory=dict)
     flips: bool = False
     init: str | None = None
@@ -141,7 +147,7 @@ def evaluate_l2(net, dataset, device, batch_size: int = 4, rank: int = 0, world:
 
 
 #: Settings a resumed run may change: how long it runs and how often it saves.
-_RUN_LENGTH = ("max_minutes", "epochs", "checkpoint_minutes")
+_RUN_LENGTH = ("max_minutes", "epochs", "checkpoint_minutes", "keep_epochs")
 
 
 def _fixed_settings(train_config: dict) -> dict:
@@ -374,16 +380,18 @@ def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "a
             with open(log_path, "a", newline="") as fh:
                 csv.writer(fh).writerow([epoch, state["steps"], state["samples"], f"{train_l2:.6f}", f"{val:.6f}",
                                          f"{opt.param_groups[0]['lr']:.3g}", f"{state['seconds']:.1f}"])
+            meta = {"data_manifest_sha256": data_hash, "data_dir": "+".join(d.name for d in data_dirs),
+                    **({"data_manifests": lock["manifests"]} if len(data_dirs) > 1 else {}),
+                    "data_format": "pack" if lock["pack"] else "shards", "train_config": asdict(cfg),
+                    "epoch": epoch, "steps": state["steps"], "samples_seen": state["samples"],
+                    "val_l2": val, "train_seconds": round(state["seconds"], 1), "device": str(dev),
+                    "world_size": world, "torch": torch.__version__, "colonbench": __version__,
+                    "grid_options": grid_options, "command": command or "",
+                    "train_coverage_mean": train_coverage}
+            if cfg.keep_epochs:
+                save_model(out / f"epoch-{epoch:03d}.safetensors", net, net_cfg, meta)
             if val < state["best_val"]:
                 state["best_val"] = val
-                meta = {"data_manifest_sha256": data_hash, "data_dir": "+".join(d.name for d in data_dirs),
-                        **({"data_manifests": lock["manifests"]} if len(data_dirs) > 1 else {}),
-                        "data_format": "pack" if lock["pack"] else "shards", "train_config": asdict(cfg),
-                        "epoch": epoch, "steps": state["steps"], "samples_seen": state["samples"],
-                        "val_l2": val, "train_seconds": round(state["seconds"], 1), "device": str(dev),
-                        "world_size": world, "torch": torch.__version__, "colonbench": __version__,
-                        "grid_options": grid_options, "command": command or "",
-                        "train_coverage_mean": train_coverage}
                 save_model(out / "best.safetensors", net, net_cfg, meta)
         save_checkpoint()
         last_ckpt = time.perf_counter()

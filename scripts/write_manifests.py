@@ -108,6 +108,15 @@ dump("train-wide", "Training data of the 0.2 model: 24 colons of the widened gen
       "validation": split(200, 8, 4, 1, WIDE_NOISE, WIDE_HOLES)}, WIDE, axes="tube",
      mesh_names=["gca00090", "gca00080"])
 
+dump("train-real", "Every segment of the real training colons gca00090 and gca00080 (40, 55 and 70 mm, two hole "
+     "permutations each, the widened suite's hole models and noise), as the kink-free importer cuts them: trained "
+     "together with train-wide.yaml (colonbench train data/train-wide data/train-real), it gives the real colons "
+     "a sixth of the samples instead of a thirteenth. Validated on 4 widened colons that no other manifest "
+     "trains on; real-test.yaml's colon gca00060 is never seen.", 20261125,
+     {"train": split(0, 0, None, 2, WIDE_NOISE, WIDE_HOLES, meshes=["gca00090", "gca00080"]),
+      "validation": split(212, 4, 2, 1, WIDE_NOISE, WIDE_HOLES)}, WIDE, axes="tube",
+     mesh_names=["gca00090", "gca00080"])
+
 # ------------------------------------------------------------------ 0.3: reconstruction-like partials (issue 13)
 #: The same segments of paper.yaml's test colons, as ideal visibility (camera) and as a fused, degraded video.
 for name, mix, what in (("video", {"video": 1.0}, "reconstruction-like partials: a rendered withdrawal per segment, "

@@ -253,9 +253,14 @@ def test_training_resumes_and_refuses_other_settings(tiny_run):
     out, run, cfg, _ = tiny_run
     import dataclasses
 
-    more = train(out, run, dataclasses.replace(cfg, epochs=2), device="cpu", progress=False)
+    # keeping every epoch's weights is a run-length setting: it may be switched on when resuming
+    more = train(out, run, dataclasses.replace(cfg, epochs=2, keep_epochs=True), device="cpu", progress=False)
     assert more["epochs"] == 2 and more["steps"] == 4
-    assert len((run / "log.csv").read_text().splitlines()) == 3
+    log = (run / "log.csv").read_text().splitlines()
+    assert len(log) == 3
+    assert sorted(p.name for p in run.glob("epoch-*.safetensors")) == ["epoch-001.safetensors"]
+    _, _, meta = load_model(run / "epoch-001.safetensors")
+    assert meta["epoch"] == 1 and meta["steps"] == 4 and f"{meta['val_l2']:.6f}" == log[2].split(",")[4]
     with pytest.raises(InputError, match="other settings"):
         train(out, run, dataclasses.replace(cfg, epochs=3, lr=0.5), device="cpu", progress=False)
 
