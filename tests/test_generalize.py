@@ -298,7 +298,7 @@ def test_colons_with_diverticula_and_stalked_polyps(small_config):
 
 
 @pytest.mark.parametrize("name", ["paper", "demo", "smoke", "train-cpu", "train-gpu", "wide", "real-test",
-                                  "train-wide"])
+                                  "train-wide", "train-real"])
 def test_resolving_a_resolved_manifest_keeps_its_hash(name):
     # a dataset folder keeps the resolved manifest; a resumed run compares their hashes
     from colonbench.shards.manifest import dumps, load, manifest_hash
