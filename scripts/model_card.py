@@ -15,15 +15,23 @@ from pathlib import Path
 from colonbench.completion.network import load_model
 
 
-def _commands(manifest: str, meta: dict) -> str:
+def _commands(manifests: list[str], meta: dict) -> str:
     """The commands that made the model, from the data it was trained on."""
-    name = Path(manifest).stem
-    steps = [f"`colonbench generate {manifest} --out data/{name} --workers 2`"]
+    names = [Path(m).stem for m in manifests]
+    steps = [f"`colonbench generate {m} --out data/{n} --workers 2`" for m, n in zip(manifests, names)]
     if meta.get("data_format") == "pack":
-        steps.append(f"`colonbench pack data/{name} --out {meta.get('data_dir') and 'packs/' + meta['data_dir']} "
+        steps.append(f"`colonbench pack data/{names[0]} --out {meta.get('data_dir') and 'packs/' + meta['data_dir']} "
                      "--workers 2`")
     steps.append(f"`{meta.get('command') or 'colonbench train'}`")
     return ", then ".join(steps)
+
+
+def _data(manifests: list[str], meta: dict) -> str:
+    """The training manifests with the sha256 the run recorded for each."""
+    shas = meta.get("data_manifests") or [meta.get("data_manifest_sha256", "?")]
+    if len(shas) != len(manifests):
+        raise SystemExit(f"the model was trained on {len(shas)} dataset(s); --data-manifest names {len(manifests)}")
+    return " + ".join(f"`{m}` (manifest sha256 `{h}`)" for m, h in zip(manifests, shas))
 
 
 def main(argv=None):
@@ -34,7 +42,8 @@ def main(argv=None):
     ap.add_argument("--leaderboard", nargs="*", default=[],
                     help="leaderboard.json files of colonbench leaderboard over runs of this model (one per suite)")
     ap.add_argument("--hardware", required=True)
-    ap.add_argument("--data-manifest", default="data_manifests/train-cpu.yaml")
+    ap.add_argument("--data-manifest", nargs="+", default=["data_manifests/train-cpu.yaml"],
+                    help="the manifest(s) of the training data, in the order given to colonbench train")
     ap.add_argument("--note", default="")
     args = ap.parse_args(argv)
     _, config, meta = load_model(args.model)
@@ -46,9 +55,10 @@ def main(argv=None):
     out += ["| | |", "|---|---|",
             f"| network | MONAI 3D UNet, channels {list(config.channels)}, strides {list(config.strides)}, "
             f"{config.num_res_units} residual unit(s), {config.norm} norm; 64^3 input heatmap -> 64^3 target heatmap |",
-            f"| training data | `{args.data_manifest}` (manifest sha256 `{meta.get('data_manifest_sha256', '?')}`), "
-            "its train split; validation split for model selection |",
-            f"| command | {_commands(args.data_manifest, meta)} (resumed with the same command) |",
+            f"| training data | {_data(args.data_manifest, meta)}, "
+            + ("its train split; validation split" if len(args.data_manifest) == 1 else
+               "their train splits as one; their validation splits as one") + " for model selection |",
+            f"| command | {_commands(args.data_manifest, meta)} (rerun the same command to resume a stopped run) |",
             f"| settings | batch {tc.get('batch_size')}, Adam lr {tc.get('lr')}, L2 loss, geometric augmentation "
             f"share {tc.get('augment_prob')}, axis flips {'on' if tc.get('flips') else 'off'}, seed {tc.get('seed')} |",
             f"| selected | epoch {meta.get('epoch')}, {meta.get('steps')} steps, {meta.get('samples_seen')} samples seen, "
