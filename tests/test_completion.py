@@ -94,7 +94,6 @@ def test_a_cut_window_is_found_as_a_hole_of_its_area():
     assert inside.mean() > 0.95
 
 
-
 def test_end_planes_follow_the_axis_when_the_last_voxel_wobbles():
     # a straight centerline along z whose end voxel sits 1.5 voxels to the side, as a ridge's last voxel
     # can: the planes stay perpendicular to the axis, and a tube clipped by them keeps its whole length
@@ -154,6 +153,7 @@ def test_an_unseen_end_keeps_the_centerline_plane():
     rims, ends = rim_planes(line, pts), end_planes(line)
     assert abs(rims[0][0][2] - 10.0) < 1.0
     assert np.allclose(rims[1][0], ends[1][0]) and np.allclose(rims[1][1], ends[1][1])
+
 
 @pytest.mark.parametrize("density", [0.5, 2.0, 8.0])
 def test_a_cut_window_in_a_sparse_or_dense_cloud_is_a_hole_of_its_area(density):

@@ -321,11 +321,10 @@ def test_real_colon_segments_hold_only_their_own_stretch(gca00060):
     # wedge whose far side holds wall of another stretch, connected to this segment's wall
     from colonbench.datagen.generate import PreparedColon
 
-    colon = gca00060
-    prepared = PreparedColon(colon)
+    prepared = PreparedColon(gca00060)
     wins, skipped = prepared.usable_windows(70.0, 10.0)
     assert len(wins) >= 10 and skipped                      # the open rectum end is left out
-    r = np.median(colon.radius[colon.radius > 0])
+    r = np.median(gca00060.radius[gca00060.radius > 0])
     for s0, s1 in wins:
         seg = prepared.segment(s0, s1)
         span = np.ptp(seg.mesh.vertices, axis=0).max()
