@@ -28,8 +28,12 @@ class GTHeatmapMethod:
     """The completion method's centerline, mesh and hole steps on the GT target heatmap."""
 
     name = "gt-heatmap"
-    version = "1"
     uses_truth = True
+
+    def __init__(self):
+        from colonbench.completion.method import steps_version
+
+        self.version = steps_version()
 
     def estimate(self, points, truth: dict) -> Estimate:
         from colonbench.completion.method import check_cloud, from_heatmap
