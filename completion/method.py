@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from colonbench.completion.centerline import extract_centerline, resample
-from colonbench.completion.surface import SHELL_REACH, STEPS_VERSION, complete
+from colonbench.completion.surface import SHELL_LEVEL, STEPS_VERSION, complete
 from colonbench.errors import InputError
 from colonbench.estimate import Estimate
 from colonbench.grid import Grid, check_points, fit_grid, principal_axes
@@ -225,9 +225,9 @@ class CompletionMethod:
         (default: the paper's sqrt(2)/2).
     cut_rims : bool
         Clip the mesh at the cloud's cut rims where found (docs/method.md step 5).
-    shell_reach : float or None
-        Drop the mesh's faces farther than this from the predicted surface voxels, voxels
-        (docs/method.md step 4); None keeps them, as the steps did before their version 4.
+    shell_level : float or None
+        Drop the mesh's faces where the predicted heatmap is above this (docs/method.md step 4);
+        None keeps them, as the steps did before their version 4.
 
     The model is loaded once (and shared with the other methods built on the
     same model in this process); call :meth:`estimate` on as many clouds as
@@ -237,12 +237,12 @@ class CompletionMethod:
     name = "completion"
 
     def __init__(self, model=None, device: str = "cpu", hole_distance: float | None = None, cut_rims: bool = True,
-                 shell_reach: float | None = SHELL_REACH):
+                 shell_level: float | None = SHELL_LEVEL):
         self.predictor = shared_predictor(model, device)
         self.hole_distance = hole_distance
         self.cut_rims = cut_rims
-        self.shell_reach = shell_reach
-        self.version = f"{self.predictor.version},{steps_version(shell_reach)}"
+        self.shell_level = shell_level
+        self.version = f"{self.predictor.version},{steps_version(shell_level)}"
         self.meta = self.predictor.meta
 
     def predict(self, points) -> tuple[Grid, np.ndarray, np.ndarray]:
@@ -258,20 +258,20 @@ class CompletionMethod:
         p = self.predictor(pts)
         cl = p.centerline_vox
         est = from_heatmap(p.heatmap, p.grid, pts, self.name, self.hole_distance, centerline_vox=cl,
-                           cut_rims=self.cut_rims, shell_reach=self.shell_reach)
+                           cut_rims=self.cut_rims, shell_level=self.shell_level)
         est.seconds = {"check": t1 - t0, **p.seconds, **{k: v for k, v in est.seconds.items() if k != "centerline"}}
         return est
 
 
-def steps_version(shell_reach: float | None = SHELL_REACH) -> str:
+def steps_version(shell_level: float | None = SHELL_LEVEL) -> str:
     """``steps=N`` of the steps after the network (:data:`~colonbench.completion.surface.STEPS_VERSION`),
     with the shell reach where it is not the default: part of the methods' versions in run folders."""
-    return f"steps={STEPS_VERSION}" if shell_reach == SHELL_REACH else f"steps={STEPS_VERSION},shell_reach={shell_reach}"
+    return f"steps={STEPS_VERSION}" if shell_level == SHELL_LEVEL else f"steps={STEPS_VERSION},shell_level={shell_level}"
 
 
 def from_heatmap(heatmap: np.ndarray, grid: Grid, points, method: str = "completion",
                  hole_distance: float | None = None, centerline_vox: np.ndarray | None = None,
-                 cut_rims: bool = True, shell_reach: float | None = SHELL_REACH) -> Estimate:
+                 cut_rims: bool = True, shell_level: float | None = SHELL_LEVEL) -> Estimate:
     """Steps after the network: centerline, completed mesh, holes and coverage of a target heatmap.
 
     Parameters
@@ -286,14 +286,14 @@ def from_heatmap(heatmap: np.ndarray, grid: Grid, points, method: str = "complet
     cut_rims : bool
         Clip the mesh at the cloud's cut rims where found (docs/method.md step 5); off where the
         caller clips at planes it knows (``colonbench map``).
-    shell_reach : float or None
-        :func:`colonbench.completion.surface.clip_to_shell`'s reach, voxels; None keeps every face.
+    shell_level : float or None
+        :func:`colonbench.completion.surface.clip_to_shell`'s level; None keeps every face.
     """
     t0 = time.perf_counter()
     cl_vox = extract_centerline(heatmap) if centerline_vox is None else centerline_vox
     t1 = time.perf_counter()
     pts = np.asarray(points, dtype=float)
-    comp = complete(heatmap, cl_vox, grid.to_voxel(pts), hole_distance, cut_rims, shell_reach)
+    comp = complete(heatmap, cl_vox, grid.to_voxel(pts), hole_distance, cut_rims, shell_level)
     t2 = time.perf_counter()
     verts = grid.to_mm(comp.vertices) if len(comp.vertices) else np.zeros((0, 3))
     cl = resample(grid.to_mm(cl_vox), CENTERLINE_SPACING_MM) if len(cl_vox) else np.zeros((0, 3))

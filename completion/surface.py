@@ -22,7 +22,7 @@ them as a flap, and between the folds of a collapsed colon the local mean
 puts a ghost wall between two real ones. Neither is on the heatmap's surface
 and neither has partial points, so both counted as holes (on the real test
 colon the GT heatmap's coverage came out 5.5 points low). Faces with a
-vertex farther than :data:`SHELL_REACH` from every surface voxel are dropped
+vertex where the heatmap is above :data:`SHELL_LEVEL` are dropped
 (:func:`clip_to_shell`).
 
 Holes follow the paper: a vertex of the completed mesh farther than
@@ -45,13 +45,15 @@ from colonbench.grid import Grid
 from colonbench.heatmaps import distance_to, voxelize_polyline
 
 #: Revision of the steps after the network, part of the methods' versions: 1 the paper's, 2 the sparse
-#: clouds' hole distance, 3 the cut rims, 4 the shell reach.
+#: clouds' hole distance, 3 the cut rims, 4 the shell level.
 STEPS_VERSION = "4"
 #: Voxels below this value are surface voxels.
 SURFACE_THRESHOLD = 0.15
-#: Faces with a vertex farther than this from every surface voxel are dropped, voxels: a mesh on the
-#: surface voxels lies within sqrt(3)/2 of a voxel centre it passes through.
-SHELL_REACH = 1.0
+#: Faces with a vertex where the (trilinearly interpolated) heatmap is above this are dropped: off the
+#: surface the heatmap says is there. On an exact heatmap of a 15-voxel radius it is 0.2 about 1.3
+#: voxels from the surface. Chosen among 0.2, 0.25, 0.3 and a 1-voxel distance to the surface voxels
+#: on validation data (docs/method.md step 4).
+SHELL_LEVEL = 0.2
 #: Marching cubes runs within this many voxels of a surface voxel.
 BAND_VOXELS = 3.0
 #: Scale of the local mean of d(s, C), voxels.
@@ -115,15 +117,8 @@ class Completion:
     coverage: float
 
 
-def surface_distance(heatmap: np.ndarray, threshold: float = SURFACE_THRESHOLD) -> np.ndarray | None:
-    """(S, S, S) float32 distance (voxels) to the nearest surface voxel (below ``threshold``); None if there is none."""
-    surface = np.asarray(heatmap) < threshold
-    return distance_to(surface) if surface.any() else None
-
-
 def resigned_field(heatmap: np.ndarray, centerline_vox: np.ndarray, threshold: float = SURFACE_THRESHOLD,
-                   band: float = BAND_VOXELS, sigma: float = WALL_SIGMA,
-                   d_surface: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+                   band: float = BAND_VOXELS, sigma: float = WALL_SIGMA) -> tuple[np.ndarray, np.ndarray]:
     """The field ``d(s, C) - d(v, C)`` near the surface, and the mask where it is defined.
 
     Parameters
@@ -131,8 +126,6 @@ def resigned_field(heatmap: np.ndarray, centerline_vox: np.ndarray, threshold: f
     heatmap : (S, S, S) float
     centerline_vox : (m, 3) float
         Centerline in continuous voxel indices.
-    d_surface : (S, S, S) float, optional
-        :func:`surface_distance` of the heatmap, if already computed.
 
     Returns
     -------
@@ -153,7 +146,7 @@ def resigned_field(heatmap: np.ndarray, centerline_vox: np.ndarray, threshold: f
     weight = np.where(surface, threshold - h, 0.0).astype(np.float32)
     num = ndimage.gaussian_filter(weight * d_c, sigma, mode="constant")
     den = ndimage.gaussian_filter(weight, sigma, mode="constant")
-    near = (distance_to(surface) if d_surface is None else d_surface) <= band
+    near = distance_to(surface) <= band
     valid = den > 1e-6
     mask = near & valid
     wall = np.where(valid, num / np.maximum(den, 1e-12), 0.0)
@@ -180,20 +173,20 @@ def _keep_faces(vertices: np.ndarray, faces: np.ndarray, keep_f: np.ndarray) -> 
     return vertices[used], remap[faces[keep_f]]
 
 
-def clip_to_shell(vertices: np.ndarray, faces: np.ndarray, d_surface: np.ndarray | None,
-                  reach: float = SHELL_REACH) -> tuple[np.ndarray, np.ndarray]:
-    """Drop the faces with a vertex farther than ``reach`` (voxels) from every surface voxel.
+def clip_to_shell(vertices: np.ndarray, faces: np.ndarray, heatmap: np.ndarray,
+                  level: float = SHELL_LEVEL) -> tuple[np.ndarray, np.ndarray]:
+    """Drop the faces with a vertex where the heatmap, trilinearly interpolated, is above ``level``.
 
-    ``d_surface`` is the heatmap's :func:`surface_distance`, read at the
-    vertices by trilinear interpolation. On an exact heatmap this removes
-    only what no surface voxel supports: the flaps marching cubes draws past
-    the shell's free edges and the ghost walls between close folds, 1 to 3.5
-    voxels off the surface (what it changes in the benchmark: docs/method.md).
+    Marching cubes runs on the re-signed field in a band around the surface
+    voxels, so it draws what the heatmap does not hold: flaps past the
+    shell's free edges and ghost walls between close folds, 1 to 3.5 voxels
+    off the surface, where the heatmap rises towards its 0.5 of the lumen and
+    the outside. A weak surface of a prediction (0.15-0.2) is kept.
     """
-    if len(faces) == 0 or d_surface is None:
+    if len(faces) == 0:
         return vertices, faces
-    d = ndimage.map_coordinates(d_surface, vertices.T, order=1, mode="nearest")
-    return _keep_faces(vertices, faces, (d <= reach)[faces].all(axis=1))
+    h = ndimage.map_coordinates(np.asarray(heatmap, dtype=np.float32), vertices.T, order=1, mode="nearest")
+    return _keep_faces(vertices, faces, (h <= level)[faces].all(axis=1))
 
 
 def triangle_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -433,19 +426,17 @@ def clip_to_segment(vertices: np.ndarray, faces: np.ndarray, centerline_vox: np.
 
 def complete(heatmap: np.ndarray, centerline_vox: np.ndarray, partial_vox: np.ndarray,
              distance: float | None = None, cut_rims: bool = True,
-             shell_reach: float | None = SHELL_REACH) -> Completion:
+             shell_level: float | None = SHELL_LEVEL) -> Completion:
     """Mesh, holes and coverage of a segment from its target heatmap, centerline and partial cloud (voxels).
 
     ``distance`` is the hole distance in voxels (default: the paper's sqrt(2)/2). ``cut_rims``: clip
     at the cloud's cut rims where they are found (:func:`rim_planes`), else at the centerline's ends.
-    ``shell_reach``: drop what lies farther than this from the surface voxels (:func:`clip_to_shell`);
-    None keeps every face, as before version 4 of the steps.
+    ``shell_level``: drop the faces where the heatmap is above it (:func:`clip_to_shell`); None keeps
+    every face, as before version 4 of the steps.
     """
-    h = np.asarray(heatmap, dtype=np.float32)
-    d_surface = surface_distance(h)
-    verts, faces = extract_mesh(*resigned_field(h, centerline_vox, d_surface=d_surface))
-    if shell_reach is not None:
-        verts, faces = clip_to_shell(verts, faces, d_surface, shell_reach)
+    verts, faces = extract_mesh(*resigned_field(heatmap, centerline_vox))
+    if shell_level is not None:
+        verts, faces = clip_to_shell(verts, faces, heatmap, shell_level)
     verts, faces = clip_to_segment(verts, faces, centerline_vox,
                                    planes=segment_planes(centerline_vox, partial_vox, cut_rims))
     hole = hole_vertices(verts, partial_vox, HOLE_DISTANCE if distance is None else distance)
