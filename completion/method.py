@@ -265,7 +265,7 @@ class CompletionMethod:
 
 def steps_version(shell_level: float | None = SHELL_LEVEL) -> str:
     """``steps=N`` of the steps after the network (:data:`~colonbench.completion.surface.STEPS_VERSION`),
-    with the shell reach where it is not the default: part of the methods' versions in run folders."""
+    with the shell level where it is not the default: part of the methods' versions in run folders."""
     return f"steps={STEPS_VERSION}" if shell_level == SHELL_LEVEL else f"steps={STEPS_VERSION},shell_level={shell_level}"
 
 
