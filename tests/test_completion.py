@@ -242,6 +242,11 @@ def test_train_save_load_predict_round_trip(tiny_run):
     grid, h_in, pred = method.predict(item["partial_points"].astype(float))
     np.testing.assert_allclose(h_in, item["input"][0], atol=1e-3)  # voxelized exactly as in training
     assert pred.shape == (64, 64, 64) and 0 <= pred.min() and pred.max() <= 1
+    import torch
+
+    with torch.no_grad():                  # the network made fast for inference gives the eager network's output
+        eager = net(torch.from_numpy(h_in[None, None]))[0, 0].numpy()
+    np.testing.assert_allclose(pred, np.clip(eager, 0, 1), atol=1e-4)
     est = method.estimate(item["partial_points"].astype(float))
     assert 0 <= est.coverage <= 1 or np.isnan(est.coverage)
     assert set(est.seconds) >= {"network", "centerline", "mesh_holes"}
@@ -361,6 +366,24 @@ def test_network_shapes():
 
     net = build_network(network_config("small"))
     assert net(torch.zeros(1, 1, 64, 64, 64)).shape == (1, 1, 64, 64, 64)
+
+
+def test_the_network_made_fast_for_inference_gives_the_same_output():
+    import torch
+
+    from colonbench.completion.network import for_inference
+
+    torch.manual_seed(0)
+    net = build_network(network_config("small"))
+    for m in net.modules():                # batch norms with statistics that folding must carry over
+        if isinstance(m, torch.nn.BatchNorm3d):
+            m.running_mean.uniform_(-0.5, 0.5)
+            m.running_var.uniform_(0.5, 2.0)
+    net.eval()
+    fast = for_inference(net, 32, torch.device("cpu"))
+    x = torch.rand(1, 1, 32, 32, 32)
+    with torch.inference_mode():
+        np.testing.assert_allclose(fast(x).numpy(), net(x).numpy(), atol=1e-4)
 
 
 def test_sigterm_stops_training_cleanly_and_it_resumes(smoke_dataset, tmp_path):
