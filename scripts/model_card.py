@@ -73,7 +73,8 @@ def main(argv=None):
     if args.eval:
         out += ["", "## Figures", "",
                 "Measured with `python scripts/bench_completion.py DATA --split test --limit N [--noise S] "
-                "[--gt]` (one process, one torch thread, the model loaded once).", "",
+                "[--gt]` (one process, one torch thread, the model loaded and set up once; s per segment is the "
+                "`estimate` call).", "",
                 "| evaluated | samples | noise mm | coverage MAE (points) | median | bias | holes P / R @2mm (mean) | "
                 "centerline P / R @2mm (mean) | s per segment | constant guess MAE |",
                 "|---|---|---|---|---|---|---|---|---|---|"]
@@ -84,7 +85,7 @@ def main(argv=None):
                        f"{e['coverage_mae_points']:.2f} | {e['coverage_median_abs_points']:.2f} | "
                        f"{e['coverage_bias_points']:+.2f} | {m['holes_precision_2mm']:.2f} / "
                        f"{m['holes_recall_2mm']:.2f} | {m['centerline_precision_2mm']:.2f} / "
-                       f"{m['centerline_recall_2mm']:.2f} | {e['wall_per_segment']:.2f} | "
+                       f"{m['centerline_recall_2mm']:.2f} | {e.get('estimate_per_segment', e['wall_per_segment']):.2f} | "
                        + (f"{e['constant_guess_mae_points']:.2f} |" if e.get("constant_guess_mae_points") else "- |"))
     for path in args.leaderboard:
         out += leaderboard_rows(path, f"{Path(args.model).stem}@{meta.get('steps')}")
