@@ -123,7 +123,8 @@ def point_normals(points, neighbours: int = NORMAL_NEIGHBOURS) -> np.ndarray:
     pts = np.asarray(points, dtype=float)
     k = int(min(neighbours, len(pts)))
     _, idx = cKDTree(pts).query(pts, k=k)
-    nb = pts[idx] - pts[idx].mean(axis=1, keepdims=True)          # (n, k, 3)
+    nb = pts[idx]                                                   # (n, k, 3)
+    nb -= nb.mean(axis=1, keepdims=True)
     cov = np.einsum("nki,nkj->nij", nb, nb)
     _, vecs = np.linalg.eigh(cov)
     return vecs[:, :, 0]

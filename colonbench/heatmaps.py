@@ -43,7 +43,9 @@ def distance_to(occupied: np.ndarray) -> np.ndarray:
     """
     if not occupied.any():
         raise InputError("nothing to measure distances to: no occupied voxel in the grid")
-    return _edt.edt(np.ascontiguousarray(~occupied), black_border=False, parallel=1).astype(np.float32, copy=False)
+    # as uint8 (the same labels): edt runs a quarter faster on it than on bool
+    free = np.ascontiguousarray(~np.asarray(occupied, dtype=bool)).view(np.uint8)
+    return _edt.edt(free, black_border=False, parallel=1).astype(np.float32, copy=False)
 
 
 def voxel_indices(grid: Grid, ijk: np.ndarray) -> tuple[np.ndarray, int]:
