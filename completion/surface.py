@@ -130,7 +130,9 @@ def resigned_field(heatmap: np.ndarray, centerline_vox: np.ndarray, threshold: f
     Returns
     -------
     field : (S, S, S) float32
-        Positive inside, negative outside, zero on the wall.
+        Positive inside, negative outside, zero on the wall, within the mask
+        and wherever a surface voxel is within the Gaussian's reach; elsewhere
+        (never read by marching cubes) ``-(band + 1)``.
     mask : (S, S, S) bool
         Voxels within ``band`` of a surface voxel.
     """
@@ -150,11 +152,43 @@ def resigned_field(heatmap: np.ndarray, centerline_vox: np.ndarray, threshold: f
     valid = den > 1e-6
     mask = near & valid
     wall = np.where(valid, num / np.maximum(den, 1e-12), 0.0)
-    # outside the band the field keeps its sign (the wall estimate of the nearest valid voxel) with a
-    # magnitude beyond the band, so marching cubes sees no crossing at the band's edge
-    _, nearest = ndimage.distance_transform_edt(~valid, return_indices=True)
-    outside = np.sign(wall[tuple(nearest)] - d_c) * (band + 1.0)
+    # outside the band the field keeps its sign (the wall estimate of the voxel, or that of its nearest
+    # valid neighbours) with a magnitude beyond the band, so marching cubes sees no crossing at the band's edge
+    read = ndimage.binary_dilation(mask, structure=np.ones((3, 3, 3), bool))   # the voxels marching cubes reads
+    wall = np.where(valid, wall, _nearest_valid_mean(wall, valid, read & ~valid))
+    outside = np.where(valid | read, np.sign(wall - d_c), -1.0) * (band + 1.0)
     return np.where(mask, wall - d_c, outside).astype(np.float32), mask
+
+
+def _nearest_valid_mean(values: np.ndarray, valid: np.ndarray, where: np.ndarray) -> np.ndarray:
+    """At the voxels ``where``, the mean of ``values`` over their nearest ``valid`` neighbours; 0 elsewhere.
+
+    Neighbours are the 26 around a voxel, nearest first: the 6 across a face,
+    then the 12 across an edge, then the 8 across a corner; the first of those
+    shells with a valid voxel gives the mean. A voxel of ``where`` with no
+    valid neighbour gets 0. Marching cubes reads the field only within a voxel
+    of its mask, and every such voxel has a valid neighbour, so this replaces a
+    distance transform with indices over the whole grid (a quarter of the
+    surface step's time).
+    """
+    out = np.zeros_like(values)
+    idx = np.argwhere(where)
+    hi = np.array(values.shape) - 1
+    todo = np.ones(len(idx), bool)
+    offsets = np.array([o for o in np.ndindex(3, 3, 3) if o != (1, 1, 1)]) - 1
+    for shell in (1, 2, 3):
+        total = np.zeros(len(idx))
+        count = np.zeros(len(idx), int)
+        for off in offsets[(offsets ** 2).sum(axis=1) == shell]:
+            nb = idx + off
+            nbc = np.clip(nb, 0, hi)
+            hit = todo & np.all(nb == nbc, axis=1) & valid[tuple(nbc.T)]
+            total[hit] += values[tuple(nbc[hit].T)]
+            count[hit] += 1
+        done = count > 0
+        out[tuple(idx[done].T)] = total[done] / count[done]
+        todo &= ~done
+    return out
 
 
 def extract_mesh(field: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -82,6 +82,24 @@ def test_marching_cubes_on_a_cylinder_heatmap_gives_its_area():
     assert comp.coverage == pytest.approx(1.0, abs=0.01)  # every part of the wall has points
 
 
+def test_the_field_outside_the_band_takes_the_mean_of_the_nearest_valid_neighbours():
+    from colonbench.completion.surface import _nearest_valid_mean
+
+    values = np.zeros((5, 5, 5))
+    valid = np.zeros((5, 5, 5), bool)
+    for voxel, value in {(1, 2, 2): 1.0, (3, 2, 2): 3.0, (2, 1, 1): 100.0, (3, 3, 3): 7.0}.items():
+        values[voxel], valid[voxel] = value, True
+    where = np.zeros((5, 5, 5), bool)
+    for voxel in [(2, 2, 2), (2, 0, 0), (4, 4, 4), (4, 4, 0)]:
+        where[voxel] = True
+    out = _nearest_valid_mean(values, valid, where)
+    assert out[2, 2, 2] == 2.0          # two face neighbours tie: their mean; the edge neighbour is farther
+    assert out[2, 0, 0] == 100.0        # across an edge only
+    assert out[4, 4, 4] == 7.0          # across a corner only
+    assert out[4, 4, 0] == 0.0          # no valid neighbour
+    assert np.count_nonzero(out) == 3   # nothing outside ``where``
+
+
 @pytest.mark.parametrize("clip", [True, False])
 def test_a_half_pipe_heatmap_gives_its_own_area_without_flaps_past_its_edges(clip):
     # half a tube (x > 0): the heatmap's surface stops along two free edges; marching cubes runs on past
