@@ -13,9 +13,9 @@ estimated by a method on its own points alone; results written.
 
 from __future__ import annotations
 
+import copy
 import json
 import time
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -192,23 +192,20 @@ def clip_between(vertices: np.ndarray, faces: np.ndarray, line: np.ndarray, arc:
     return faces[(s >= lo) & (s < hi)]
 
 
-@contextmanager
-def known_planes(method):
-    """While mapping, a method that can clip at its cloud's cut rims (``cut_rims``) does not.
+def for_mapping(method):
+    """The method as mapping runs it: a method that can clip at its cloud's cut rims (``cut_rims``) does not.
 
     The map splits the reconstruction by the arc length of each point's nearest centerline point, not
     by planes, so a segment's cloud does not end in a planar rim, and the map clips the completed
     surface at its own planes. On the whole-colon benchmark the rims, searched for anyway, cost the
-    real colon's segments 1.8-3.0 points (docs/mapping.md).
+    real colon's segments 1.8-3.0 points (docs/mapping.md). Such a method comes back as a shallow copy
+    with ``cut_rims`` off (sharing its loaded model); the caller's object is left as it is.
     """
-    saved = getattr(method, "cut_rims", None)
-    if saved is not None:
-        method.cut_rims = False
-    try:
-        yield method
-    finally:
-        if saved is not None:
-            method.cut_rims = saved
+    if not getattr(method, "cut_rims", False):
+        return method
+    mapped = copy.copy(method)
+    mapped.cut_rims = False
+    return mapped
 
 
 def map_colon(points: np.ndarray, method, segment_mm: float = SEGMENT_MM, positions: np.ndarray | None = None,
@@ -315,54 +312,54 @@ def map_colon(points: np.ndarray, method, segment_mm: float = SEGMENT_MM, positi
     t0 = time.perf_counter()
     out = []
     name = getattr(method, "name", "method")
-    with known_planes(method):
-        for seg, mask, ctx, (pa, ps, last, radius) in tqdm(segments, desc="segments", unit="seg",
-                                                            disable=not progress):
-            length = seg.end_mm - seg.start_mm
-            if seg.points < MIN_POINTS and seg.unreconstructed_mm >= 0.5 * length:
-                # the scope passed, nothing was reconstructed: all of it unobserved (a tube of the colon's radius)
-                seg.coverage, seg.holes = 0.0, 1
-                seg.area_mm2 = seg.hole_area_mm2 = seg.largest_hole_mm2 = float(2 * np.pi * radius * length)
-                out.append(seg)
-                continue
-            if seg.points < MIN_POINTS:
-                seg.error = f"{seg.points} points, fewer than {MIN_POINTS}: not estimated"
-                out.append(seg)
-                continue
-            t = time.perf_counter()
-            try:
-                est = as_estimate(method.estimate(points[ctx]), name)
-                faces = est.mesh_faces
-                if context_mm > 0 and len(faces):  # the completed context, clipped to the segment's stretch
-                    hi = seg.end_mm + (1e-6 if last else 0.0)
-                    faces = clip_between(est.mesh_vertices, faces, pa, ps, seg.start_mm, hi)
-                    if len(faces) == 0:
-                        raise ColonbenchError("the completed surface holds nothing between the segment's planes")
-                elif context_mm > 0:  # no mesh to clip: the segment alone
-                    est = as_estimate(method.estimate(points[mask]), name)
-                    faces = est.mesh_faces
-            except ColonbenchError as exc:
-                seg.error = str(exc)
-                out.append(seg)
-                continue
-            seg.seconds = time.perf_counter() - t
-            seg.coverage = float(est.coverage)
-            if len(faces):
-                from colonbench.completion.surface import mesh_coverage, triangle_areas
-
-                if faces is not est.mesh_faces:
-                    seg.coverage = mesh_coverage(est.mesh_vertices, faces, est.hole_vertices)
-                seg.area_mm2 = float(triangle_areas(est.mesh_vertices, faces).sum())
-                seg.hole_area_mm2, regions = hole_regions(est.mesh_vertices, faces, est.hole_vertices)
-                seg.holes = int(np.sum(regions >= MIN_HOLE_MM2))
-                seg.largest_hole_mm2 = float(regions[0]) if len(regions) else 0.0
-                used = np.unique(faces)
-                index = np.full(len(est.mesh_vertices), -1)
-                index[used] = np.arange(len(used))
-                seg.mesh = (est.mesh_vertices[used], index[faces], est.hole_vertices[used])
-            if seg.unreconstructed_mm > 0:
-                _add_unreconstructed(seg, radius)
+    method = for_mapping(method)
+    for seg, mask, ctx, (pa, ps, last, radius) in tqdm(segments, desc="segments", unit="seg",
+                                                        disable=not progress):
+        length = seg.end_mm - seg.start_mm
+        if seg.points < MIN_POINTS and seg.unreconstructed_mm >= 0.5 * length:
+            # the scope passed, nothing was reconstructed: all of it unobserved (a tube of the colon's radius)
+            seg.coverage, seg.holes = 0.0, 1
+            seg.area_mm2 = seg.hole_area_mm2 = seg.largest_hole_mm2 = float(2 * np.pi * radius * length)
             out.append(seg)
+            continue
+        if seg.points < MIN_POINTS:
+            seg.error = f"{seg.points} points, fewer than {MIN_POINTS}: not estimated"
+            out.append(seg)
+            continue
+        t = time.perf_counter()
+        try:
+            est = as_estimate(method.estimate(points[ctx]), name)
+            faces = est.mesh_faces
+            if context_mm > 0 and len(faces):  # the completed context, clipped to the segment's stretch
+                hi = seg.end_mm + (1e-6 if last else 0.0)
+                faces = clip_between(est.mesh_vertices, faces, pa, ps, seg.start_mm, hi)
+                if len(faces) == 0:
+                    raise ColonbenchError("the completed surface holds nothing between the segment's planes")
+            elif context_mm > 0:  # no mesh to clip: the segment alone
+                est = as_estimate(method.estimate(points[mask]), name)
+                faces = est.mesh_faces
+        except ColonbenchError as exc:
+            seg.error = str(exc)
+            out.append(seg)
+            continue
+        seg.seconds = time.perf_counter() - t
+        seg.coverage = float(est.coverage)
+        if len(faces):
+            from colonbench.completion.surface import mesh_coverage, triangle_areas
+
+            if faces is not est.mesh_faces:
+                seg.coverage = mesh_coverage(est.mesh_vertices, faces, est.hole_vertices)
+            seg.area_mm2 = float(triangle_areas(est.mesh_vertices, faces).sum())
+            seg.hole_area_mm2, regions = hole_regions(est.mesh_vertices, faces, est.hole_vertices)
+            seg.holes = int(np.sum(regions >= MIN_HOLE_MM2))
+            seg.largest_hole_mm2 = float(regions[0]) if len(regions) else 0.0
+            used = np.unique(faces)
+            index = np.full(len(est.mesh_vertices), -1)
+            index[used] = np.arange(len(used))
+            seg.mesh = (est.mesh_vertices[used], index[faces], est.hole_vertices[used])
+        if seg.unreconstructed_mm > 0:
+            _add_unreconstructed(seg, radius)
+        out.append(seg)
     seconds["estimate"] = time.perf_counter() - t0
     return {"segments": out, "centerline": line, "arclength": arc, "interruptions": interruptions,
             "unreconstructed": [{"from_mm": round(a, 2), "to_mm": round(b, 2)} for a, b in unseen],
