@@ -8,7 +8,9 @@ heatmaps are functions of three occupancy grids (:mod:`colonbench.heatmaps`):
 ``s1``
     voxels the complete surface passes through (where the target is 0);
 ``c``
-    voxels the GT centerline passes through (where the target is 1).
+    voxels the GT centerline passes through (voxelized again from the
+    shard's centerline polyline: where it crosses the surface the target
+    is 0, not 1).
 
 A pack stores just these, bit-packed and compressed (about 5 KiB per
 sample), so that tens of thousands of samples travel to a GPU machine in one
@@ -61,13 +63,16 @@ def is_pack(path) -> bool:
     return (Path(path) / PACK_NAME).is_file()
 
 
-def occupancies(input_heatmap: np.ndarray, target_heatmap: np.ndarray) -> dict:
+def occupancies(input_heatmap: np.ndarray, target_heatmap: np.ndarray, centerline: np.ndarray | None = None) -> dict:
     """The three occupancy grids of a sample from its stored heatmaps.
 
     Parameters
     ----------
     input_heatmap, target_heatmap : (S, S, S) float
         As stored in a shard.
+    centerline : (S, S, S) bool, optional
+        The voxelized GT centerline, as generation made it
+        (:func:`colonbench.heatmaps.voxelize_polyline` on the sample's grid).
 
     Returns
     -------
@@ -76,15 +81,20 @@ def occupancies(input_heatmap: np.ndarray, target_heatmap: np.ndarray) -> dict:
 
     Notes
     -----
-    A centerline voxel that is also a surface voxel (only a degenerate
-    segment has one) has target 0 and is read as surface only.
+    A centerline voxel that is also a surface voxel has target 0, so the
+    target alone reads it as surface only. The widened generator makes such
+    voxels (a stalked polyp's head or a flattened section across the
+    centerline), and without them the centerline's distances, and so the
+    target, come out otherwise. ``centerline`` gives them back; without it the
+    centerline is read from the target (``== 1``).
     """
-    return {"s0": input_heatmap == 0, "s1": target_heatmap == 0, "c": target_heatmap == 1}
+    c = target_heatmap == 1 if centerline is None else np.asarray(centerline, dtype=bool)
+    return {"s0": input_heatmap == 0, "s1": target_heatmap == 0, "c": c}
 
 
 def _pack_shard(path) -> tuple[dict, float]:
     """Packed occupancies (``GRIDS`` -> (n, S^3 / 8) uint8) of one shard, and the largest heatmap difference."""
-    from colonbench.heatmaps import heatmaps_from_occupancy
+    from colonbench.heatmaps import heatmaps_from_occupancy, voxelize_polyline
     from colonbench.shards.reader import Shard
 
     rows = {g: [] for g in GRIDS}
@@ -92,7 +102,7 @@ def _pack_shard(path) -> tuple[dict, float]:
     with Shard(path) as shard:
         for i in range(len(shard)):
             x, y = shard.heatmaps(i)
-            occ = occupancies(x, y)
+            occ = occupancies(x, y, voxelize_polyline(shard.grid(i), shard.centerline(i))[0])
             if not occ["s0"].any() or not occ["s1"].any() or not occ["c"].any():
                 raise InputError(f"{path}: sample {i} has an empty partial surface, surface or centerline grid; "
                                  "the dataset is damaged (run colonbench verify)")

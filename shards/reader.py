@@ -115,6 +115,11 @@ class Shard:
         i = self._check(i)
         return Grid(self.h5["samples/grid_affine"][i], int(self.attrs["grid_size"]))
 
+    def centerline(self, i: int) -> np.ndarray:
+        """(m, 3) float: the GT centerline of sample ``i``'s segment, mm (without reading its mesh)."""
+        i = self._check(i)
+        return ragged_row(self.h5["segments"], "centerline", int(self.h5["samples/segment"][i])).astype(float)
+
     def segment(self, m: int) -> dict:
         """Segment row ``m``: ``segment_id``, ``window_mm``, ``complete_area_mm2``, ``vertices``, ``faces``, ``centerline``."""
         seg = self.h5["segments"]

@@ -46,6 +46,28 @@ def test_a_pack_remakes_every_stored_heatmap(smoke_pack):
         assert torch.equal(a, b)
 
 
+def test_a_centerline_voxel_on_the_surface_is_kept_from_the_shards_polyline():
+    # a stalked polyp's head across the centerline: voxels that are both surface and centerline have
+    # target 0, so the target alone loses them and remakes other targets; the polyline gives them back
+    from colonbench.heatmaps import heatmaps_from_occupancy
+    from colonbench.shards.pack import CHECK_TOLERANCE, occupancies
+
+    s0 = np.zeros((32, 32, 32), bool)
+    s1 = np.zeros((32, 32, 32), bool)
+    c = np.zeros((32, 32, 32), bool)
+    s1[:, 16, 6] = s1[:, 16, 26] = True         # two walls
+    s0[:, 16, 6] = True
+    c[4:28, 16, 16] = True                       # the centerline between them
+    s1[14:18, 14:19, 14:19] = True               # a polyp's head across it
+    x, y = heatmaps_from_occupancy(s0, s1, c)
+    read = occupancies(x, y)
+    assert (c & ~read["c"]).sum() == 4            # the centerline voxels inside the head are lost
+    assert np.abs(heatmaps_from_occupancy(read["s0"], read["s1"], read["c"])[1] - y).max() > CHECK_TOLERANCE
+    again = occupancies(x, y, c)
+    _, y2 = heatmaps_from_occupancy(again["s0"], again["s1"], again["c"])
+    np.testing.assert_array_equal(y2, y)
+
+
 def test_min_plus_distance_transform_is_exact():
     rng = np.random.default_rng(3)
     occ = torch.from_numpy(rng.random((3, 32, 32, 32)) < 0.002)
