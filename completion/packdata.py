@@ -25,10 +25,13 @@ flips are exact augmentations. They are the only ones a pack allows.
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import torch
 
 from colonbench import seeding
+from colonbench.errors import InputError
 from colonbench.heatmaps import heatmaps_from_occupancy
 from colonbench.shards.pack import GRIDS, read_pack
 
@@ -109,7 +112,8 @@ class PackSplit:
 
     Parameters
     ----------
-    pack_dir : path
+    pack_dir : path or list of paths
+        Several packs (the same grid) are one split, in the order given.
     split : str
     device : torch.device
     cache : bool, optional
@@ -121,16 +125,22 @@ class PackSplit:
     Attributes
     ----------
     info : dict
-        The pack's ``pack.json``.
+        The (first) pack's ``pack.json``.
     size : int
         Grid side S.
     """
 
     def __init__(self, pack_dir, split: str, device, cache: bool | None = None):
-        self.info, bits = read_pack(pack_dir, split)
+        dirs = [pack_dir] if isinstance(pack_dir, (str, os.PathLike)) else list(pack_dir)
+        read = [read_pack(d, split) for d in dirs]
+        self.info = read[0][0]
+        other = [str(d) for d, (info, _) in zip(dirs, read) if info["grid_options"] != self.info["grid_options"]]
+        if other:
+            raise InputError(f"{other[0]} has another grid than {dirs[0]}; packs trained together need the same grid")
         self.size = int(self.info["grid_options"]["size"])
         self.device = torch.device(device)
-        self.bits = torch.from_numpy(np.stack([bits[g] for g in GRIDS], axis=1)).to(self.device)
+        self.bits = torch.from_numpy(np.concatenate([np.stack([bits[g] for g in GRIDS], axis=1)
+                                                     for _, bits in read])).to(self.device)
         self._shifts = torch.arange(7, -1, -1, dtype=torch.uint8, device=self.device)
         self._cache = None
         if cache is None:

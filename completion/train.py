@@ -170,7 +170,7 @@ def _data_lock(data_dir: Path) -> dict:
         raise InputError(f"{data_dir}: the {'pack' if pack else 'dataset'} has no {' and no '.join(missing)} split; "
                          "make it with them")
     coverage = lock["train_coverage_mean"] if pack else lock["splits"]["train"]["statistics"]["coverage"]["mean"]
-    samples = lock.get("train_samples") if pack else lock["splits"]["train"].get("samples")
+    samples = lock["splits"]["train"].get("samples")
     return {"manifest_sha256": lock["manifest_sha256"], "train_coverage_mean": coverage, "pack": pack,
             "train_samples": samples}
 
@@ -178,7 +178,7 @@ def _data_lock(data_dir: Path) -> dict:
 def _data_locks(data_dirs: list[Path]) -> dict:
     """:func:`_data_lock` of one or more dataset folders trained on together.
 
-    Several folders must all be shard datasets with the same grid; their
+    Several folders must all be shard datasets or all packs, with the same grid; their
     ``manifest_sha256`` is then the SHA-256 of theirs joined by ``+`` (in the
     order given), ``manifests`` lists theirs, and ``train_coverage_mean`` is
     the mean over all their training samples.
@@ -186,14 +186,14 @@ def _data_locks(data_dirs: list[Path]) -> dict:
     locks = [_data_lock(d) for d in data_dirs]
     if len(locks) == 1:
         return {**locks[0], "manifests": [locks[0]["manifest_sha256"]]}
-    if any(lk["pack"] for lk in locks):
-        raise InputError("several datasets train together as shard folders only; pack them into one "
-                         "(colonbench pack of a single manifest) or train on their shards")
+    if len({lk["pack"] for lk in locks}) > 1:
+        raise InputError("datasets trained together must be all shard folders or all packs, not both; "
+                         "pack the others too (colonbench pack) or train on every dataset's shards")
     n = [lk["train_samples"] or 1 for lk in locks]
     hashes = [lk["manifest_sha256"] for lk in locks]
     return {"manifest_sha256": hashlib.sha256("+".join(hashes).encode()).hexdigest(), "manifests": hashes,
             "train_coverage_mean": float(np.average([lk["train_coverage_mean"] for lk in locks], weights=n)),
-            "pack": False, "train_samples": sum(n)}
+            "pack": locks[0]["pack"], "train_samples": sum(n)}
 
 
 def _ignore_stop_signals(worker_id: int):
@@ -211,9 +211,9 @@ def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "a
     data_dir : path or list of paths
         Dataset folder with ``train`` and ``validation`` splits, or a pack of
         one (:mod:`colonbench.shards.pack`; heatmaps are then made on the
-        training device, and only flips augment). Several dataset folders
-        (same grid) train together: their train splits are one training set,
-        their validation splits one validation set.
+        training device, and only flips augment). Several dataset folders, or
+        several packs (same grid), train together: their train splits are one
+        training set, their validation splits one validation set.
     out_dir : path
         Run folder (log, checkpoints, best model). If it holds ``last.pt`` the
         run resumes; its settings must then match.
@@ -250,7 +250,7 @@ def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "a
                              "deform, so train on it with --augment-prob 0 (and --flips, its exact augmentation), "
                              "or on the dataset's shards")
         from colonbench.completion.packdata import PackSplit
-        train_ds, val_ds = PackSplit(data_dir, "train", dev), PackSplit(data_dir, "validation", dev)
+        train_ds, val_ds = PackSplit(data_dirs, "train", dev), PackSplit(data_dirs, "validation", dev)
         grid_options = train_ds.info["grid_options"]
     else:
         from colonbench.shards.reader import ShardDataset, dataset_files

@@ -122,6 +122,26 @@ def test_training_on_a_pack_matches_the_shards_and_resumes(smoke_pack, tmp_path)
         train(out, tmp_path / "aug", dataclasses.replace(cfg, augment_prob=0.3), device="cpu", progress=False)
 
 
+def test_several_packs_train_together_and_not_with_shards(smoke_pack, tmp_path):
+    # e.g. the widened, real and video training packs of one GPU run; here one pack and a copy of it
+    import shutil
+
+    data, lock, out, _ = smoke_pack
+    copy = tmp_path / "copy"
+    shutil.copytree(out, copy)
+    n_train = len(packdata.PackSplit(out, "train", "cpu"))
+    both = packdata.PackSplit([out, copy], "train", "cpu")
+    assert len(both) == 2 * n_train
+    assert bool((both.grids([0]) == both.grids([n_train])).all())     # the second pack follows the first
+    cfg = TrainConfig(epochs=1, batch_size=1, workers=0, augment_prob=0.0)
+    result = train([out, copy], tmp_path / "run", cfg, device="cpu", progress=False)
+    assert result["steps"] == 2 * n_train
+    _, _, meta = load_model(tmp_path / "run" / "best.safetensors")
+    assert meta["data_manifests"] == [lock["manifest_sha256"]] * 2 and meta["data_format"] == "pack"
+    with pytest.raises(InputError, match="all shard folders or all packs"):
+        train([out, data], tmp_path / "mixed", cfg, device="cpu", progress=False)
+
+
 def test_flips_also_augment_training_on_shards(smoke_dataset, tmp_path):
     data, _ = smoke_dataset
     cfg = TrainConfig(epochs=1, batch_size=2, workers=0, augment_prob=0.0, flips=True)
