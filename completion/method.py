@@ -147,7 +147,7 @@ class Predictor:
         self.device = resolve_device(device)
         self.net, self.config, self.meta = load_model(path, self.device)
         self._forward: dict = {}     # grid size -> the network made fast for inputs of that size
-        self._calls: dict = {}       # grid size -> predictions made so far
+        self._seen: set = set()      # grid sizes predicted once (with the eager network)
         self.path = path
         self.version = f"{path.stem}@{self.meta.get('steps', '?')}"
         self.grid_options = self.meta.get("grid_options", {})
@@ -167,12 +167,11 @@ class Predictor:
         h_in, _ = input_from_points(grid, pts)
         # the first cloud runs the eager network; from the second on, the network made fast for inference
         # (its set-up, about 1 s, pays off over a few clouds, not for a single one)
-        calls = self._calls.get(grid.size, 0)
-        self._calls[grid.size] = calls + 1
-        if calls == 1:
+        if grid.size in self._seen and grid.size not in self._forward:
             from colonbench.completion.network import for_inference
 
             self._forward[grid.size] = for_inference(self.net, grid.size, self.device)
+        self._seen.add(grid.size)
         with torch.inference_mode():
             x = torch.from_numpy(h_in[None, None]).to(self.device)
             pred = self._forward.get(grid.size, self.net)(x)[0, 0].float().cpu().numpy()
