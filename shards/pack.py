@@ -63,14 +63,14 @@ def is_pack(path) -> bool:
     return (Path(path) / PACK_NAME).is_file()
 
 
-def occupancies(input_heatmap: np.ndarray, target_heatmap: np.ndarray, centerline: np.ndarray | None = None) -> dict:
-    """The three occupancy grids of a sample from its stored heatmaps.
+def occupancies(input_heatmap: np.ndarray, target_heatmap: np.ndarray, centerline: np.ndarray) -> dict:
+    """The three occupancy grids of a sample from its stored heatmaps and its voxelized centerline.
 
     Parameters
     ----------
     input_heatmap, target_heatmap : (S, S, S) float
         As stored in a shard.
-    centerline : (S, S, S) bool, optional
+    centerline : (S, S, S) bool
         The voxelized GT centerline, as generation made it
         (:func:`colonbench.heatmaps.voxelize_polyline` on the sample's grid).
 
@@ -81,15 +81,13 @@ def occupancies(input_heatmap: np.ndarray, target_heatmap: np.ndarray, centerlin
 
     Notes
     -----
-    A centerline voxel that is also a surface voxel has target 0, so the
-    target alone reads it as surface only. The widened generator makes such
-    voxels (a stalked polyp's head or a flattened section across the
-    centerline), and without them the centerline's distances, and so the
-    target, come out otherwise. ``centerline`` gives them back; without it the
-    centerline is read from the target (``== 1``).
+    The centerline is not read from the target (``== 1``): a centerline
+    voxel that is also a surface voxel has target 0, and the widened
+    generator makes such voxels (a stalked polyp's head or a flattened
+    section across the centerline); without them the centerline's distances,
+    and so the target, come out otherwise.
     """
-    c = target_heatmap == 1 if centerline is None else np.asarray(centerline, dtype=bool)
-    return {"s0": input_heatmap == 0, "s1": target_heatmap == 0, "c": c}
+    return {"s0": input_heatmap == 0, "s1": target_heatmap == 0, "c": np.asarray(centerline, dtype=bool)}
 
 
 def _pack_shard(path) -> tuple[dict, float]:
