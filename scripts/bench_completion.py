@@ -49,10 +49,11 @@ def main(argv=None):
     rows, stages, true = [], {}, []
     setup = None
     if method is not None:
-        # the second call sets the network up for inference (traced and optimized on the CPU): once per process
+        # the second call sets the network up for inference (traced and optimized on the CPU): once per process;
+        # the clouds are moved by 1 mm so that the timed loop does not find their predictions in the cache
         t = time.perf_counter()
         for k in picks[:2]:
-            method.estimate(ds[int(k)]["partial_points"].astype(float))
+            method.estimate(ds[int(k)]["partial_points"].astype(float) + 1.0)
         setup = time.perf_counter() - t
     t_all, t_estimate = time.perf_counter(), 0.0
     for k in picks:
