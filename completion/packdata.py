@@ -20,7 +20,14 @@ Augmentation
 ------------
 Flipping a grid axis maps the occupancies, and with them both heatmaps, onto
 another valid sample (the grid's principal axes have no preferred sign), so
-flips are exact augmentations. They are the only ones a pack allows.
+flips are exact augmentations. They are the only geometric ones a pack allows.
+
+Erasing (``colonbench train --erase P``) takes 1-3 ball-shaped patches out of a
+share of the samples' partial surfaces before their input heatmaps are made
+(:func:`erase_patches`): the same colon with larger or more holes. The target
+does not depend on the partial surface, so it stays exact. It trains the
+completion of the large unobserved areas that camera holes leave on real
+colons, where the network's surface fades (docs/method.md, the 0.4 model).
 """
 
 from __future__ import annotations
@@ -32,7 +39,7 @@ import torch
 
 from colonbench import seeding
 from colonbench.errors import InputError
-from colonbench.heatmaps import heatmaps_from_occupancy
+from colonbench.heatmaps import heatmaps_from_occupancy, input_heatmap
 from colonbench.shards.pack import GRIDS, read_pack
 
 #: Elements of the broadcast (n, S, S, S, S) tensor of one min-plus step, at most.
@@ -92,6 +99,65 @@ def flips(seed: int, epoch: int, index: int) -> tuple[int, ...]:
     """
     draw = seeding.rng(seed, "flip", epoch, index).random(3) < 0.5
     return tuple(int(a) for a in np.flatnonzero(draw))
+
+
+#: Patches erased from a sample (count drawn uniformly between the two, inclusive).
+ERASE_PATCHES = (1, 3)
+#: Radius of an erased patch, voxels (uniform); at 1.1-1.6 mm voxels 5-25 mm, as large as the camera holes of real colons.
+ERASE_RADIUS = (4.0, 16.0)
+#: Share of the partial surface's voxels an erased sample keeps at least (patches past it are left out).
+ERASE_KEEP = 0.4
+
+
+def erasure(seed: int, epoch: int, index: int, share: float) -> np.random.Generator | None:
+    """The generator that erases patches of sample ``index`` in ``epoch``, or None (probability ``1 - share``).
+
+    Drawn from stream ``("erase", epoch, index)`` under ``seed``, so a resumed
+    run draws the same patches.
+    """
+    rng = seeding.rng(seed, "erase", epoch, index)
+    return rng if share > 0 and rng.random() < share else None
+
+
+def erase_patches(s0: torch.Tensor, rng: np.random.Generator, patches: tuple = ERASE_PATCHES,
+                  radius: tuple = ERASE_RADIUS, keep: float = ERASE_KEEP) -> torch.Tensor:
+    """A copy of a partial-surface occupancy with ball-shaped patches taken out.
+
+    Parameters
+    ----------
+    s0 : (S, S, S) bool tensor
+        Voxels holding a partial point.
+    rng : numpy Generator
+        Draws the patch count, centres (occupied voxels, so that every patch
+        removes surface) and radii.
+    patches : (int, int)
+        Fewest and most patches.
+    radius : (float, float)
+        Range of the patch radius, voxels.
+    keep : float
+        A patch that would leave fewer than this share of the occupied
+        voxels is not taken out.
+
+    Returns
+    -------
+    (S, S, S) bool tensor on ``s0``'s device.
+    """
+    occupied = torch.nonzero(s0).cpu().numpy()
+    if len(occupied) == 0:
+        return s0.clone()
+    out = s0.clone()
+    size = s0.shape[0]
+    axis = torch.arange(size, device=s0.device, dtype=torch.float32)
+    floor = keep * len(occupied)
+    for _ in range(int(rng.integers(patches[0], patches[1] + 1))):
+        c = occupied[rng.integers(len(occupied))].astype(np.float32)
+        r = float(rng.uniform(*radius))
+        d2 = ((axis - float(c[0])) ** 2)[:, None, None] + ((axis - float(c[1])) ** 2)[None, :, None] \
+            + ((axis - float(c[2])) ** 2)[None, None, :]
+        trial = out & (d2 > r * r)
+        if int(trial.sum()) >= floor:
+            out = trial
+    return out
 
 
 def apply_flips(x: torch.Tensor, y: torch.Tensor, axes: list) -> tuple[torch.Tensor, torch.Tensor]:
@@ -163,9 +229,22 @@ class PackSplit:
         h_in, h_t = heatmaps(grids[:, 0], grids[:, 1], grids[:, 2])
         return h_in.unsqueeze(1), h_t.unsqueeze(1)
 
-    def batch(self, indices) -> tuple[torch.Tensor, torch.Tensor]:
-        """(input, target) heatmaps of samples ``indices``: (n, 1, S, S, S) float32 on the device."""
+    def batch(self, indices, erase=None) -> tuple[torch.Tensor, torch.Tensor]:
+        """(input, target) heatmaps of samples ``indices``: (n, 1, S, S, S) float32 on the device.
+
+        ``erase``: per sample None or a generator (:func:`erasure`); those
+        samples' input heatmaps are made from their partial surface with
+        patches taken out (:func:`erase_patches`).
+        """
         if self._cache is None:
-            return self._make(indices)
-        at = torch.as_tensor(np.asarray(indices, dtype=np.int64), device=self.device)
-        return self._cache[0][at], self._cache[1][at]
+            x, y = self._make(indices)
+        else:
+            at = torch.as_tensor(np.asarray(indices, dtype=np.int64), device=self.device)
+            x, y = self._cache[0][at], self._cache[1][at]
+        todo = [k for k, rng in enumerate(erase or []) if rng is not None]
+        if todo:
+            s0 = self.grids([indices[k] for k in todo])[:, 0]
+            cut = torch.stack([erase_patches(s0[j], erase[k]) for j, k in enumerate(todo)])
+            x = x.clone()
+            x[todo] = input_heatmap(distance_to(cut)).unsqueeze(1)
+        return x, y

@@ -52,7 +52,7 @@ import torch
 from colonbench import seeding
 from colonbench._version import __version__
 from colonbench.augment import AugmentConfig
-from colonbench.completion.packdata import apply_flips, flips
+from colonbench.completion.packdata import apply_flips, erasure, flips
 from colonbench.completion.network import (NETWORKS, build_network, network_config, resolve_device,
                                            save_model)
 from colonbench.errors import InputError
@@ -78,6 +78,7 @@ class TrainConfig:
     keep_epochs: bool = False
     augment: dict = field(default_factory=dict)
     flips: bool = False
+    erase: float = 0.0
     init: str | None = None
     init_sha256: str | None = None
 
@@ -89,6 +90,8 @@ class TrainConfig:
                 raise InputError(f"{name} must be >= 1")
         if not 0 <= self.augment_prob <= 1:
             raise InputError("augment_prob must be in [0, 1]")
+        if not 0 <= self.erase <= 1:
+            raise InputError("erase must be in [0, 1]")
         if self.lr <= 0:
             raise InputError("lr must be positive")
         if self.seed < 0 or self.workers < 0:
@@ -256,6 +259,9 @@ def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "a
         from colonbench.shards.reader import ShardDataset, dataset_files
         aug = AugmentConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in cfg.augment.items()})
         files = {split: [f for d in data_dirs for f in dataset_files(d, split)] for split in ("train", "validation")}
+        if cfg.erase > 0:
+            raise InputError("--erase takes patches out of a pack's partial-surface occupancies; make a pack of "
+                             f"{data_dir} first (colonbench pack) and train on it")
         train_ds = ShardDataset(files["train"], augment=aug if cfg.augment_prob > 0 else None,
                                 seed=cfg.seed, augment_prob=cfg.augment_prob)
         val_ds = ShardDataset(files["validation"])
@@ -336,7 +342,8 @@ def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "a
         mine = order[: n_batches * bs * world][rank::world]
         todo = mine[state["position"] * bs:]
         if lock["pack"]:
-            batches = (train_ds.batch(todo[b:b + bs]) for b in range(0, len(todo), bs))
+            batches = (train_ds.batch(todo[b:b + bs], [erasure(cfg.seed, epoch, int(i), cfg.erase)
+                                                       for i in todo[b:b + bs]]) for b in range(0, len(todo), bs))
         else:
             train_ds.set_epoch(epoch)
             batches = torch.utils.data.DataLoader(torch.utils.data.Subset(train_ds, todo.tolist()), **loader_kwargs)

@@ -100,6 +100,46 @@ def test_flips_are_exact_and_reproducible(smoke_pack):
     assert len(set(draws)) > 4 and () in draws and (0, 1, 2) in draws
 
 
+def test_erased_patches_are_balls_of_the_drawn_radii_and_leave_the_target_alone(smoke_pack, tmp_path):
+    # a plane of occupied voxels: one patch of radius 5 takes out exactly the plane's voxels within 5
+    # voxels of its centre, an occupied voxel drawn after the patch count
+    plane = torch.zeros((32, 32, 32), dtype=torch.bool)
+    plane[:, :, 16] = True
+    cut = packdata.erase_patches(plane, np.random.default_rng(3), patches=(1, 1), radius=(5.0, 5.0), keep=0.0)
+    rng = np.random.default_rng(3)
+    rng.integers(1, 2)
+    occupied = torch.nonzero(plane).numpy()
+    centre = occupied[rng.integers(len(occupied))]
+    within = np.linalg.norm(occupied - centre, axis=1) <= 5.0
+    assert not bool((cut & ~plane).any())                       # nothing added
+    assert sorted(map(tuple, torch.nonzero(plane & ~cut).numpy())) == sorted(map(tuple, occupied[within]))
+    assert 15 < within.sum() <= 81                                  # a disc of radius 5, whole or clipped at an edge
+    assert bool(packdata.erase_patches(plane, np.random.default_rng(3), keep=1.0).equal(plane))
+    # the same seed, epoch and sample draw the same patches; share 0 never erases
+    assert packdata.erasure(0, 2, 7, 0.0) is None
+    draws = [packdata.erasure(0, e, i, 0.5) is not None for e in range(4) for i in range(25)]
+    assert 30 < sum(draws) < 70 and draws == [packdata.erasure(0, e, i, 0.5) is not None
+                                              for e in range(4) for i in range(25)]
+    *_, out, _ = smoke_pack
+    split = packdata.PackSplit(out, "train", "cpu")
+    x, y = split.batch([0, 1])
+    ex, ey = split.batch([0, 1], [packdata.erasure(0, 0, 0, 1.0), None])
+    assert torch.equal(ey, y) and torch.equal(ex[1], x[1])
+    # the erased input is the input heatmap of the occupancy with the patches taken out
+    s0 = packdata.erase_patches(split.grids([0])[0, 0], packdata.erasure(0, 0, 0, 1.0))
+    assert not torch.equal(ex[0], x[0])
+    assert torch.allclose(ex[0, 0], packdata.heatmaps(s0[None], s0[None], s0[None])[0][0])
+    # training erases; a shard folder is refused with what to do
+    cfg = TrainConfig(epochs=1, batch_size=2, workers=0, augment_prob=0.0, erase=0.5)
+    assert train(out, tmp_path / "run", cfg, device="cpu", progress=False)["steps"] == 2
+    assert load_model(tmp_path / "run" / "best.safetensors")[2]["train_config"]["erase"] == 0.5
+    data, *_ = smoke_pack
+    with pytest.raises(InputError, match="colonbench pack"):
+        train(data, tmp_path / "shards", cfg, device="cpu", progress=False)
+    with pytest.raises(InputError, match="erase must be"):
+        TrainConfig(erase=1.5).check()
+
+
 def test_training_on_a_pack_matches_the_shards_and_resumes(smoke_pack, tmp_path):
     data, _, out, _ = smoke_pack
     net = build_network(network_config("small"))
