@@ -237,6 +237,9 @@ class CompletionMethod:
     shell_level : float or None
         Drop the mesh's faces where the predicted heatmap is above this (docs/method.md step 4);
         None keeps them, as the steps did before their version 4.
+    gaps : bool
+        Add hole patches where the completed tube has no wall (docs/method.md step 6); off, as the steps
+        did before their version 5.
 
     The model is loaded once (and shared with the other methods built on the
     same model in this process); call :meth:`estimate` on as many clouds as
@@ -246,12 +249,13 @@ class CompletionMethod:
     name = "completion"
 
     def __init__(self, model=None, device: str = "cpu", hole_distance: float | None = None, cut_rims: bool = True,
-                 shell_level: float | None = SHELL_LEVEL):
+                 shell_level: float | None = SHELL_LEVEL, gaps: bool = True):
         self.predictor = shared_predictor(model, device)
         self.hole_distance = hole_distance
         self.cut_rims = cut_rims
         self.shell_level = shell_level
-        self.version = f"{self.predictor.version},{steps_version(shell_level)}"
+        self.gaps = gaps
+        self.version = f"{self.predictor.version},{steps_version(shell_level, gaps)}"
         self.meta = self.predictor.meta
 
     def predict(self, points) -> tuple[Grid, np.ndarray, np.ndarray]:
@@ -267,20 +271,22 @@ class CompletionMethod:
         p = self.predictor(pts)
         cl = p.centerline_vox
         est = from_heatmap(p.heatmap, p.grid, pts, self.name, self.hole_distance, centerline_vox=cl,
-                           cut_rims=self.cut_rims, shell_level=self.shell_level)
+                           cut_rims=self.cut_rims, shell_level=self.shell_level, gaps=self.gaps)
         est.seconds = {"check": t1 - t0, **p.seconds, **{k: v for k, v in est.seconds.items() if k != "centerline"}}
         return est
 
 
-def steps_version(shell_level: float | None = SHELL_LEVEL) -> str:
+def steps_version(shell_level: float | None = SHELL_LEVEL, gaps: bool = True) -> str:
     """``steps=N`` of the steps after the network (:data:`~colonbench.completion.surface.STEPS_VERSION`),
-    with the shell level where it is not the default: part of the methods' versions in run folders."""
-    return f"steps={STEPS_VERSION}" if shell_level == SHELL_LEVEL else f"steps={STEPS_VERSION},shell_level={shell_level}"
+    with the shell level and the wall gaps where they are not the default: part of the methods' versions
+    in run folders."""
+    return (f"steps={STEPS_VERSION}" + ("" if shell_level == SHELL_LEVEL else f",shell_level={shell_level}")
+            + ("" if gaps else ",gaps=off"))
 
 
 def from_heatmap(heatmap: np.ndarray, grid: Grid, points, method: str = "completion",
                  hole_distance: float | None = None, centerline_vox: np.ndarray | None = None,
-                 cut_rims: bool = True, shell_level: float | None = SHELL_LEVEL) -> Estimate:
+                 cut_rims: bool = True, shell_level: float | None = SHELL_LEVEL, gaps: bool = True) -> Estimate:
     """Steps after the network: centerline, completed mesh, holes and coverage of a target heatmap.
 
     Parameters
@@ -297,12 +303,14 @@ def from_heatmap(heatmap: np.ndarray, grid: Grid, points, method: str = "complet
         caller clips at planes it knows (``colonbench map``).
     shell_level : float or None
         :func:`colonbench.completion.surface.clip_to_shell`'s level; None keeps every face.
+    gaps : bool
+        Add hole patches where the tube has no wall (:func:`colonbench.completion.surface.wall_gaps`).
     """
     t0 = time.perf_counter()
     cl_vox = extract_centerline(heatmap) if centerline_vox is None else centerline_vox
     t1 = time.perf_counter()
     pts = np.asarray(points, dtype=float)
-    comp = complete(heatmap, cl_vox, grid.to_voxel(pts), hole_distance, cut_rims, shell_level)
+    comp = complete(heatmap, cl_vox, grid.to_voxel(pts), hole_distance, cut_rims, shell_level, gaps)
     t2 = time.perf_counter()
     verts = grid.to_mm(comp.vertices) if len(comp.vertices) else np.zeros((0, 3))
     cl = resample(grid.to_mm(cl_vox), CENTERLINE_SPACING_MM) if len(cl_vox) else np.zeros((0, 3))

@@ -25,6 +25,13 @@ colon the GT heatmap's coverage came out 5.5 points low). Faces with a
 vertex where the heatmap is above :data:`SHELL_LEVEL` are dropped
 (:func:`clip_to_shell`).
 
+The colon is a closed tube: every direction across the centerline meets the
+wall. Where the predicted heatmap holds no surface voxel along a ray from
+the centerline (a large unobserved area whose surface the network left out),
+the wall is missing from the completed mesh, and without it the coverage
+came out high. :func:`wall_gaps` adds a patch of hole surface there, at the
+wall distance of the other rays at that station.
+
 Holes follow the paper: a vertex of the completed mesh farther than
 sqrt(2)/2 voxel from every partial point is a hole vertex. Coverage = the area
 of the observed part of the mesh / the area of the mesh, where each triangle
@@ -45,8 +52,8 @@ from colonbench.grid import Grid
 from colonbench.heatmaps import distance_to, voxelize_polyline
 
 #: Revision of the steps after the network, part of the methods' versions: 1 the paper's, 2 the sparse
-#: clouds' hole distance, 3 the cut rims, 4 the shell level.
-STEPS_VERSION = "4"
+#: clouds' hole distance, 3 the cut rims, 4 the shell level, 5 the wall gaps.
+STEPS_VERSION = "5"
 #: Voxels below this value are surface voxels.
 SURFACE_THRESHOLD = 0.15
 #: Faces with a vertex where the (trilinearly interpolated) heatmap is above this are dropped: off the
@@ -94,6 +101,20 @@ RIM_REFINE = 3
 RIM_FIT_DEG = 15.0
 #: The rim replaces the centerline's end plane where the line ends at least this far inside it, voxels.
 RIM_BEYOND = 1.0
+
+
+#: Rays cast across the centerline at each station (1 voxel apart) by :func:`wall_gaps`.
+GAP_RAYS = 32
+#: A ray passes through a gap when it meets no surface voxel, or meets one farther than this many times the
+#: station's median wall distance.
+GAP_FAR = 3.0
+#: Step along a ray, voxels (the shell of surface voxels below the threshold is about 1.5 voxels thick).
+GAP_STEP = 0.5
+#: How far before the wall a ray meets the grown surface voxels, voxels (0.76 for the shell below the
+#: threshold, about 0.6 more for the growing).
+GAP_GROWN = 1.3
+#: A station's own wall distance is its rays' median when at least this share of them meets the wall.
+GAP_MIN_HITS = 0.25
 
 
 @dataclass
@@ -475,20 +496,111 @@ def clip_to_segment(vertices: np.ndarray, faces: np.ndarray, centerline_vox: np.
     return _keep_faces(vertices, faces, keep_v[faces].all(axis=1))
 
 
+def _station_frames(centerline_vox: np.ndarray, planes: list, inset: float) -> tuple:
+    """Stations 1 voxel apart along the line between the planes, their unit tangents and two normals."""
+    c = np.asarray(centerline_vox, dtype=float)
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(c, axis=0), axis=1))])
+    at = np.arange(0.5, s[-1], 1.0)
+    p = np.stack([np.interp(at, s, c[:, k]) for k in range(3)], axis=1)
+    t = np.gradient(ndimage.gaussian_filter1d(p, 2.0, axis=0, mode="nearest"), axis=0) if len(p) > 1 else p * 0
+    norm = np.linalg.norm(t, axis=1, keepdims=True)
+    keep = norm[:, 0] > 0
+    for point, normal in planes:
+        keep &= (p - point) @ normal >= inset
+    p, t = p[keep], t[keep] / norm[keep]
+    u = np.cross(t, np.where(np.abs(t[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]]))
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    return p, t, u, np.cross(t, u)
+
+
+def wall_gaps(heatmap: np.ndarray, centerline_vox: np.ndarray, planes: list, threshold: float = SURFACE_THRESHOLD,
+              rays: int = GAP_RAYS, far: float = GAP_FAR, inset: float = END_INSET) -> tuple[np.ndarray, np.ndarray]:
+    """Patches of hole surface where the completed tube has no wall.
+
+    From stations 1 voxel apart along the centerline, between the segment's
+    planes, ``rays`` rays perpendicular to the line are marched through the
+    heatmap. A ray that meets no voxel below ``threshold`` inside the grid,
+    or meets the first one farther than ``far`` times the station's median
+    wall distance, passes where the heatmap holds no wall. Each such ray gets
+    a quad of the tube's wall at the station's median distance (the median
+    of all stations' where fewer than :data:`GAP_MIN_HITS` of its rays meet
+    the wall), 1 voxel long and one ray's angle wide: its area is that of
+    the missing cylinder wall, ``r dtheta ds``.
+
+    Parameters
+    ----------
+    heatmap : (S, S, S) float
+    centerline_vox : (m, 3) float
+    planes : list of (point, inward normal)
+        The planes the segment is clipped at (:func:`segment_planes`).
+
+    Returns
+    -------
+    vertices : (4 k, 3) float
+        Voxel coordinates; four per gap, none shared.
+    faces : (2 k, 3) int
+    """
+    none = (np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64))
+    if len(centerline_vox) < 2:
+        return none
+    p, t, u, v = _station_frames(centerline_vox, planes, inset)
+    if len(p) == 0:
+        return none
+    size = heatmap.shape[0]
+    theta = np.arange(rays) * 2 * np.pi / rays
+    d = np.cos(theta)[None, :, None] * u[:, None] + np.sin(theta)[None, :, None] * v[:, None]   # (m, rays, 3)
+    r = np.arange(GAP_STEP, float(size), GAP_STEP)
+    # the surface voxels, grown by their 6 neighbours so that no ray slips between two of them diagonally;
+    # a ray meets it about a voxel before the wall (GAP_GROWN)
+    wall = ndimage.binary_dilation(heatmap < threshold).ravel()
+    with np.errstate(divide="ignore", invalid="ignore"):
+        exits = np.where(d > 0, (size - 0.5 - p[:, None]) / d, np.where(d < 0, (-0.5 - p[:, None]) / d, np.inf))
+    exit_r = exits.min(axis=-1)                                                                  # (m, rays)
+    x = np.rint(p[:, None, None] + d[:, :, None] * r[None, None, :, None]).astype(np.int64)       # (m, rays, k, 3)
+    np.clip(x, 0, size - 1, out=x)
+    hit = wall[(x[..., 0] * size + x[..., 1]) * size + x[..., 2]] & (r < exit_r[..., None])
+    first = np.where(hit.any(axis=-1), r[hit.argmax(axis=-1)] + GAP_GROWN, np.inf)                 # (m, rays)
+    met = np.isfinite(first)
+    if not met.any():
+        return none
+    enough = met.sum(axis=1) >= GAP_MIN_HITS * rays
+    radius = np.full(len(p), float(np.median(first[met])))
+    radius[enough] = [np.median(f[np.isfinite(f)]) for f in first[enough]]
+    gap = ~met | (first > far * radius[:, None])
+    i, j = np.nonzero(gap)
+    if len(i) == 0:
+        return none
+    half = np.pi / rays
+    corners = []
+    for da, ds in ((-half, -0.5), (half, -0.5), (half, 0.5), (-half, 0.5)):
+        a = theta[j] + da
+        corners.append(p[i] + ds * t[i] + radius[i, None] * (np.cos(a)[:, None] * u[i] + np.sin(a)[:, None] * v[i]))
+    vertices = np.stack(corners, axis=1).reshape(-1, 3)
+    base = 4 * np.arange(len(i))[:, None]
+    faces = np.concatenate([base + [0, 1, 2], base + [0, 2, 3]])
+    return vertices, faces
+
+
 def complete(heatmap: np.ndarray, centerline_vox: np.ndarray, partial_vox: np.ndarray,
              distance: float | None = None, cut_rims: bool = True,
-             shell_level: float | None = SHELL_LEVEL) -> Completion:
+             shell_level: float | None = SHELL_LEVEL, gaps: bool = True) -> Completion:
     """Mesh, holes and coverage of a segment from its target heatmap, centerline and partial cloud (voxels).
 
     ``distance`` is the hole distance in voxels (default: the paper's sqrt(2)/2). ``cut_rims``: clip
     at the cloud's cut rims where they are found (:func:`rim_planes`), else at the centerline's ends.
     ``shell_level``: drop the faces where the heatmap is above it (:func:`clip_to_shell`); None keeps
-    every face, as before version 4 of the steps.
+    every face, as before version 4 of the steps. ``gaps``: add hole patches where the tube has no wall
+    (:func:`wall_gaps`), as from version 5.
     """
     verts, faces = extract_mesh(*resigned_field(heatmap, centerline_vox))
     if shell_level is not None:
         verts, faces = clip_to_shell(verts, faces, heatmap, shell_level)
-    verts, faces = clip_to_segment(verts, faces, centerline_vox,
-                                   planes=segment_planes(centerline_vox, partial_vox, cut_rims))
+    planes = segment_planes(centerline_vox, partial_vox, cut_rims)
+    verts, faces = clip_to_segment(verts, faces, centerline_vox, planes=planes)
     hole = hole_vertices(verts, partial_vox, HOLE_DISTANCE if distance is None else distance)
+    if gaps and len(faces):
+        gap_v, gap_f = wall_gaps(heatmap, centerline_vox, planes)
+        faces = np.concatenate([faces, gap_f + len(verts)])
+        verts = np.concatenate([verts, gap_v])
+        hole = np.concatenate([hole, np.ones(len(gap_v), bool)])
     return Completion(verts, faces, hole, mesh_coverage(verts, faces, hole))

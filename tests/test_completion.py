@@ -13,7 +13,8 @@ from colonbench.cli import main  # noqa: E402
 from colonbench.completion.centerline import extract_centerline  # noqa: E402
 from colonbench.completion.method import CompletionMethod, check_cloud, from_heatmap  # noqa: E402
 from colonbench.completion.network import build_network, load_model, network_config, save_model  # noqa: E402
-from colonbench.completion.surface import complete, hole_vertices, mesh_coverage, triangle_areas  # noqa: E402
+from colonbench.completion.surface import (complete, hole_vertices, mesh_coverage, segment_planes,  # noqa: E402
+                                          triangle_areas, wall_gaps)
 from colonbench.completion.train import TrainConfig, train  # noqa: E402
 from colonbench.datagen.colon import tube_colon  # noqa: E402
 from colonbench.datagen.generate import write_points_ply  # noqa: E402
@@ -33,6 +34,15 @@ def tube_heatmaps(centerline, grid=None, radius=R):
     grid = grid or fit_grid(pts)
     return colon, grid, pts, sample_heatmaps(grid, pts, colon.mesh.vertices, colon.mesh.faces,
                                              colon.centerline.points)
+
+
+def half_pipe():
+    """Points and heatmaps of the half (x > 0) of a straight tube of radius R along z."""
+    colon = tube_colon(straight(63.0), R, ring_spacing_mm=0.5, n_around=256)
+    v, f = colon.mesh.vertices, colon.mesh.faces
+    f = f[(v[f][:, :, 0] > 0).all(axis=1)]
+    pts = v[v[:, 0] > 0][::2]
+    return pts, sample_heatmaps(UNIT, pts, v, f, colon.centerline.points)
 
 
 def distance_to_polyline(points, polyline):
@@ -104,12 +114,8 @@ def test_the_field_outside_the_band_takes_the_mean_of_the_nearest_valid_neighbou
 def test_a_half_pipe_heatmap_gives_its_own_area_without_flaps_past_its_edges(clip):
     # half a tube (x > 0): the heatmap's surface stops along two free edges; marching cubes runs on past
     # them as flaps, with no points on them, unless the faces off the heatmap's surface are dropped
-    colon = tube_colon(straight(63.0), R, ring_spacing_mm=0.5, n_around=256)
-    v, f = colon.mesh.vertices, colon.mesh.faces
-    f = f[(v[f][:, :, 0] > 0).all(axis=1)]
-    pts = v[v[:, 0] > 0][::2]
-    hm = sample_heatmaps(UNIT, pts, v, f, colon.centerline.points)
-    options = {} if clip else {"shell_level": None}
+    pts, hm = half_pipe()
+    options = {"gaps": False} if clip else {"shell_level": None, "gaps": False}
     comp = complete(hm.target, extract_centerline(hm.target), UNIT.to_voxel(pts), **options)
     centroid = comp.vertices[comp.faces].mean(axis=1)
     mid = (centroid[:, 2] > 5) & (centroid[:, 2] < 58)
@@ -120,6 +126,27 @@ def test_a_half_pipe_heatmap_gives_its_own_area_without_flaps_past_its_edges(cli
         assert comp.coverage > 0.97  # a fully observed wall
     else:  # as before version 4 of the steps: flaps past both edges, all holes
         assert area > 1.1 * np.pi * R * 53.0 and comp.coverage < 0.92
+
+
+def test_the_missing_half_of_a_tube_becomes_hole_surface_of_its_area():
+    # the half pipe's heatmap holds no wall for x < 0: the rays across its centerline meet nothing there,
+    # and wall_gaps puts back that half of the tube at the wall's radius, all of it hole
+    pts, hm = half_pipe()
+    line = extract_centerline(hm.target)
+    planes = segment_planes(line, UNIT.to_voxel(pts), cut_rims=False)
+    gap_v, gap_f = wall_gaps(hm.target, line, planes)
+    centroid = gap_v[gap_f].mean(axis=1)
+    assert (centroid[:, 0] - 32 < 1.5).all()                       # only where the wall is missing
+    length = np.ptp(gap_v[:, 2])
+    assert triangle_areas(gap_v, gap_f).sum() == pytest.approx(np.pi * R * length, rel=0.08)
+    assert np.median(np.linalg.norm(gap_v[:, :2] - 32, axis=1)) == pytest.approx(R, abs=1.0)
+    comp = complete(hm.target, line, UNIT.to_voxel(pts))
+    assert comp.coverage == pytest.approx(0.5, abs=0.04)            # the observed half over the whole tube
+    assert comp.hole[len(comp.hole) - len(gap_v):].all()
+    # a whole tube has a wall in every direction: nothing is added
+    colon, grid, pts, hm = tube_heatmaps(straight(63.0), UNIT)
+    line = extract_centerline(hm.target)
+    assert len(wall_gaps(hm.target, line, segment_planes(line, UNIT.to_voxel(pts), cut_rims=False))[1]) == 0
 
 
 def test_a_cut_window_is_found_as_a_hole_of_its_area():
