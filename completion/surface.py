@@ -110,6 +110,10 @@ GAP_RAYS = 32
 GAP_FAR = 3.0
 #: Step along a ray, voxels (the shell of surface voxels below the threshold is about 1.5 voxels thick).
 GAP_STEP = 0.5
+#: A ray is a gap only where the heatmap along it falls below this (a faint wall the network was unsure of):
+#: a real colon's surface is open in places (where its walls touch), and a ray through such an opening
+#: stays far from every surface, so above it.
+GAP_VALLEY = 0.4
 #: How far before the wall a ray meets the grown surface voxels, voxels (0.76 for the shell below the
 #: threshold, about 0.6 more for the growing).
 GAP_GROWN = 1.3
@@ -514,14 +518,18 @@ def _station_frames(centerline_vox: np.ndarray, planes: list, inset: float) -> t
 
 
 def wall_gaps(heatmap: np.ndarray, centerline_vox: np.ndarray, planes: list, threshold: float = SURFACE_THRESHOLD,
-              rays: int = GAP_RAYS, far: float = GAP_FAR, inset: float = END_INSET) -> tuple[np.ndarray, np.ndarray]:
+              rays: int = GAP_RAYS, far: float = GAP_FAR, inset: float = END_INSET,
+              valley: float = GAP_VALLEY) -> tuple[np.ndarray, np.ndarray]:
     """Patches of hole surface where the completed tube has no wall.
 
     From stations 1 voxel apart along the centerline, between the segment's
     planes, ``rays`` rays perpendicular to the line are marched through the
     heatmap. A ray that meets no voxel below ``threshold`` inside the grid,
     or meets the first one farther than ``far`` times the station's median
-    wall distance, passes where the heatmap holds no wall. Each such ray gets
+    wall distance, passes where the heatmap holds no wall; it is a gap when
+    the heatmap along it still falls below ``valley`` (a faint wall the
+    network was unsure of, not an opening of the true surface, which a
+    collapsed real colon has where its walls touch). Each such ray gets
     a quad of the tube's wall at the station's median distance (the median
     of all stations' where fewer than :data:`GAP_MIN_HITS` of its rays meet
     the wall), 1 voxel long and one ray's angle wide: its area is that of
@@ -558,15 +566,18 @@ def wall_gaps(heatmap: np.ndarray, centerline_vox: np.ndarray, planes: list, thr
     exit_r = exits.min(axis=-1)                                                                  # (m, rays)
     x = np.rint(p[:, None, None] + d[:, :, None] * r[None, None, :, None]).astype(np.int64)       # (m, rays, k, 3)
     np.clip(x, 0, size - 1, out=x)
-    hit = wall[(x[..., 0] * size + x[..., 1]) * size + x[..., 2]] & (r < exit_r[..., None])
+    flat = (x[..., 0] * size + x[..., 1]) * size + x[..., 2]
+    within = r < exit_r[..., None]
+    hit = wall[flat] & within
     first = np.where(hit.any(axis=-1), r[hit.argmax(axis=-1)] + GAP_GROWN, np.inf)                 # (m, rays)
+    faint = np.where(within, heatmap.ravel()[flat], np.inf).min(axis=-1) < valley                  # (m, rays)
     met = np.isfinite(first)
     if not met.any():
         return none
     enough = met.sum(axis=1) >= GAP_MIN_HITS * rays
     radius = np.full(len(p), float(np.median(first[met])))
     radius[enough] = [np.median(f[np.isfinite(f)]) for f in first[enough]]
-    gap = ~met | (first > far * radius[:, None])
+    gap = (~met | (first > far * radius[:, None])) & faint
     i, j = np.nonzero(gap)
     if len(i) == 0:
         return none
