@@ -2,11 +2,13 @@
 
 Usage::
 
-    python scripts/bench_train.py PACK [--device cuda] [--network small] [--batch-sizes 8,32,64] [--steps 10]
+    python scripts/bench_train.py PACK [--device cuda] [--network small] [--batch-sizes 8,32,64] [--steps 10] [--erase 0.5]
 
 Uses the pack's validation split (its samples are only read). On a CUDA
 device it first checks that the min-plus distance transform used there
-equals the ``edt`` package's on one batch.
+equals the ``edt`` package's on one batch. ``--erase P`` times the batches
+as ``colonbench train --erase P`` makes them (patches erased from a share of
+the partial surfaces, their input heatmaps made again).
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ def main():
     ap.add_argument("--batch-sizes", default="4,16,32,64")
     ap.add_argument("--steps", type=int, default=10)
     ap.add_argument("--split", default="validation")
+    ap.add_argument("--erase", type=float, default=0.0, help="share of samples with erased patches (as in training)")
     args = ap.parse_args()
     dev = resolve_device(args.device)
     t = time.perf_counter()
@@ -49,6 +52,8 @@ def main():
     net = build_network(network_config(args.network)).to(dev)
     opt = torch.optim.Adam(net.parameters(), lr=1e-3)
     print(f"network {args.network}: {sum(p.numel() for p in net.parameters()) / 1e6:.2f} M parameters")
+    if args.erase:
+        print(f"erasing patches from a share {args.erase} of the samples")
     print(f"{'batch':>5} {'heatmaps ms':>12} {'step ms':>9} {'samples/s':>10} {'peak MiB':>9}")
     rng = np.random.default_rng(0)
     for bs in [int(b) for b in args.batch_sizes.split(",")]:
@@ -59,7 +64,7 @@ def main():
             idx = rng.choice(len(split), size=bs, replace=len(split) < bs)
             sync(dev)
             a = time.perf_counter()
-            x, y = split.batch(idx)
+            x, y = split.batch(idx, [packdata.erasure(0, step, int(i), args.erase) for i in idx])
             sync(dev)
             b = time.perf_counter()
             opt.zero_grad(set_to_none=True)
