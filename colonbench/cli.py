@@ -184,7 +184,8 @@ def cmd_train(args):
     from colonbench.completion.train import TrainConfig, train
 
     cfg = TrainConfig(network=args.network, batch_size=args.batch_size, lr=args.lr, epochs=args.epochs,
-                      augment_prob=args.augment_prob, seed=args.seed, workers=args.workers, flips=args.flips, erase=args.erase,
+                      augment_prob=args.augment_prob, seed=args.seed, workers=args.workers, flips=args.flips,
+                      erase=args.erase,
                       checkpoint_minutes=args.checkpoint_minutes, max_minutes=args.max_minutes,
                       keep_epochs=args.keep_epochs, init=args.init, init_sha256=_model_sha256(args.init))
     command = "colonbench train " + " ".join(sys.argv[2:]) if len(sys.argv) > 2 else ""
@@ -577,7 +578,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--augment-prob", type=float, default=0.3,
                    help="share of samples augmented on the fly (default 0.3)")
     p.add_argument("--flips", action="store_true",
-                   help="flip each sample's grid axes at random (exact augmentation; the only geometric one for a pack)")
+                   help="flip each sample's grid axes at random (exact augmentation; the only geometric one "
+                        "for a pack)")
     p.add_argument("--erase", type=float, default=0.0, metavar="P",
                    help="share of a pack's training samples whose partial surface loses 1-3 ball-shaped patches "
                         "before its input heatmap is made: larger holes to complete (default 0)")

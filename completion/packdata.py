@@ -27,7 +27,7 @@ share of the samples' partial surfaces before their input heatmaps are made
 (:func:`erase_patches`): the same colon with larger or more holes. The target
 does not depend on the partial surface, so it stays exact. It trains the
 completion of the large unobserved areas that camera holes leave on real
-colons, where the network's surface fades (docs/method.md, the 0.4 model).
+colons, where the network's surface fades (docs/method.md, Training).
 """
 
 from __future__ import annotations
@@ -103,7 +103,8 @@ def flips(seed: int, epoch: int, index: int) -> tuple[int, ...]:
 
 #: Patches erased from a sample (count drawn uniformly between the two, inclusive).
 ERASE_PATCHES = (1, 3)
-#: Radius of an erased patch, voxels (uniform); at 1.1-1.6 mm voxels 5-25 mm, as large as the camera holes of real colons.
+#: Radius of an erased patch, voxels (uniform); at 1.1-1.6 mm voxels 5-25 mm, as large as the camera
+#: holes of real colons.
 ERASE_RADIUS = (4.0, 16.0)
 #: Share of the partial surface's voxels an erased sample keeps at least (patches past it are left out).
 ERASE_KEEP = 0.4
@@ -115,8 +116,10 @@ def erasure(seed: int, epoch: int, index: int, share: float) -> np.random.Genera
     Drawn from stream ``("erase", epoch, index)`` under ``seed``, so a resumed
     run draws the same patches.
     """
+    if share <= 0:
+        return None
     rng = seeding.rng(seed, "erase", epoch, index)
-    return rng if share > 0 and rng.random() < share else None
+    return rng if rng.random() < share else None
 
 
 def erase_patches(s0: torch.Tensor, rng: np.random.Generator, patches: tuple = ERASE_PATCHES,

@@ -512,9 +512,7 @@ def _station_frames(centerline_vox: np.ndarray, planes: list, inset: float) -> t
     for point, normal in planes:
         keep &= (p - point) @ normal >= inset
     p, t = p[keep], t[keep] / norm[keep]
-    u = np.cross(t, np.where(np.abs(t[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]]))
-    u /= np.linalg.norm(u, axis=1, keepdims=True)
-    return p, t, u, np.cross(t, u)
+    return (p, t, *_bases(t))
 
 
 def wall_gaps(heatmap: np.ndarray, centerline_vox: np.ndarray, planes: list, threshold: float = SURFACE_THRESHOLD,

@@ -258,10 +258,10 @@ def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "a
     else:
         from colonbench.shards.reader import ShardDataset, dataset_files
         aug = AugmentConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in cfg.augment.items()})
-        files = {split: [f for d in data_dirs for f in dataset_files(d, split)] for split in ("train", "validation")}
         if cfg.erase > 0:
             raise InputError("--erase takes patches out of a pack's partial-surface occupancies; make a pack of "
                              f"{data_dir} first (colonbench pack) and train on it")
+        files = {split: [f for d in data_dirs for f in dataset_files(d, split)] for split in ("train", "validation")}
         train_ds = ShardDataset(files["train"], augment=aug if cfg.augment_prob > 0 else None,
                                 seed=cfg.seed, augment_prob=cfg.augment_prob)
         val_ds = ShardDataset(files["validation"])

@@ -2,7 +2,8 @@
 
 Usage::
 
-    python scripts/bench_train.py PACK [--device cuda] [--network small] [--batch-sizes 8,32,64] [--steps 10] [--erase 0.5]
+    python scripts/bench_train.py PACK [--device cuda] [--network small] [--batch-sizes 8,32,64] [--steps 10] \
+        [--erase 0.5]
 
 Uses the pack's validation split (its samples are only read). On a CUDA
 device it first checks that the min-plus distance transform used there
