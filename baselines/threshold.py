@@ -18,7 +18,8 @@ from __future__ import annotations
 import numpy as np
 
 from colonbench.completion.centerline import extract_centerline, resample
-from colonbench.completion.surface import END_INSET, HOLE_DISTANCE, hole_vertices, segment_planes
+from colonbench.completion.surface import (END_INSET, HOLE_DISTANCE, hole_vertices, inside_planes, line_between,
+                                          segment_planes)
 from colonbench.estimate import Estimate
 from colonbench.grid import Grid
 
@@ -47,10 +48,11 @@ def threshold_coverage(heatmap: np.ndarray, grid: Grid, points, threshold: float
     cl = extract_centerline(heatmap) if centerline_vox is None else np.asarray(centerline_vox, float)
     vox = np.argwhere(np.asarray(heatmap) < threshold).astype(float)
     partial = grid.to_voxel(np.asarray(points, dtype=float))
-    for point, normal in segment_planes(cl, partial, cut_rims):
-        vox = vox[(vox - point) @ normal >= END_INSET]
+    planes = segment_planes(cl, partial, cut_rims)
+    vox = vox[inside_planes(vox, planes, END_INSET)]
     hole = hole_vertices(vox, partial, HOLE_DISTANCE, false_hole_rate=None)  # the baseline as the paper ran it
     coverage = float(1.0 - hole.mean()) if len(vox) else float("nan")
+    cl = line_between(cl, planes)
     centerline = resample(grid.to_mm(cl), 0.5) if len(cl) else np.zeros((0, 3))
     return Estimate(coverage, grid.to_mm(vox[hole]) if hole.any() else np.zeros((0, 3)), centerline, method)
 

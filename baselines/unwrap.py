@@ -147,7 +147,11 @@ class UnwrapMethod:
         from colonbench.completion.method import on_prediction
 
         def unwrap_learned(pts, p):
+            from colonbench.completion.surface import line_between, segment_planes
+
             cl = p.centerline_vox
+            if len(cl) >= 2:  # the line the completion method reports: between the segment's planes
+                cl = line_between(cl, segment_planes(cl, p.grid.to_voxel(pts)))
             return unwrap_coverage(pts, p.grid.to_mm(cl) if len(cl) else np.zeros((0, 3)), self.name)
 
         return on_prediction(self.predictor, points, "unwrap", unwrap_learned)

@@ -19,6 +19,13 @@
    the voxels above 0.5 (the lumen side of the heatmap, which holds every
    candidate; a minimal path never leaves it, and the front then has a tenth
    of the grid to cover).
+   The ends are first moved to the far ends of the lumen's core (the voxels
+   at or above :data:`END_LEVEL`), where those lie farther along it than the
+   candidates' ends: the candidates stop where the network's ridge fades, a
+   median 9 mm short of a real colon's cut, and the mesh and the planes that
+   follow the line stopped with them. Farther is measured along the core
+   (shortest paths in its voxel graph), and each new end is re-centred in the
+   core's last cross-section (:func:`_far_end`).
 4. Back-propagation from the end point: steepest descent of the travel time
    (26-neighbourhood), then Gaussian smoothing, which gives a smooth sub-voxel
    polyline (:mod:`colonbench.paths`).
@@ -42,6 +49,13 @@ LUMEN = 0.5
 #: 0.8 (was 0.6) keeps fast marching off the plateau just under 0.5 that the 0.2 model predicts around
 #: the lumen: the same centerlines on paper.yaml, a quarter of the time (0.11 -> 0.03 s per segment).
 LUMEN_SHARE = 0.8
+#: The line's ends are moved to the far ends of the voxels at or above this heatmap value (the lumen's core:
+#: on a tube's exact heatmap within about 0.4 of the radius from the axis). Chosen among 0.6, 0.65 and 0.7
+#: on validation data (docs/method.md step 3); None keeps the candidates' ends (steps before version 6).
+END_LEVEL = 0.6
+#: ... and re-centred in the lumen's cross-section there, square to the path between this many voxels (along
+#: the path) from the far voxel.
+END_TANGENT = (8, 16)
 #: At most this many pieces of the candidates (the largest) are joined into one graph.
 MAX_PIECES = 32
 #: Fewest candidate voxels before the threshold is lowered.
@@ -144,8 +158,58 @@ def _point_mask(shape, points) -> np.ndarray:
     return m
 
 
+def _far_end(h: np.ndarray, core: np.ndarray, graph: sparse.csr_matrix, source: int) -> tuple[np.ndarray, np.ndarray]:
+    """The lumen's far end from the core voxel ``source``: (3,) int, and every core voxel's distance from it.
+
+    The core voxel farthest from ``source`` along the core (shortest paths in
+    its 26-neighbour graph: distance along the lumen, not fast-marching time,
+    which grows with every step off the ridge and so would pick a stray
+    voxel beside it) lies on the rim of the core's last cross-section. The
+    end is the voxel of highest value in that cross-section: the core voxels
+    within 1 voxel of the plane through the far voxel perpendicular to the
+    path's direction :data:`END_TANGENT` voxels before it.
+    """
+    dist, pred = dijkstra(graph, indices=source, return_predecessors=True)
+    dist[~np.isfinite(dist)] = -1
+    far = int(np.argmax(dist))
+    chain = [far]
+    while pred[chain[-1]] >= 0 and len(chain) <= END_TANGENT[1]:
+        chain.append(int(pred[chain[-1]]))
+    a, b = END_TANGENT
+    if len(chain) <= b:
+        return core[far], dist
+    tangent = (core[chain[a]] - core[chain[b]]).astype(float)
+    tangent /= max(np.linalg.norm(tangent), 1e-9)
+    section = np.abs((core - core[far]) @ tangent) <= 1.0
+    section &= (np.linalg.norm(core - core[far], axis=1) <= b) & (dist >= 0)
+    best = np.flatnonzero(section)[int(np.argmax(h[tuple(core[section].T)]))]
+    return core[best], dist
+
+
+def _lumen_ends(h: np.ndarray, start: np.ndarray, end: np.ndarray, level: float) -> tuple[np.ndarray, np.ndarray]:
+    """The line's ends moved to the far ends of the lumen's core (the voxels at or above ``level`` connected to
+    the candidates' ends), where those lie farther along it; the candidates' ends otherwise."""
+    core = np.argwhere(h >= level)
+    if len(core) < 2:
+        return start, end
+    index = np.full(h.shape, -1, np.int64)
+    index[tuple(core.T)] = np.arange(len(core))
+    i, j = index[tuple(start)], index[tuple(end)]
+    if i < 0 or j < 0:
+        return start, end
+    graph = voxel_graph(core)
+    # the start: the core's far end from the candidates' end, if farther than their start; then the end from it
+    new_start, d = _far_end(h, core, graph, j)
+    if d[index[tuple(new_start)]] > d[i]:
+        start, i = new_start, index[tuple(new_start)]
+    new_end, d = _far_end(h, core, graph, i)
+    if d[index[tuple(new_end)]] > d[j]:
+        end = new_end
+    return start, end
+
+
 def extract_centerline(heatmap: np.ndarray, delta: float = DELTA, smooth_voxels: float = 2.0,
-                       power: float = SPEED_POWER) -> np.ndarray:
+                       power: float = SPEED_POWER, end_level: float | None = END_LEVEL) -> np.ndarray:
     """The centerline of a target heatmap, in continuous voxel indices.
 
     Parameters
@@ -158,6 +222,8 @@ def extract_centerline(heatmap: np.ndarray, delta: float = DELTA, smooth_voxels:
         Gaussian smoothing of the back-propagated path, voxels.
     power : float
         Speed = heatmap ** power.
+    end_level : float or None
+        The ends move to the farthest voxels at or above this value (step 3); None keeps the candidates'.
 
     Returns
     -------
@@ -180,7 +246,10 @@ def extract_centerline(heatmap: np.ndarray, delta: float = DELTA, smooth_voxels:
     # a weak prediction whose candidates sit below LUMEN still gets a connected domain
     lumen = min(LUMEN, LUMEN_SHARE * float(h[tuple(vox.T)].min()))
     speed = np.maximum(h, 1e-3) ** power
-    t = paths.travel_time(speed, start, mask=(h > lumen) | _point_mask(h.shape, (start, end)))
+    if end_level is not None:
+        start, end = _lumen_ends(h, start, end, end_level)
+    mask = (h > lumen) | _point_mask(h.shape, (start, end))
+    t = paths.travel_time(speed, start, mask=mask)
     if not np.isfinite(t[tuple(end)]):  # the two ends are not connected above `lumen`: march everywhere
         t = paths.travel_time(speed, start, mask=np.ones(h.shape, bool))
     path = paths.backtrack(t, end)

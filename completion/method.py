@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from colonbench.completion.centerline import extract_centerline, resample
-from colonbench.completion.surface import SHELL_LEVEL, STEPS_VERSION, complete
+from colonbench.completion.surface import SHELL_LEVEL, STEPS_VERSION, complete, line_between
 from colonbench.errors import InputError
 from colonbench.estimate import Estimate
 from colonbench.grid import Grid, check_points, fit_grid, principal_axes
@@ -313,7 +313,8 @@ def from_heatmap(heatmap: np.ndarray, grid: Grid, points, method: str = "complet
     comp = complete(heatmap, cl_vox, grid.to_voxel(pts), hole_distance, cut_rims, shell_level, gaps)
     t2 = time.perf_counter()
     verts = grid.to_mm(comp.vertices) if len(comp.vertices) else np.zeros((0, 3))
-    cl = resample(grid.to_mm(cl_vox), CENTERLINE_SPACING_MM) if len(cl_vox) else np.zeros((0, 3))
+    inside = line_between(cl_vox, comp.planes)
+    cl = resample(grid.to_mm(inside), CENTERLINE_SPACING_MM) if len(inside) else np.zeros((0, 3))
     return Estimate(coverage=comp.coverage, holes=verts[comp.hole], centerline=cl, method=method,
                     mesh_vertices=verts, mesh_faces=comp.faces, hole_vertices=comp.hole,
                     seconds={"centerline": t1 - t0, "mesh_holes": t2 - t1})

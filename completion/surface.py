@@ -40,7 +40,7 @@ counts by the share of its vertices that are observed.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy import ndimage
@@ -52,8 +52,9 @@ from colonbench.grid import Grid
 from colonbench.heatmaps import distance_to, voxelize_polyline
 
 #: Revision of the steps after the network, part of the methods' versions: 1 the paper's, 2 the sparse
-#: clouds' hole distance, 3 the cut rims, 4 the shell level, 5 the wall gaps.
-STEPS_VERSION = "5"
+#: clouds' hole distance, 3 the cut rims, 4 the shell level, 5 the wall gaps, 6 the centerline's ends on the
+#: lumen's far ends and the cut rims held where the line runs past them.
+STEPS_VERSION = "6"
 #: Voxels below this value are surface voxels.
 SURFACE_THRESHOLD = 0.15
 #: Faces with a vertex where the (trilinearly interpolated) heatmap is above this are dropped: off the
@@ -99,7 +100,7 @@ RIM_MIN_TOUCHING = 20
 #: winning direction (degrees) ...
 RIM_REFINE = 3
 RIM_FIT_DEG = 15.0
-#: The rim replaces the centerline's end plane where the line ends at least this far inside it, voxels.
+#: The rim replaces the centerline's end plane where the line ends at least this far inside or past it, voxels.
 RIM_BEYOND = 1.0
 
 
@@ -134,12 +135,15 @@ class Completion:
         Vertices farther than the hole distance from the partial cloud.
     coverage : float
         Observed area / total area of the completed mesh (NaN if the mesh is empty).
+    planes : list of (point, inward normal)
+        The planes the mesh was clipped at (the segment's ends).
     """
 
     vertices: np.ndarray
     faces: np.ndarray
     hole: np.ndarray
     coverage: float
+    planes: list = field(default_factory=list)
 
 
 def resigned_field(heatmap: np.ndarray, centerline_vox: np.ndarray, threshold: float = SURFACE_THRESHOLD,
@@ -388,9 +392,11 @@ def rim_planes(centerline_vox: np.ndarray, partial_vox: np.ndarray, band: float 
     plane's points within ``band`` refitted, :data:`RIM_REFINE` times (each fit
     within :data:`RIM_FIT_DEG` of the winning direction). The rim is accepted
     if its points fill at least ``min_share`` of the sectors and it lies more
-    than :data:`RIM_BEYOND` beyond the line's end (where the line reaches the
-    cut, its own plane is as good). Otherwise, an unobserved or ragged end,
-    the end keeps :func:`end_planes`' plane.
+    than :data:`RIM_BEYOND` beyond or before the line's end (where the line
+    reaches the cut, its own plane is as good; where the line runs on past it,
+    into a lumen the network continued beyond the cut, the cut holds: steps
+    version 6). Otherwise, an unobserved or ragged end, the end keeps
+    :func:`end_planes`' plane.
 
     Returns
     -------
@@ -435,8 +441,9 @@ def rim_planes(centerline_vox: np.ndarray, partial_vox: np.ndarray, band: float 
             out.append((point, normal))
             continue
         centre = rim.mean(axis=0)
-        # where the line reaches the cut, its own plane is as good (and exact on the GT heatmap)
-        out.append((centre, -outward) if (centre - point) @ outward > RIM_BEYOND else (point, normal))
+        # where the line reaches the cut, its own plane is as good (and exact on the GT heatmap); where it
+        # runs on past the cut (its ends follow the lumen, which the network may continue), the cut holds
+        out.append((centre, -outward) if abs((centre - point) @ outward) > RIM_BEYOND else (point, normal))
     return out
 
 
@@ -494,10 +501,25 @@ def clip_to_segment(vertices: np.ndarray, faces: np.ndarray, centerline_vox: np.
     """
     if len(faces) == 0:
         return vertices, faces
-    keep_v = np.ones(len(vertices), bool)
-    for point, normal in end_planes(centerline_vox) if planes is None else planes:
-        keep_v &= (vertices - point) @ normal >= inset
+    keep_v = inside_planes(vertices, end_planes(centerline_vox) if planes is None else planes, inset)
     return _keep_faces(vertices, faces, keep_v[faces].all(axis=1))
+
+
+def line_between(centerline_vox: np.ndarray, planes: list) -> np.ndarray:
+    """The centerline's points between the segment's planes (the whole line if fewer than two are): the
+    line's ends follow the lumen (:data:`~colonbench.completion.centerline.END_LEVEL`), which the network
+    may continue past a cut, so a method reports its centerline between the planes it clipped at."""
+    c = np.asarray(centerline_vox, float)
+    inside = c[inside_planes(c, planes)] if len(c) else c
+    return inside if len(inside) >= 2 else c
+
+
+def inside_planes(points: np.ndarray, planes: list, inset: float = 0.0) -> np.ndarray:
+    """(n,) bool: which of the (n, 3) ``points`` lie at least ``inset`` inside every (point, inward normal) plane."""
+    keep = np.ones(len(points), bool)
+    for point, normal in planes:
+        keep &= (np.asarray(points, float) - point) @ normal >= inset
+    return keep
 
 
 def _station_frames(centerline_vox: np.ndarray, planes: list, inset: float) -> tuple:
@@ -612,4 +634,4 @@ def complete(heatmap: np.ndarray, centerline_vox: np.ndarray, partial_vox: np.nd
         faces = np.concatenate([faces, gap_f + len(verts)])
         verts = np.concatenate([verts, gap_v])
         hole = np.concatenate([hole, np.ones(len(gap_v), bool)])
-    return Completion(verts, faces, hole, mesh_coverage(verts, faces, hole))
+    return Completion(verts, faces, hole, mesh_coverage(verts, faces, hole), planes)
