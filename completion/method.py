@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from colonbench.completion.centerline import extract_centerline, resample
+from colonbench.completion.centerline import END_LEVEL, extract_centerline, resample
 from colonbench.completion.surface import SHELL_LEVEL, STEPS_VERSION, complete, line_between
 from colonbench.errors import InputError
 from colonbench.estimate import Estimate
@@ -240,6 +240,9 @@ class CompletionMethod:
     gaps : bool
         Add hole patches where the completed tube has no wall (docs/method.md step 6); off, as the steps
         did before their version 5.
+    end_level : float or None
+        The centerline's ends move to the far ends of the predicted heatmap's voxels at or above this
+        (docs/method.md step 3, from steps version 6); None keeps the ends of its ridge.
 
     The model is loaded once (and shared with the other methods built on the
     same model in this process); call :meth:`estimate` on as many clouds as
@@ -249,13 +252,14 @@ class CompletionMethod:
     name = "completion"
 
     def __init__(self, model=None, device: str = "cpu", hole_distance: float | None = None, cut_rims: bool = True,
-                 shell_level: float | None = SHELL_LEVEL, gaps: bool = True):
+                 shell_level: float | None = SHELL_LEVEL, gaps: bool = True, end_level: float | None = END_LEVEL):
         self.predictor = shared_predictor(model, device)
         self.hole_distance = hole_distance
         self.cut_rims = cut_rims
         self.shell_level = shell_level
         self.gaps = gaps
-        self.version = f"{self.predictor.version},{steps_version(shell_level, gaps)}"
+        self.end_level = end_level
+        self.version = f"{self.predictor.version},{steps_version(shell_level, gaps, end_level)}"
         self.meta = self.predictor.meta
 
     def predict(self, points) -> tuple[Grid, np.ndarray, np.ndarray]:
@@ -269,19 +273,25 @@ class CompletionMethod:
         pts = check_cloud(points)
         t1 = time.perf_counter()
         p = self.predictor(pts)
-        cl = p.centerline_vox
+        if self.end_level == END_LEVEL:
+            cl = p.centerline_vox        # shared with the other methods on this prediction
+        else:
+            t = time.perf_counter()
+            cl = extract_centerline(p.heatmap, end_level=self.end_level)
+            p.seconds["centerline"] = time.perf_counter() - t
         est = from_heatmap(p.heatmap, p.grid, pts, self.name, self.hole_distance, centerline_vox=cl,
                            cut_rims=self.cut_rims, shell_level=self.shell_level, gaps=self.gaps)
         est.seconds = {"check": t1 - t0, **p.seconds, **{k: v for k, v in est.seconds.items() if k != "centerline"}}
         return est
 
 
-def steps_version(shell_level: float | None = SHELL_LEVEL, gaps: bool = True) -> str:
+def steps_version(shell_level: float | None = SHELL_LEVEL, gaps: bool = True,
+                  end_level: float | None = END_LEVEL) -> str:
     """``steps=N`` of the steps after the network (:data:`~colonbench.completion.surface.STEPS_VERSION`),
-    with the shell level and the wall gaps where they are not the default: part of the methods' versions
-    in run folders."""
+    with the shell level, the wall gaps and the centerline's end level where they are not the default:
+    part of the methods' versions in run folders."""
     return (f"steps={STEPS_VERSION}" + ("" if shell_level == SHELL_LEVEL else f",shell_level={shell_level}")
-            + ("" if gaps else ",gaps=off"))
+            + ("" if gaps else ",gaps=off") + ("" if end_level == END_LEVEL else f",end_level={end_level}"))
 
 
 def from_heatmap(heatmap: np.ndarray, grid: Grid, points, method: str = "completion",

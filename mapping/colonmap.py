@@ -192,19 +192,30 @@ def clip_between(vertices: np.ndarray, faces: np.ndarray, line: np.ndarray, arc:
     return faces[(s >= lo) & (s < hi)]
 
 
-def for_mapping(method):
-    """The method as mapping runs it: a method that can clip at its cloud's cut rims (``cut_rims``) does not.
+def for_mapping(method, context_mm: float = 0.0):
+    """The method as mapping runs it: a method that can clip at its cloud's cut rims (``cut_rims``) does not,
+    and on a segment alone (``context_mm`` 0) its centerline keeps the ends of its ridge (``end_level``).
 
     The map splits the reconstruction by the arc length of each point's nearest centerline point, not
     by planes, so a segment's cloud does not end in a planar rim, and the map clips the completed
     surface at its own planes. On the whole-colon benchmark the rims, searched for anyway, cost the
-    real colon's segments 1.8-3.0 points (docs/mapping.md). Such a method comes back as a shallow copy
-    with ``cut_rims`` off (sharing its loaded model); the caller's object is left as it is.
+    real colon's segments 1.8-3.0 points (docs/mapping.md). Without rims nothing holds a centerline
+    that follows the lumen's core past the segment's ends (docs/method.md step 3), and on a segment
+    alone the mesh is not clipped to the segment's stretch either: there the line's ends on the core
+    cost the segment-only track 3 points (docs/mapping.md), while in context, clipped to the stretch,
+    they gained. Such a method comes back as a shallow copy (sharing its loaded model); the caller's
+    object is left as it is.
     """
-    if not getattr(method, "cut_rims", False):
+    changes = {}
+    if getattr(method, "cut_rims", False):
+        changes["cut_rims"] = False
+    if context_mm <= 0 and getattr(method, "end_level", None) is not None:
+        changes["end_level"] = None
+    if not changes:
         return method
     mapped = copy.copy(method)
-    mapped.cut_rims = False
+    for name, value in changes.items():
+        setattr(mapped, name, value)
     return mapped
 
 
@@ -312,7 +323,7 @@ def map_colon(points: np.ndarray, method, segment_mm: float = SEGMENT_MM, positi
     t0 = time.perf_counter()
     out = []
     name = getattr(method, "name", "method")
-    method = for_mapping(method)
+    method = for_mapping(method, context_mm)
     for seg, mask, ctx, (pa, ps, last, radius) in tqdm(segments, desc="segments", unit="seg",
                                                         disable=not progress):
         length = seg.end_mm - seg.start_mm

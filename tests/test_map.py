@@ -256,16 +256,24 @@ def test_the_map_clips_at_its_own_planes_not_at_cut_rims():
     from colonbench.completion.method import CompletionMethod
     from colonbench.mapping.colonmap import map_colon
 
+    from colonbench.completion.centerline import END_LEVEL
+
     class Spy(CompletionMethod):
         seen: list = []
 
         def estimate(self, points):
-            self.seen.append(self.cut_rims)
+            self.seen.append((self.cut_rims, self.end_level))
             return super().estimate(points)
 
     pts, _, _ = tube_cloud(straight(200.0), density=1.0)
     spy = Spy()
     result = map_colon(pts, spy, segment_mm=60.0, progress=False, context_mm=15.0)
     assert len(result["segments"]) >= 3 and not any(seg.error for seg in result["segments"])
-    assert spy.seen and not any(spy.seen)
-    assert spy.cut_rims is True
+    assert spy.seen and set(spy.seen) == {(False, END_LEVEL)}
+    # on a segment alone nothing clips a centerline that follows the lumen past the segment's ends:
+    # there the line keeps the ends of its ridge
+    spy.seen.clear()
+    result = map_colon(pts, spy, segment_mm=60.0, progress=False, context_mm=0.0)
+    assert not any(seg.error for seg in result["segments"])
+    assert spy.seen and set(spy.seen) == {(False, None)}
+    assert spy.cut_rims is True and spy.end_level == END_LEVEL
