@@ -352,6 +352,16 @@ def test_train_save_load_predict_round_trip(tiny_run):
     est = method.estimate(item["partial_points"].astype(float))
     assert 0 <= est.coverage <= 1 or np.isnan(est.coverage)
     assert set(est.seconds) >= {"network", "centerline", "mesh_holes"}
+    # the centerline with the ridge's own ends (steps before 6; the map's segment-only track): its version
+    # says so, and its line is the one extract_centerline gives with end_level None
+    ridge = CompletionMethod(run / "best.safetensors", end_level=None)
+    assert ridge.version.endswith(",end_level=None") and "end_level" not in method.version
+    p = ridge.predictor(check_cloud(item["partial_points"].astype(float)))
+    est_ridge = ridge.estimate(item["partial_points"].astype(float))
+    assert 0 <= est_ridge.coverage <= 1 or np.isnan(est_ridge.coverage)
+    line = extract_centerline(p.heatmap, end_level=None)
+    if len(line) >= 2 and len(est_ridge.centerline):       # the reported line: a piece of that one (between the planes)
+        assert distance_to_polyline(est_ridge.centerline, p.grid.to_mm(line)).max() < 0.1
 
 
 def torch_equal(a, b):
