@@ -275,13 +275,14 @@ class CompletionMethod:
         p = self.predictor(pts)
         if self.end_level == END_LEVEL:
             cl = p.centerline_vox        # shared with the other methods on this prediction
-        else:
+            shared = p.seconds
+        else:                            # its own line; the shared prediction's timings are left as they are
             t = time.perf_counter()
             cl = extract_centerline(p.heatmap, end_level=self.end_level)
-            p.seconds["centerline"] = time.perf_counter() - t
+            shared = {**p.seconds, "centerline": time.perf_counter() - t}
         est = from_heatmap(p.heatmap, p.grid, pts, self.name, self.hole_distance, centerline_vox=cl,
                            cut_rims=self.cut_rims, shell_level=self.shell_level, gaps=self.gaps)
-        est.seconds = {"check": t1 - t0, **p.seconds, **{k: v for k, v in est.seconds.items() if k != "centerline"}}
+        est.seconds = {"check": t1 - t0, **shared, **{k: v for k, v in est.seconds.items() if k != "centerline"}}
         return est
 
 

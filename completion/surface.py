@@ -516,9 +516,10 @@ def line_between(centerline_vox: np.ndarray, planes: list) -> np.ndarray:
 
 def inside_planes(points: np.ndarray, planes: list, inset: float = 0.0) -> np.ndarray:
     """(n,) bool: which of the (n, 3) ``points`` lie at least ``inset`` inside every (point, inward normal) plane."""
+    points = np.asarray(points, float)
     keep = np.ones(len(points), bool)
     for point, normal in planes:
-        keep &= (np.asarray(points, float) - point) @ normal >= inset
+        keep &= (points - point) @ normal >= inset
     return keep
 
 
@@ -530,9 +531,7 @@ def _station_frames(centerline_vox: np.ndarray, planes: list, inset: float) -> t
     p = np.stack([np.interp(at, s, c[:, k]) for k in range(3)], axis=1)
     t = np.gradient(ndimage.gaussian_filter1d(p, 2.0, axis=0, mode="nearest"), axis=0) if len(p) > 1 else p * 0
     norm = np.linalg.norm(t, axis=1, keepdims=True)
-    keep = norm[:, 0] > 0
-    for point, normal in planes:
-        keep &= (p - point) @ normal >= inset
+    keep = (norm[:, 0] > 0) & inside_planes(p, planes, inset)
     p, t = p[keep], t[keep] / norm[keep]
     return (p, t, *_bases(t))
 

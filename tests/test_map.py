@@ -253,10 +253,9 @@ def test_whole_partials_hold_points_on_observed_faces_only():
 def test_the_map_clips_at_its_own_planes_not_at_cut_rims():
     # the map splits a reconstruction by arc length, not by planes, so its segments' clouds end in no
     # planar rim: the completion method runs with its rim search off (a copy), the caller's own left as it is
+    from colonbench.completion.centerline import END_LEVEL
     from colonbench.completion.method import CompletionMethod
     from colonbench.mapping.colonmap import map_colon
-
-    from colonbench.completion.centerline import END_LEVEL
 
     class Spy(CompletionMethod):
         seen: list = []
