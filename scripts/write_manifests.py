@@ -141,3 +141,12 @@ dump("colon-test", "The whole-colon benchmark (colonbench evaluate --task colon)
      "(withdrawal-camera or sphere holes, 2 points/mm^2, each with its withdrawal trajectory) of each of 4 of "
      "paper.yaml's test colons and of the real held-out colon gca00060, with their exact per-face truth.",
      20210901, {"test": whole}, mesh_names=["gca00060"], task="colon")
+
+#: Whole-colon validation: where the map's own settings (its context margin) are chosen, never on colon-test.yaml.
+val = split(340, 4, None, 2, CLEAN, {"camera": 0.5, "spheres": 0.5}, meshes=["gca00090"])
+del val["segments_per_length"]
+dump("colon-val", "Whole-colon validation, where the map's settings are chosen (colonbench evaluate --task colon "
+     "--split validation): two whole partial reconstructions (withdrawal-camera or sphere holes, 2 points/mm^2) of "
+     "each of 4 of paper.yaml's validation colons and of the real training colon gca00090 (its segments are in "
+     "train-real.yaml, so the network's figures on it are optimistic; colon-test.yaml's colons are never used).",
+     20261123, {"validation": val}, mesh_names=["gca00090"], task="colon")
