@@ -18,6 +18,8 @@ import argparse
 import resource
 import time
 
+from colonbench.mapping.colonmap import CONTEXT_MM
+
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -27,7 +29,7 @@ def main() -> None:
     parser.add_argument("--threads", type=int, default=2, help="torch threads (the CPU cores used)")
     parser.add_argument("--holes", default="spheres", choices=["spheres", "camera"],
                         help="whole-colon hole model (datagen.wholecolon)")
-    parser.add_argument("--context-mm", type=float, nargs="+", default=[15.0],
+    parser.add_argument("--context-mm", type=float, nargs="+", default=[CONTEXT_MM],
                         help="context margins to compare on the same segments (0 = segment-only)")
     args = parser.parse_args()
 
