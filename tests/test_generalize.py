@@ -372,3 +372,43 @@ def test_real_colon_centerline_has_no_kinks(gca00060):
     assert np.quantile(ratio, 0.001) >= 0.8 * MIN_TURN_RATIO
     turn = np.degrees(3.0 / turning_radius(gca00060.centerline).min())
     assert turn < 45.0
+
+
+def test_lumen_centre_of_a_segment_is_the_tube_axis_beside_an_offset_line():
+    # scripts/centerline_convention.py: a line 3 mm off a straight tube's axis is re-centred onto the axis,
+    # and a D-shaped (flattened) section moves the centre away from the flat side by a known amount
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("centerline_convention",
+                                                  MANIFESTS.parent / "scripts" / "centerline_convention.py")
+    conv = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(conv)
+    tube = tube_colon(straight(80.0), 15.0, ring_spacing_mm=1.0, n_around=256)
+    axis = straight(80.0).resample(0.5).points
+    direction = axis[-1] - axis[0]
+    direction /= np.linalg.norm(direction)
+    side = np.cross(direction, [0.0, 0.0, 1.0] if abs(direction[2]) < 0.9 else [1.0, 0.0, 0.0])
+    side /= np.linalg.norm(side)
+    off = axis + 3.0 * side
+    line = conv.lumen_line(tube.mesh.vertices, tube.mesh.faces, off)
+    middle = line[20:-20]
+    d = np.linalg.norm(np.cross(middle - axis[0], direction), axis=1)  # distance to the true axis
+    assert np.median(d) < 0.3 and d.max() < 0.6
+    # flattened: a circle of R = 15 mm pressed flat at x = 0.5 R. Its deepest point (the inscribed circle's
+    # centre) is at x = -0.25 R with depth 0.75 R; the core (depth >= 0.8 of that) is the disc of radius 6 mm
+    # about the axis cut at x <= -1.5, a circular segment whose centroid lies at
+    # x = -4 r sin^3(a) / (3 (2a - sin 2a)), r = 6, cos a = 1.5 / 6: -3.37 mm
+    theta = np.linspace(0, 2 * np.pi, 256, endpoint=False)
+    ring = np.c_[15.0 * np.cos(theta), 15.0 * np.sin(theta)]
+    ring[:, 0] = np.minimum(ring[:, 0], 7.5)
+    pts = np.concatenate([np.c_[ring, np.full(len(ring), z)] for z in np.arange(0.0, 40.1, 1.0)])
+    n = len(ring)
+    faces = []
+    for k in range(40):
+        for j in range(n):
+            a, b = k * n + j, k * n + (j + 1) % n
+            faces += [(a, b, a + n), (b, b + n, a + n)]
+    centre = conv.section_centre(trimesh.Trimesh(pts, np.array(faces), process=False),
+                                 np.array([0.0, 0.0, 20.0]), np.array([0.0, 0.0, 1.0]))
+    assert centre is not None
+    assert centre[0] == pytest.approx(-3.37, abs=0.3) and abs(centre[1]) < 0.3
