@@ -54,6 +54,9 @@ CHAMBER_MM = 60.0
 END_SEAL_MM = 20.0
 #: Gaussian smoothing of the midline before and after re-centring, mm.
 SMOOTH_MM = 6.0
+#: A section's core, whose centroid is the lumen's centre there: its points at least this share as deep
+#: (as far from the wall) as the deepest.
+CORE_SHARE = 0.8
 #: The re-centred line's radius of curvature is at least this share of the lumen's local radius.
 MIN_TURN_RATIO = 0.5
 #: Length over which the line's turning is measured, mm.
@@ -295,10 +298,10 @@ def cross_sections(cavity: np.ndarray, origin: np.ndarray, voxel: float, centerl
                 continue
             pick = lab[tuple(cand[np.argmin(d2)])]
         sel = lab == pick
-        # the middle of the section's widest part: the centroid of its points at least 80 % as deep as the
-        # deepest (a flattened or kidney-shaped section has its plain centroid near, or in, a wall)
+        # the middle of the section's widest part: the centroid of its points at least CORE_SHARE as deep as
+        # the deepest (a flattened or kidney-shaped section has its plain centroid near, or in, a wall)
         depth = ndimage.distance_transform_edt(sel)
-        core = depth >= 0.8 * depth.max()
+        core = depth >= CORE_SHARE * depth.max()
         centroid[i] = plane[core].mean(axis=0)
         area[i] = sel.sum() * step * step
     return s, centroid, area

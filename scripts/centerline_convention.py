@@ -36,8 +36,6 @@ from scipy.spatial import cKDTree
 SECTION_EVERY = 4
 #: Pixel of a section's raster, mm.
 PIXEL_MM = 0.5
-#: A section's core: at least this share of its deepest point's distance from the wall (as the importer).
-CORE = 0.8
 #: Farthest a section's outline may lie from the line, mm.
 MAX_RADIUS_MM = 60.0
 
@@ -54,6 +52,8 @@ def section_centre(mesh, point: np.ndarray, tangent: np.ndarray) -> np.ndarray |
     """
     from matplotlib.path import Path as Outline
     from skimage.draw import polygon
+
+    from colonbench.datagen.lumen import CORE_SHARE
 
     sec = mesh.section(plane_origin=point, plane_normal=tangent)
     if sec is None:
@@ -75,7 +75,7 @@ def section_centre(mesh, point: np.ndarray, tangent: np.ndarray) -> np.ndarray |
     rr, cc = polygon(*((outline - lo) / PIXEL_MM).T, shape=shape)
     inside[rr, cc] = True
     depth = ndimage.distance_transform_edt(inside)
-    centre = np.argwhere(depth >= CORE * depth.max()).mean(axis=0) * PIXEL_MM + lo
+    centre = np.argwhere(depth >= CORE_SHARE * depth.max()).mean(axis=0) * PIXEL_MM + lo
     return point + centre[0] * u + centre[1] * v
 
 
