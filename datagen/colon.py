@@ -80,7 +80,8 @@ class Colon:
     info: dict = field(default_factory=dict)
 
 
-def generate_colon(config: ColonConfig | None = None, seed: int = 0, colon_id: int = 0) -> Colon:
+def generate_colon(config: ColonConfig | None = None, seed: int = 0, colon_id: int = 0,
+                   lumen_centerline: bool = False) -> Colon:
     """Generate one procedural colon.
 
     Parameters
@@ -92,6 +93,10 @@ def generate_colon(config: ColonConfig | None = None, seed: int = 0, colon_id: i
     colon_id : int
         Index of the colon under the root seed; colon ``i`` is the same whatever
         else is generated.
+    lumen_centerline : bool
+        Record as the colon's centerline the centre of its lumen
+        (:func:`lumen_centred_line`) instead of the axis the tube was swept
+        around (``truth.lumen_centerline``). The surface is the same either way.
 
     Returns
     -------
@@ -112,7 +117,7 @@ def generate_colon(config: ColonConfig | None = None, seed: int = 0, colon_id: i
         clash = self_intersections(centerline, max_radius, config.clearance_mm)
         if len(clash) == 0:
             params["attempt"] = attempt
-            return _build(config, rng, centerline, base, params)
+            return _build(config, rng, centerline, base, params, lumen_centerline)
         last = clash
     raise ColonbenchError(
         f"no self-intersection-free colon in {config.max_attempts} attempts (colon {colon_id}, seed {seed}); "
@@ -206,7 +211,8 @@ def _base_radius(config, params, s, length=None) -> np.ndarray:
 
 
 # --------------------------------------------------------------------------- surface
-def _build(config: ColonConfig, rng, centerline: Centerline, base: np.ndarray, params: dict) -> Colon:
+def _build(config: ColonConfig, rng, centerline: Centerline, base: np.ndarray, params: dict,
+           lumen_centerline: bool = False) -> Colon:
     L = centerline.length
     n_rings = int(np.ceil(L / config.ring_spacing_mm)) + 1
     s = np.linspace(0.0, L, n_rings)
@@ -297,9 +303,63 @@ def _build(config: ColonConfig, rng, centerline: Centerline, base: np.ndarray, p
     info = {k: v for k, v in params.items() if k != "region_knots"}
     info.update(n_folds=n_folds, polyps=polyps, regions=region_bounds, n_around=n_around,
                 ring_spacing_mm=float(s[1] - s[0]), **irregular)
+    if lumen_centerline:
+        ring_points = lumen_centred_line(rings, frames, rho, theta)
+        offset = np.linalg.norm(ring_points - rings.points, axis=1)
+        raw = Centerline.from_points(ring_points)
+        centerline = raw.resample(0.5)
+        max_radius = np.interp(centerline.arclength, raw.arclength, rho.max(axis=1) + offset)
+        if irregular:
+            max_radius = max_radius + _pouch_reach(config)
+        info.update(centerline="lumen-centred", centerline_offset_median_mm=float(np.median(offset)),
+                    centerline_offset_max_mm=float(offset.max()))
     swept = not irregular  # after CSG the vertices no longer lie on rings
     return Colon(mesh=mesh, centerline=centerline, radius=max_radius, ring_arclength=s if swept else None,
                  n_around=n_around if swept else None, info=info)
+
+
+def lumen_centred_line(rings: Centerline, frames, rho: np.ndarray, theta: np.ndarray,
+                       every_mm: float = 2.0) -> np.ndarray:
+    """The centre of the lumen at each ring of a swept tube, mm; (K, 3).
+
+    Each ring is the tube's cross-section square to its axis; its centre is the
+    centroid of its core (:func:`colonbench.datagen.lumen.outline_core_centre`),
+    the definition imported colons are re-centred by. Sections are taken every
+    ``every_mm``, interpolated between, and their offsets from the axis are
+    median-filtered and smoothed along it as in
+    :func:`colonbench.datagen.lumen.recentre` (a fold or a polyp moves one
+    section's core, not the line), and kept within half the ring's smallest radius.
+
+    Parameters
+    ----------
+    rings : Centerline
+        The K ring centres (the axis), mm.
+    frames : tuple of (K, 3) arrays
+        ``(tangent, normal, binormal)`` the tube was swept with.
+    rho : (K, n) float
+        Distance of each ring vertex from its centre, mm.
+    theta : (n,) float
+        The ring vertices' angles, rad.
+    every_mm : float
+        Spacing of the sections, mm.
+    """
+    from scipy.ndimage import median_filter
+
+    from colonbench.datagen.lumen import SMOOTH_MM, outline_core_centre
+
+    s = rings.arclength
+    step = max(1, int(round(every_mm / max(s[1] - s[0], 1e-9))))
+    picks = np.unique(np.r_[np.arange(0, len(s), step), len(s) - 1])
+    cos, sin = np.cos(theta), np.sin(theta)
+    centres = np.array([outline_core_centre(np.c_[rho[k] * cos, rho[k] * sin]) for k in picks])
+    offset = np.stack([np.interp(s, s[picks], centres[:, i]) for i in range(2)], axis=1)
+    spacing = s[1] - s[0]
+    offset = median_filter(offset, size=(max(3, int(round(5 * every_mm / spacing)) | 1), 1), mode="nearest")
+    offset = gaussian_filter1d(offset, SMOOTH_MM / spacing, axis=0, mode="nearest")
+    norm = np.linalg.norm(offset, axis=1)
+    offset *= np.minimum(1.0, 0.5 * rho.min(axis=1) / np.maximum(norm, 1e-12))[:, None]
+    _, nrm, bnm = frames
+    return rings.points + offset[:, :1] * nrm + offset[:, 1:] * bnm
 
 
 def _pouch_reach(config: ColonConfig) -> float:

@@ -172,8 +172,18 @@ class WholeConfig:
     fov_deg: float = _p(140.0, 30.0, 170.0, "degree", "field of view of each view (camera model)")
 
 
+@dataclass(frozen=True)
+class TruthConfig:
+    """How a procedural colon's ground truth is recorded."""
+
+    lumen_centerline: int = _p(0, 0, 1, "flag",
+                               "1: the true centerline runs through the lumen's centre (each cross-section's core "
+                               "centroid, smoothed, as imported colons are re-centred); 0: the axis the tube is "
+                               "swept around, which elliptic and flattened sections leave off-centre")
+
+
 CONFIG_CLASSES = {"colon": ColonConfig, "camera": CameraConfig, "spheres": SphereConfig, "segments": SegmentConfig,
-                  "video": VideoConfig, "whole": WholeConfig}
+                  "video": VideoConfig, "whole": WholeConfig, "truth": TruthConfig}
 
 
 def _check_value(cls, f, value):

@@ -18,7 +18,7 @@ from colonbench import seeding
 from colonbench.datagen.camera import SurfaceScene
 from colonbench.datagen.colon import Colon, generate_colon
 from colonbench.datagen.config import (CONFIG_CLASSES, CameraConfig, ColonConfig, SegmentConfig, SphereConfig,
-                                       VideoConfig, WholeConfig, from_dict, read_yaml, to_dict)
+                                       TruthConfig, VideoConfig, WholeConfig, from_dict, read_yaml, to_dict)
 from colonbench.datagen.holes import check_hole_model
 from colonbench.datagen.sample import Sample, make_sample
 from colonbench.datagen.segments import segment_surface, windows
@@ -28,7 +28,7 @@ from colonbench.errors import InputError
 @dataclass(frozen=True)
 class GeneratorConfig:
     """All the parameters of the data generator (YAML sections ``colon``, ``camera``, ``spheres``, ``segments``,
-    ``video``, ``whole``)."""
+    ``video``, ``whole``, ``truth``)."""
 
     colon: ColonConfig = field(default_factory=ColonConfig)
     camera: CameraConfig = field(default_factory=CameraConfig)
@@ -36,6 +36,7 @@ class GeneratorConfig:
     segments: SegmentConfig = field(default_factory=SegmentConfig)
     video: VideoConfig = field(default_factory=VideoConfig)
     whole: WholeConfig = field(default_factory=WholeConfig)
+    truth: TruthConfig = field(default_factory=TruthConfig)
 
     @classmethod
     def from_dict(cls, data: dict | None) -> "GeneratorConfig":
@@ -57,14 +58,14 @@ class GeneratorConfig:
     def to_dict(self) -> dict:
         """Plain dict of all sections (ranges as lists).
 
-        The ``video`` and ``whole`` sections are left out while they hold their
-        defaults, so that manifests from before they existed keep their hash.
+        The ``video``, ``whole`` and ``truth`` sections are left out while they
+        hold their defaults, so that manifests from before they existed keep
+        their hash.
         """
         out = {k: to_dict(getattr(self, k)) for k in CONFIG_CLASSES}
-        if self.video == VideoConfig():
-            del out["video"]
-        if self.whole == WholeConfig():
-            del out["whole"]
+        for name, default in (("video", VideoConfig()), ("whole", WholeConfig()), ("truth", TruthConfig())):
+            if getattr(self, name) == default:
+                del out[name]
         return out
 
 
@@ -149,7 +150,8 @@ def colon_samples(colon: Colon, config: GeneratorConfig, seed: int, colon_id: in
 
 def procedural_colon(config: GeneratorConfig, seed: int, colon_id: int) -> Colon:
     """Colon ``colon_id`` under ``seed`` (see :func:`colonbench.datagen.colon.generate_colon`)."""
-    return generate_colon(config.colon, seed=seed, colon_id=colon_id)
+    return generate_colon(config.colon, seed=seed, colon_id=colon_id,
+                          lumen_centerline=bool(config.truth.lumen_centerline))
 
 
 def write_points_ply(path, points) -> Path:

@@ -307,6 +307,32 @@ def cross_sections(cavity: np.ndarray, origin: np.ndarray, voxel: float, centerl
     return s, centroid, area
 
 
+def outline_core_centre(outline: np.ndarray, pixel_mm: float = 0.5) -> np.ndarray:
+    """The centre of a closed cross-section outline: the centroid of its core, mm; (2,).
+
+    The core is the part of the section at least :data:`CORE_SHARE` as far from
+    the outline as its deepest point, as in :func:`cross_sections`, on a raster
+    of ``pixel_mm``.
+
+    Parameters
+    ----------
+    outline : (n, 2) float
+        The section's closed outline in its plane, mm (any start, either orientation).
+    pixel_mm : float
+        Raster pixel, mm.
+    """
+    from skimage.draw import polygon
+
+    outline = np.asarray(outline, dtype=float)
+    lo = outline.min(axis=0) - 2.0 * pixel_mm
+    shape = np.ceil((outline.max(axis=0) - lo) / pixel_mm).astype(int) + 3
+    inside = np.zeros(shape, bool)
+    rr, cc = polygon(*((outline - lo) / pixel_mm).T, shape=shape)
+    inside[rr, cc] = True
+    depth = ndimage.distance_transform_edt(inside)
+    return np.argwhere(depth >= CORE_SHARE * depth.max()).mean(axis=0) * pixel_mm + lo
+
+
 def recentre(cavity: np.ndarray, origin: np.ndarray, voxel: float, midline, iterations: int = 3,
              min_radius_mm: float = MIN_RADIUS_MM, smooth_mm: float = SMOOTH_MM,
              max_radius_mm: float = MAX_RADIUS_MM) -> tuple[Centerline, np.ndarray, list]:

@@ -51,9 +51,8 @@ def section_centre(mesh, point: np.ndarray, tangent: np.ndarray) -> np.ndarray |
         A point of the centerline and its unit tangent.
     """
     from matplotlib.path import Path as Outline
-    from skimage.draw import polygon
 
-    from colonbench.datagen.lumen import CORE_SHARE
+    from colonbench.datagen.lumen import outline_core_centre
 
     sec = mesh.section(plane_origin=point, plane_normal=tangent)
     if sec is None:
@@ -69,13 +68,7 @@ def section_centre(mesh, point: np.ndarray, tangent: np.ndarray) -> np.ndarray |
             outline = xy  # the closed outline around the line's point
     if outline is None:
         return None
-    lo = outline.min(axis=0) - 2.0
-    shape = np.ceil((outline.max(axis=0) + 2.0 - lo) / PIXEL_MM).astype(int)
-    inside = np.zeros(shape, bool)
-    rr, cc = polygon(*((outline - lo) / PIXEL_MM).T, shape=shape)
-    inside[rr, cc] = True
-    depth = ndimage.distance_transform_edt(inside)
-    centre = np.argwhere(depth >= CORE_SHARE * depth.max()).mean(axis=0) * PIXEL_MM + lo
+    centre = outline_core_centre(outline, PIXEL_MM)
     return point + centre[0] * u + centre[1] * v
 
 

@@ -412,3 +412,38 @@ def test_lumen_centre_of_a_segment_is_the_tube_axis_beside_an_offset_line():
                                  np.array([0.0, 0.0, 20.0]), np.array([0.0, 0.0, 1.0]))
     assert centre is not None
     assert centre[0] == pytest.approx(-3.37, abs=0.3) and abs(centre[1]) < 0.3
+
+
+def test_lumen_centerline_of_a_flattened_colon_sits_where_its_sections_core_is():
+    # truth.lumen_centerline: a colon whose every section is a circle pressed flat at 0.5 r (no folds, taeniae,
+    # polyps or roughness) has its lumen's centre 0.2249 r from the axis (the core centroid of that D shape,
+    # see the test above: 3.37 mm at r = 15 mm), away from the flat side; the surface is the same
+    from colonbench.datagen.generate import GeneratorConfig, procedural_colon
+
+    shape = {"ring_spacing_mm": 1.0, "edge_mm": 1.5, "length_mm": [600.0, 600.0], "fold_depth": [0.0, 0.0],
+             "taenia_depth": [0.0, 0.0], "taenia_depth_transverse": [0.0, 0.0], "polyps": [0, 0],
+             "roughness_mm": [0.0, 0.0], "flattening": [0.5, 0.5], "ellipticity": [0.0, 0.0]}
+    axis_colon = procedural_colon(GeneratorConfig.from_dict({"colon": shape}), seed=3, colon_id=0)
+    config = GeneratorConfig.from_dict({"colon": shape, "truth": {"lumen_centerline": 1}})
+    assert config.to_dict()["truth"] == {"lumen_centerline": 1}
+    assert "truth" not in GeneratorConfig.from_dict({"colon": shape}).to_dict()  # old manifests keep their hash
+    colon = procedural_colon(config, seed=3, colon_id=0)
+    assert np.array_equal(colon.mesh.vertices, axis_colon.mesh.vertices)
+    assert colon.info["centerline"] == "lumen-centred"
+    axis = axis_colon.centerline.points
+    line = colon.centerline.points
+    s = axis_colon.centerline.arclength
+    inner = (s > 60) & (s < s[-1] - 60)  # away from the ends, where the smoothing reaches past them
+    from scipy.spatial import cKDTree
+
+    d = cKDTree(line).query(axis[inner])[0]  # how far the lumen's centre lies from the axis
+    # the ring radius at each axis point: the largest distance of its ring's vertices from the axis
+    rings = axis_colon.mesh.vertices.reshape(-1, axis_colon.n_around, 3)
+    ring_s = axis_colon.ring_arclength
+    r = np.linalg.norm(rings - axis_colon.centerline.point_at(ring_s)[:, None, :], axis=2).max(axis=1)
+    r_at = np.interp(s[inner], ring_s, r)
+    ratio = d / r_at
+    assert np.median(ratio) == pytest.approx(0.2249, abs=0.02)
+    assert np.percentile(ratio, 95) < 0.26
+    # every point of the new line is inside the tube: nearer the axis than the ring's flat side (0.5 r)
+    assert ratio.max() < 0.5
