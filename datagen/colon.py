@@ -343,19 +343,16 @@ def lumen_centred_line(rings: Centerline, frames, rho: np.ndarray, theta: np.nda
     every_mm : float
         Spacing of the sections, mm.
     """
-    from scipy.ndimage import median_filter
-
-    from colonbench.datagen.lumen import SMOOTH_MM, outline_core_centre
+    from colonbench.datagen.lumen import SMOOTH_MM, outline_core_centre, smooth_along
 
     s = rings.arclength
-    step = max(1, int(round(every_mm / max(s[1] - s[0], 1e-9))))
+    spacing = s[1] - s[0]
+    step = max(1, int(round(every_mm / max(spacing, 1e-9))))
     picks = np.unique(np.r_[np.arange(0, len(s), step), len(s) - 1])
     cos, sin = np.cos(theta), np.sin(theta)
     centres = np.array([outline_core_centre(np.c_[rho[k] * cos, rho[k] * sin]) for k in picks])
     offset = np.stack([np.interp(s, s[picks], centres[:, i]) for i in range(2)], axis=1)
-    spacing = s[1] - s[0]
-    offset = median_filter(offset, size=(max(3, int(round(5 * every_mm / spacing)) | 1), 1), mode="nearest")
-    offset = gaussian_filter1d(offset, SMOOTH_MM / spacing, axis=0, mode="nearest")
+    offset = smooth_along(offset, spacing, 5 * every_mm, SMOOTH_MM)
     norm = np.linalg.norm(offset, axis=1)
     offset *= np.minimum(1.0, 0.5 * rho.min(axis=1) / np.maximum(norm, 1e-12))[:, None]
     _, nrm, bnm = frames

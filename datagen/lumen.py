@@ -307,6 +307,24 @@ def cross_sections(cavity: np.ndarray, origin: np.ndarray, voxel: float, centerl
     return s, centroid, area
 
 
+def smooth_along(values: np.ndarray, step_mm: float, median_mm: float, smooth_mm: float) -> np.ndarray:
+    """Values sampled along a line, median-filtered over ``median_mm`` then Gaussian-smoothed (sigma ``smooth_mm``).
+
+    The median lets one odd section (a fold, a pocket, an oblique cut) move one
+    sample, not the line; the Gaussian makes the line smooth.
+
+    Parameters
+    ----------
+    values : (m, d) float
+        One row per sample, ``step_mm`` apart along the line.
+    step_mm, median_mm, smooth_mm : float
+        mm; the median window is an odd number of samples, at least 3.
+    """
+    width = max(3, int(round(median_mm / step_mm)) | 1)
+    out = ndimage.median_filter(values, size=(width, 1), mode="nearest")
+    return ndimage.gaussian_filter1d(out, smooth_mm / step_mm, axis=0, mode="nearest")
+
+
 def outline_core_centre(outline: np.ndarray, pixel_mm: float = 0.5) -> np.ndarray:
     """The centre of a closed cross-section outline: the centroid of its core, mm; (2,).
 
@@ -365,9 +383,7 @@ def recentre(cavity: np.ndarray, origin: np.ndarray, voxel: float, midline, iter
         # move by a smoothed displacement (median then Gaussian along the line, at most half the radius):
         # moving each point to its own centroid lets an oblique or pocketed section make the line zig-zag
         move = np.where(good[:, None], np.nan_to_num(cen - pts), 0.0)
-        width = max(3, int(round(2 * smooth_mm / SECTION_STEP_MM)) | 1)
-        move = ndimage.median_filter(move, size=(width, 1), mode="nearest")
-        move = ndimage.gaussian_filter1d(move, smooth_mm / SECTION_STEP_MM, axis=0, mode="nearest")
+        move = smooth_along(move, SECTION_STEP_MM, 2 * smooth_mm, smooth_mm)
         # only across the line: a move along it (the filters mix in the neighbours' moves at a bend) lets
         # points overtake each other, and the line folds back on itself in a cusp
         move -= (move * tangent).sum(axis=1, keepdims=True) * tangent

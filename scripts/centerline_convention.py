@@ -29,7 +29,6 @@ import sys
 import time
 
 import numpy as np
-from scipy import ndimage
 from scipy.spatial import cKDTree
 
 #: Distance between the sections, mm (4 points of a 0.5 mm centerline).
@@ -77,6 +76,7 @@ def lumen_line(vertices: np.ndarray, faces: np.ndarray, centerline: np.ndarray) 
     import trimesh
 
     from colonbench.completion.centerline import resample
+    from colonbench.datagen.lumen import smooth_along
 
     mesh = trimesh.Trimesh(vertices, faces, process=False)
     cl = np.asarray(centerline, float)
@@ -88,9 +88,8 @@ def lumen_line(vertices: np.ndarray, faces: np.ndarray, centerline: np.ndarray) 
         centres.append(cl[i] if c is None else c)
     if len(centres) < 3:
         return cl
-    line = ndimage.median_filter(np.array(centres), size=(5, 1), mode="nearest")
-    line = ndimage.gaussian_filter1d(line, 1.5, axis=0, mode="nearest")
-    return resample(line, 0.5)
+    step = SECTION_EVERY * 0.5  # mm between sections of a 0.5 mm centerline
+    return resample(smooth_along(np.array(centres), step, 5 * step, 1.5 * step), 0.5)
 
 
 def _pr(estimate: np.ndarray, truth: np.ndarray, th: float = 2.0) -> tuple[float, float]:

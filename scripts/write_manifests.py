@@ -135,18 +135,21 @@ dump("train-video", "Video partials for training (the video hole model on the wi
      mesh_names=["gca00090", "gca00080"])
 
 # ------------------------------------------------------------------ whole-colon benchmark (issue 12)
-whole = split(440, 4, None, 2, CLEAN, {"camera": 0.5, "spheres": 0.5}, meshes=["gca00060"])
-del whole["segments_per_length"]
+def whole_colons(first, count, permutations, meshes):
+    """A split of whole-colon reconstructions (task: colon): no segments, camera and sphere holes half and half."""
+    out = split(first, count, None, permutations, CLEAN, {"camera": 0.5, "spheres": 0.5}, meshes=meshes)
+    del out["segments_per_length"]
+    return out
+
+
 dump("colon-test", "The whole-colon benchmark (colonbench evaluate --task colon): two whole partial reconstructions "
      "(withdrawal-camera or sphere holes, 2 points/mm^2, each with its withdrawal trajectory) of each of 4 of "
      "paper.yaml's test colons and of the real held-out colon gca00060, with their exact per-face truth.",
-     20210901, {"test": whole}, mesh_names=["gca00060"], task="colon")
+     20210901, {"test": whole_colons(440, 4, 2, ["gca00060"])}, mesh_names=["gca00060"], task="colon")
 
 #: Whole-colon validation: where the map's own settings (its context margin) are chosen, never on colon-test.yaml.
-val = split(340, 4, None, 2, CLEAN, {"camera": 0.5, "spheres": 0.5}, meshes=["gca00090"])
-del val["segments_per_length"]
 dump("colon-val", "Whole-colon validation, where the map's settings are chosen (colonbench evaluate --task colon "
      "--split validation): two whole partial reconstructions (withdrawal-camera or sphere holes, 2 points/mm^2) of "
      "each of 4 of paper.yaml's validation colons and of the real training colon gca00090 (its segments are in "
      "train-real.yaml, so the network's figures on it are optimistic; colon-test.yaml's colons are never used).",
-     20261123, {"validation": val}, mesh_names=["gca00090"], task="colon")
+     20261123, {"validation": whole_colons(340, 4, 2, ["gca00090"])}, mesh_names=["gca00090"], task="colon")
