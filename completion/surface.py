@@ -53,8 +53,9 @@ from colonbench.heatmaps import distance_to, voxelize_polyline
 
 #: Revision of the steps after the network, part of the methods' versions: 1 the paper's, 2 the sparse
 #: clouds' hole distance, 3 the cut rims, 4 the shell level, 5 the wall gaps, 6 the centerline's ends on the
-#: lumen's far ends and the cut rims held where the line runs past them.
-STEPS_VERSION = "6"
+#: lumen's far ends and the cut rims held where the line runs past them, 7 an end with no cut rim pushed out to
+#: the cloud's extent.
+STEPS_VERSION = "7"
 #: Voxels below this value are surface voxels.
 SURFACE_THRESHOLD = 0.15
 #: Faces with a vertex where the (trilinearly interpolated) heatmap is above this are dropped: off the
@@ -396,7 +397,8 @@ def rim_planes(centerline_vox: np.ndarray, partial_vox: np.ndarray, band: float 
     reaches the cut, its own plane is as good; where the line runs on past it,
     into a lumen the network continued beyond the cut, the cut holds: steps
     version 6). Otherwise, an unobserved or ragged end, the end keeps
-    :func:`end_planes`' plane.
+    :func:`end_planes`' plane, pushed out along its normal to the cloud's
+    extent where the cloud runs on past it (:func:`pushed_out`, steps version 7).
 
     Returns
     -------
@@ -413,7 +415,7 @@ def rim_planes(centerline_vox: np.ndarray, partial_vox: np.ndarray, band: float 
         near = nearest <= RIM_END_SHARE * len(dense) if k == 0 else nearest >= (1 - RIM_END_SHARE) * len(dense)
         x = pts[near]
         if len(x) < RIM_MIN_POINTS:
-            out.append((point, normal))
+            out.append(pushed_out(point, normal, x))
             continue
         # coarse: the directions are ~6 degrees apart, so the touching band is twice as wide
         dirs = cap_directions(-normal, cap_deg, RIM_DIRECTIONS)
@@ -423,7 +425,7 @@ def rim_planes(centerline_vox: np.ndarray, partial_vox: np.ndarray, band: float 
         touch[count < RIM_MIN_TOUCHING] = False
         sectors = _sectors(x - point, dirs, touch)
         if not sectors.any():
-            out.append((point, normal))
+            out.append(pushed_out(point, normal, x))
             continue
         best = int(np.lexsort((np.arange(len(dirs)), count, sectors))[-1])
         # fine: the plane fitted to the touching points, its own supporting plane, a few times over
@@ -438,13 +440,46 @@ def rim_planes(centerline_vox: np.ndarray, partial_vox: np.ndarray, band: float 
             rim = _touching(x, outward, band)
         if len(rim) < RIM_MIN_TOUCHING or \
                 _sectors(rim - point, outward[None], np.ones((1, len(rim)), bool))[0] < min_share * RIM_SECTORS:
-            out.append((point, normal))
+            out.append(pushed_out(point, normal, x))
             continue
         centre = rim.mean(axis=0)
         # where the line reaches the cut, its own plane is as good (and exact on the GT heatmap); where it
         # runs on past the cut (its ends follow the lumen, which the network may continue), the cut holds
         out.append((centre, -outward) if abs((centre - point) @ outward) > RIM_BEYOND else (point, normal))
     return out
+
+
+def pushed_out(point: np.ndarray, normal: np.ndarray, points: np.ndarray,
+               min_beyond: int = RIM_MIN_TOUCHING) -> tuple[np.ndarray, np.ndarray]:
+    """An end's plane moved out along its normal to the cloud's extent, where the cloud runs on past it.
+
+    Every observed point belongs to the segment, so no plane that bounds it
+    may cut observed surface off. Where an end shows no cut rim, its plane
+    is the centerline's (:func:`end_planes`), and on colons unlike the
+    training data the network's ridge often stops well inside the segment
+    (on the real training colons the planes cut away more than 5 % of the
+    observed points in a quarter of the segments; docs/method.md, step 5). The plane keeps its normal and goes through
+    the :data:`RIM_OUTLIERS`-th farthest (0-based) of the points beyond it,
+    as the rim search's supporting planes do (so that a few outliers do not
+    hold it), when at least ``min_beyond`` points lie
+    beyond it; otherwise it stays.
+
+    Parameters
+    ----------
+    point, normal : (3,) float
+        The plane: a point on it and its inward unit normal, voxels.
+    points : (n, 3) float
+        The cloud's points at that end, voxels.
+
+    Returns
+    -------
+    (point, inward unit normal)
+    """
+    beyond = (np.asarray(point, float) - np.asarray(points, float).reshape(-1, 3)) @ normal
+    beyond = beyond[beyond > 0]
+    if len(beyond) < max(min_beyond, RIM_OUTLIERS + 1):
+        return point, normal
+    return point - np.partition(beyond, len(beyond) - 1 - RIM_OUTLIERS)[len(beyond) - 1 - RIM_OUTLIERS] * normal, normal
 
 
 def _kth_largest(values: np.ndarray, k: int) -> np.ndarray:

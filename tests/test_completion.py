@@ -264,16 +264,26 @@ def test_cut_rims_give_the_planes_a_short_centerline_misses(tilt):
     assert np.allclose(q0, full[0]) and np.allclose(m0, [0, 0, 1.0], atol=1e-6)
 
 
-def test_an_unseen_end_keeps_the_centerline_plane():
-    # the last 15 voxels before the far cut seen on one side only: no rim there
-    from colonbench.completion.surface import end_planes, rim_planes
+def test_an_end_without_a_rim_keeps_the_line_plane_pushed_out_to_the_cloud():
+    # the last 15 voxels before the far cut seen on one side only: no rim there, so the end keeps the
+    # centerline's plane; the cloud runs on 8 voxels past the line's end (to z = 50), and every observed
+    # point belongs to the segment, so the plane moves out to it (steps 7) and the coverage is the
+    # analytic one of the tube between z = 10 and 50: (25 + 15 / 3) / 40 = 0.75 (0.85 at the line's end)
+    from colonbench.completion.surface import end_planes, pushed_out, rim_planes
 
     pts, _ = _cut_tube_cloud()
     pts = pts[(pts[:, 2] < 35.0) | (pts[:, 0] > 32.0 + 10.0)]
     line = np.stack([np.full(25, 32.0), np.full(25, 32.0), np.linspace(18.0, 42.0, 25)], 1)
     rims, ends = rim_planes(line, pts), end_planes(line)
     assert abs(rims[0][0][2] - 10.0) < 1.0
-    assert np.allclose(rims[1][0], ends[1][0]) and np.allclose(rims[1][1], ends[1][1])
+    assert np.allclose(rims[1][1], ends[1][1]) and np.allclose(rims[1][0][:2], ends[1][0][:2])
+    assert abs(rims[1][0][2] - 50.0) < 0.5
+    _, grid, _, hm = tube_heatmaps(straight(63.0), UNIT)
+    assert complete(hm.target, line, pts).coverage == pytest.approx(0.75, abs=0.02)
+    # a cloud that stops before the plane, or runs past it with fewer than 20 points, leaves it where it is
+    point, normal = ends[1]
+    assert pushed_out(point, normal, pts[pts[:, 2] < 42.0])[0] is point
+    assert pushed_out(point, normal, pts[pts[:, 2] < 42.05])[0] is point
 
 
 @pytest.mark.parametrize("density", [0.5, 2.0, 8.0])
