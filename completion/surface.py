@@ -458,11 +458,11 @@ def pushed_out(point: np.ndarray, normal: np.ndarray, points: np.ndarray,
     is the centerline's (:func:`end_planes`), and on colons unlike the
     training data the network's ridge often stops well inside the segment
     (on the real training colons the planes cut away more than 5 % of the
-    observed points in a quarter of the segments; docs/method.md, step 5). The plane keeps its normal and goes through
-    the :data:`RIM_OUTLIERS`-th farthest (0-based) of the points beyond it,
-    as the rim search's supporting planes do (so that a few outliers do not
-    hold it), when at least ``min_beyond`` points lie
-    beyond it; otherwise it stays.
+    observed points in a quarter of the segments; docs/method.md, step 5).
+    The plane keeps its normal and goes through the :data:`RIM_OUTLIERS`-th
+    farthest (0-based) of the points beyond it, as the rim search's
+    supporting planes do (so that a few outliers do not hold it), when at
+    least ``min_beyond`` points lie beyond it; otherwise it stays.
 
     Parameters
     ----------
@@ -479,7 +479,8 @@ def pushed_out(point: np.ndarray, normal: np.ndarray, points: np.ndarray,
     beyond = beyond[beyond > 0]
     if len(beyond) < max(min_beyond, RIM_OUTLIERS + 1):
         return point, normal
-    return point - np.partition(beyond, len(beyond) - 1 - RIM_OUTLIERS)[len(beyond) - 1 - RIM_OUTLIERS] * normal, normal
+    k = len(beyond) - 1 - RIM_OUTLIERS
+    return point - np.partition(beyond, k)[k] * normal, normal
 
 
 def _kth_largest(values: np.ndarray, k: int) -> np.ndarray:
