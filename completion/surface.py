@@ -414,39 +414,47 @@ def rim_planes(centerline_vox: np.ndarray, partial_vox: np.ndarray, band: float 
     for k, (point, normal) in enumerate(planes):
         near = nearest <= RIM_END_SHARE * len(dense) if k == 0 else nearest >= (1 - RIM_END_SHARE) * len(dense)
         x = pts[near]
-        if len(x) < RIM_MIN_POINTS:
-            out.append(pushed_out(point, normal, x))
-            continue
-        # coarse: the directions are ~6 degrees apart, so the touching band is twice as wide
-        dirs = cap_directions(-normal, cap_deg, RIM_DIRECTIONS)
-        proj = dirs @ x.T                                           # (directions, points)
-        touch = proj > _kth_largest(proj, RIM_OUTLIERS)[:, None] - 2 * band
-        count = touch.sum(axis=1)
-        touch[count < RIM_MIN_TOUCHING] = False
-        sectors = _sectors(x - point, dirs, touch)
-        if not sectors.any():
-            out.append(pushed_out(point, normal, x))
-            continue
-        best = int(np.lexsort((np.arange(len(dirs)), count, sectors))[-1])
-        # fine: the plane fitted to the touching points, its own supporting plane, a few times over
-        outward, rim, refitted = dirs[best], x[touch[best]], False
-        for _ in range(RIM_REFINE):
-            fitted = np.linalg.svd(rim - rim.mean(axis=0), full_matrices=False)[2][2]
-            fitted = fitted if fitted @ outward >= 0 else -fitted
-            if fitted @ dirs[best] < np.cos(np.radians(RIM_FIT_DEG)):
-                break
-            outward, rim, refitted = fitted, _touching(x, fitted, band), True
-        if not refitted:                     # the coarse rim was taken within twice the band
-            rim = _touching(x, outward, band)
-        if len(rim) < RIM_MIN_TOUCHING or \
-                _sectors(rim - point, outward[None], np.ones((1, len(rim)), bool))[0] < min_share * RIM_SECTORS:
-            out.append(pushed_out(point, normal, x))
-            continue
-        centre = rim.mean(axis=0)
-        # where the line reaches the cut, its own plane is as good (and exact on the GT heatmap); where it
-        # runs on past the cut (its ends follow the lumen, which the network may continue), the cut holds
-        out.append((centre, -outward) if abs((centre - point) @ outward) > RIM_BEYOND else (point, normal))
+        rim = _rim_plane(point, normal, x, band, cap_deg, min_share)
+        out.append(pushed_out(point, normal, x) if rim is None else rim)
     return out
+
+
+def _rim_plane(point: np.ndarray, normal: np.ndarray, x: np.ndarray, band: float, cap_deg: float,
+               min_share: float) -> tuple[np.ndarray, np.ndarray] | None:
+    """One end's plane from its cut rim (:func:`rim_planes`), or None where no rim is seen there.
+
+    ``point``, ``normal``: the line's end plane (:func:`end_planes`); ``x`` (n, 3): the cloud's points at
+    that end, voxels.
+    """
+    if len(x) < RIM_MIN_POINTS:
+        return None
+    # coarse: the directions are ~6 degrees apart, so the touching band is twice as wide
+    dirs = cap_directions(-normal, cap_deg, RIM_DIRECTIONS)
+    proj = dirs @ x.T                                           # (directions, points)
+    touch = proj > _kth_largest(proj, RIM_OUTLIERS)[:, None] - 2 * band
+    count = touch.sum(axis=1)
+    touch[count < RIM_MIN_TOUCHING] = False
+    sectors = _sectors(x - point, dirs, touch)
+    if not sectors.any():
+        return None
+    best = int(np.lexsort((np.arange(len(dirs)), count, sectors))[-1])
+    # fine: the plane fitted to the touching points, its own supporting plane, a few times over
+    outward, rim, refitted = dirs[best], x[touch[best]], False
+    for _ in range(RIM_REFINE):
+        fitted = np.linalg.svd(rim - rim.mean(axis=0), full_matrices=False)[2][2]
+        fitted = fitted if fitted @ outward >= 0 else -fitted
+        if fitted @ dirs[best] < np.cos(np.radians(RIM_FIT_DEG)):
+            break
+        outward, rim, refitted = fitted, _touching(x, fitted, band), True
+    if not refitted:                     # the coarse rim was taken within twice the band
+        rim = _touching(x, outward, band)
+    if len(rim) < RIM_MIN_TOUCHING or \
+            _sectors(rim - point, outward[None], np.ones((1, len(rim)), bool))[0] < min_share * RIM_SECTORS:
+        return None
+    centre = rim.mean(axis=0)
+    # where the line reaches the cut, its own plane is as good (and exact on the GT heatmap); where it
+    # runs on past the cut (its ends follow the lumen, which the network may continue), the cut holds
+    return (centre, -outward) if abs((centre - point) @ outward) > RIM_BEYOND else (point, normal)
 
 
 def pushed_out(point: np.ndarray, normal: np.ndarray, points: np.ndarray,
@@ -475,12 +483,11 @@ def pushed_out(point: np.ndarray, normal: np.ndarray, points: np.ndarray,
     -------
     (point, inward unit normal)
     """
-    beyond = (np.asarray(point, float) - np.asarray(points, float).reshape(-1, 3)) @ normal
+    beyond = (np.asarray(point, float) - np.asarray(points, float)) @ normal
     beyond = beyond[beyond > 0]
     if len(beyond) < max(min_beyond, RIM_OUTLIERS + 1):
         return point, normal
-    k = len(beyond) - 1 - RIM_OUTLIERS
-    return point - np.partition(beyond, k)[k] * normal, normal
+    return point - _kth_largest(beyond[None], RIM_OUTLIERS)[0] * normal, normal
 
 
 def _kth_largest(values: np.ndarray, k: int) -> np.ndarray:

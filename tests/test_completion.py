@@ -278,7 +278,7 @@ def test_an_end_without_a_rim_keeps_the_line_plane_pushed_out_to_the_cloud():
     assert abs(rims[0][0][2] - 10.0) < 1.0
     assert np.allclose(rims[1][1], ends[1][1]) and np.allclose(rims[1][0][:2], ends[1][0][:2])
     assert abs(rims[1][0][2] - 50.0) < 0.5
-    _, grid, _, hm = tube_heatmaps(straight(63.0), UNIT)
+    *_, hm = tube_heatmaps(straight(63.0), UNIT)
     assert complete(hm.target, line, pts).coverage == pytest.approx(0.75, abs=0.02)
     # a cloud that stops before the plane, or runs past it with fewer than 20 points, leaves it where it is
     point, normal = ends[1]
