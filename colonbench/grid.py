@@ -130,6 +130,23 @@ def point_normals(points, neighbours: int = NORMAL_NEIGHBOURS) -> np.ndarray:
     return vecs[:, :, 0]
 
 
+def even_subsample(points, max_points: int) -> np.ndarray:
+    """At most ``max_points`` of the (n, 3) ``points``, every k-th in lexicographic (x, y, z) order.
+
+    The order the points came in does not matter: the same cloud in any order
+    gives the same subsample, so everything estimated from it (the grid's
+    axes, the cloud's density) is a function of the cloud alone. Taking every
+    k-th point in the file's order instead turned the grid by a fraction of a
+    degree when the points were shuffled, and the completion method's coverage
+    by 1.4 points on average (up to 10) on real-colon segments.
+    """
+    pts = np.asarray(points, dtype=float)
+    step = max(1, int(np.ceil(len(pts) / max_points)))
+    if step == 1:
+        return pts
+    return pts[np.lexsort(pts.T[::-1])[::step]]
+
+
 def tube_axes(points, neighbours: int = NORMAL_NEIGHBOURS, max_points: int = NORMAL_POINTS) -> np.ndarray:
     """(3, 3) rotation whose first row is the axis of the tube a partial surface cloud lies on.
 
@@ -152,7 +169,7 @@ def tube_axes(points, neighbours: int = NORMAL_NEIGHBOURS, max_points: int = NOR
     neighbours : int
         Points per local normal estimate.
     max_points : int
-        Normals are estimated on an even subsample of at most this many points.
+        Normals are estimated on an even subsample of at most this many points (:func:`even_subsample`).
 
     Returns
     -------
@@ -161,7 +178,7 @@ def tube_axes(points, neighbours: int = NORMAL_NEIGHBOURS, max_points: int = NOR
     """
     pts = np.asarray(points, dtype=float)
     centred = pts - pts.mean(axis=0)
-    sub = pts[:: max(1, int(np.ceil(len(pts) / max_points)))]
+    sub = even_subsample(pts, max_points)
     if len(sub) < 2 * neighbours:
         return principal_axes(pts)
     normals = point_normals(sub, neighbours)

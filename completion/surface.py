@@ -48,7 +48,7 @@ from scipy.spatial import cKDTree
 from skimage.measure import marching_cubes
 
 from colonbench.completion.centerline import resample
-from colonbench.grid import Grid
+from colonbench.grid import Grid, even_subsample
 from colonbench.heatmaps import distance_to, voxelize_polyline
 
 #: Revision of the steps after the network, part of the methods' versions: 1 the paper's, 2 the sparse
@@ -266,7 +266,7 @@ def sparse_reach(partial_vox: np.ndarray, false_hole_rate: float = FALSE_HOLE_RA
     The local density at a point is ``rho = k / (pi r_k^2)`` points per
     voxel^2, ``r_k`` the distance to its k-th nearest neighbour; the cloud's
     density is the median over its points (an even subsample of at most
-    :data:`DENSITY_POINTS`), which outliers, a second layer and hole borders
+    :data:`DENSITY_POINTS`, :func:`colonbench.grid.even_subsample`), which outliers, a second layer and hole borders
     barely move. On a surface sampled as a Poisson process
     of density ``rho`` a disc of radius ``d`` holds no point with probability
     ``exp(-rho pi d^2)``, so a point of the observed surface is farther than
@@ -277,7 +277,7 @@ def sparse_reach(partial_vox: np.ndarray, false_hole_rate: float = FALSE_HOLE_RA
     k = int(min(neighbours, len(partial_vox) - 1))
     if k < 1:
         return float("inf")
-    sub = partial_vox[:: max(1, int(np.ceil(len(partial_vox) / DENSITY_POINTS)))]
+    sub = even_subsample(partial_vox, DENSITY_POINTS)
     r_k = tree.query(sub, k=k + 1)[0][:, -1]
     rho = k / (np.pi * max(float(np.median(r_k)), 1e-9) ** 2)
     return float(np.sqrt(np.log(1.0 / false_hole_rate) / (np.pi * rho)))

@@ -569,3 +569,27 @@ def test_several_datasets_train_together(smoke_dataset, tmp_path):
     generate(tmp_path / "c.yaml", tmp_path / "c", workers=1, progress=False)
     with pytest.raises(InputError, match="need the same grid"):
         train([out, tmp_path / "c"], tmp_path / "run-c", cfg, device="cpu", progress=False)
+
+
+def test_the_estimate_is_the_same_whatever_the_order_of_the_points():
+    # a tube with a window, sampled like a reconstruction (more points than the grid's normals and the density
+    # estimate use): shuffled, the shipped model must give the same answer (to the rounding of sums over points)
+    from colonbench.datagen.holes import sample_surface
+    from colonbench.grid import even_subsample
+
+    colon = tube_colon(straight(63.0), R, ring_spacing_mm=0.5, n_around=256)
+    pts = sample_surface(np.random.default_rng(2), colon.mesh.vertices, colon.mesh.faces, 2.0)
+    theta = np.arctan2(pts[:, 1], pts[:, 0])
+    pts = pts[~((np.abs(theta) < 0.5) & (pts[:, 2] > 20) & (pts[:, 2] < 40))]
+    shuffled = pts[np.random.default_rng(3).permutation(len(pts))]
+    assert len(pts) > 3000
+    a = np.sort(even_subsample(pts, 1000).view("f8,f8,f8"), axis=0)
+    b = np.sort(even_subsample(shuffled, 1000).view("f8,f8,f8"), axis=0)
+    assert len(a) <= 1000 and np.array_equal(a, b)
+    method = CompletionMethod()
+    one, other = method.estimate(pts), method.estimate(shuffled)
+    assert one.coverage == pytest.approx(other.coverage, abs=1e-6)
+    assert 1 - one.coverage == pytest.approx(R * 1.0 * 20.0 / (2 * np.pi * R * 63.0), abs=0.03)  # the window
+    assert one.centerline.shape == other.centerline.shape and one.holes.shape == other.holes.shape
+    np.testing.assert_allclose(one.centerline, other.centerline, atol=1e-3)   # mm: float32 rounding
+    np.testing.assert_allclose(one.holes, other.holes, atol=1e-3)
