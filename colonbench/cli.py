@@ -236,7 +236,7 @@ def cmd_estimate(args):
     """Estimate coverage, holes and centerline of partial segments; one JSON per input."""
     from colonbench.benchmark.registry import as_estimate, load_method
     from colonbench.datagen.generate import write_points_ply
-    from colonbench.pointio import read_points, write_mesh_ply
+    from colonbench.pointio import read_surface, write_mesh_ply
 
     files = [Path(f) for f in args.files]
     names = [estimate_name(f) for f in files]
@@ -253,7 +253,10 @@ def cmd_estimate(args):
     failed = 0
     for f, name in zip(files, names):
         try:
-            est = as_estimate(method.estimate(read_points(f)), method.name)
+            points, dropped = read_surface(f)
+            if dropped:
+                print(f"colonbench: note: {f}: {dropped} point(s) that are NaN or infinite left out", file=sys.stderr)
+            est = as_estimate(method.estimate(points), method.name)
         except ColonbenchError as exc:
             print(f"colonbench: error: {f}: {exc}", file=sys.stderr)
             failed += 1
@@ -598,7 +601,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_train)
 
     p = sub.add_parser("estimate", help="estimate coverage, holes and centerline of partial segments (mm)")
-    p.add_argument("files", nargs="+", help="partial point clouds (.ply, .npy, .xyz; mm), one segment each")
+    p.add_argument("files", nargs="+", help="partial segments, mm, one each: point clouds (.ply, .npy, .xyz, .txt) or meshes (.ply, .obj; sampled on their faces at 2 points/mm^2)")
     p.add_argument("--out-dir", required=True, help="folder for <name>.json per input")
     p.add_argument("--method", default="completion", help="method (default completion: the paper's)")
     _add_model_args(p, "model .safetensors from colonbench train, or a shipped model by name: small (the default), "

@@ -1,19 +1,35 @@
-"""Reading and writing point clouds and meshes a user hands us: PLY, NPY, XYZ, in mm."""
+"""Reading and writing point clouds and meshes a user hands us: PLY, OBJ, NPY, XYZ, in mm."""
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import numpy as np
 
 from colonbench.errors import InputError
 
-#: File types ``read_points`` understands.
-POINT_SUFFIXES = (".ply", ".npy", ".xyz", ".txt")
+#: File types ``read_surface`` understands: point clouds (``.npy``, ``.xyz``, ``.txt``, a ``.ply`` without
+#: faces) and meshes (``.ply`` or ``.obj`` with faces).
+SURFACE_SUFFIXES = (".ply", ".obj", ".npy", ".xyz", ".txt")
+#: A mesh is sampled at this density (points/mm^2), the paper's and the shipped model's.
+MESH_DENSITY = 2.0
 
 
-def read_points(path) -> np.ndarray:
-    """(n, 3) float64 points from a ``.ply`` (vertices of a point cloud or mesh), ``.npy`` or ``.xyz``/``.txt``.
+def read_surface(path, seed: int = 0) -> tuple[np.ndarray, int]:
+    """The points of a user's surface file, mm: a point cloud, or a mesh sampled on its faces.
+
+    A mesh is sampled uniformly on its faces at :data:`MESH_DENSITY` points/mm^2
+    (seeded by ``seed``), so that the coarse faces of a fused surface reach a
+    method as the clouds it was trained on, whatever the mesh's vertex
+    spacing. Rows that are not finite (NaN or infinite: invalid depth in a
+    reconstruction) are dropped and counted.
+
+    Returns
+    -------
+    points : (n, 3) float64
+    dropped : int
+        Rows dropped for not being finite.
 
     Raises
     ------
@@ -21,23 +37,20 @@ def read_points(path) -> np.ndarray:
         For a missing file, an unknown type, or content that is not x, y, z.
     """
     path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in SURFACE_SUFFIXES:
+        raise InputError(f"{path}: unknown file type {suffix!r}; use one of {', '.join(SURFACE_SUFFIXES)}")
     if not path.is_file():
         raise InputError(f"{path}: no such file")
-    suffix = path.suffix.lower()
     try:
         if suffix == ".npy":
             pts = np.load(path, allow_pickle=False)
         elif suffix in (".xyz", ".txt"):
-            pts = np.loadtxt(path, ndmin=2, usecols=(0, 1, 2))
-        elif suffix == ".ply":
-            import trimesh
-
-            geom = trimesh.load(path, process=False)
-            if not hasattr(geom, "vertices"):
-                raise InputError(f"{path}: a PLY file without vertices")
-            pts = np.asarray(geom.vertices)
+            with warnings.catch_warnings():  # an empty file: reported below as 0 points
+                warnings.simplefilter("ignore", UserWarning)
+                pts = np.loadtxt(path, ndmin=2, usecols=(0, 1, 2))
         else:
-            raise InputError(f"{path}: unknown point file type {suffix!r}; use one of {', '.join(POINT_SUFFIXES)}")
+            pts = _mesh_or_cloud(path, suffix, seed)
     except InputError:
         raise
     except Exception as exc:  # noqa: BLE001 - numpy/trimesh raise many types for a bad file
@@ -45,7 +58,32 @@ def read_points(path) -> np.ndarray:
     pts = np.asarray(pts)
     if pts.ndim != 2 or pts.shape[1] != 3 or not np.issubdtype(pts.dtype, np.number):
         raise InputError(f"{path}: expected (n, 3) x, y, z values, got an array of shape {pts.shape}")
-    return pts.astype(np.float64)
+    pts = pts.astype(np.float64)
+    finite = np.isfinite(pts).all(axis=1)
+    return pts[finite], int(np.count_nonzero(~finite))
+
+
+def _mesh_or_cloud(path: Path, suffix: str, seed: int) -> np.ndarray:
+    """A ``.ply`` or ``.obj``: its faces sampled at :data:`MESH_DENSITY`, or its vertices if it has no faces
+    (or too little area to sample)."""
+    import trimesh
+
+    geom = trimesh.load(path, process=False, force="mesh") if suffix == ".obj" else trimesh.load(path, process=False)
+    faces = getattr(geom, "faces", None)
+    vertices = getattr(geom, "vertices", None)
+    if vertices is None or len(vertices) == 0:
+        raise InputError(f"{path}: neither a point cloud nor a mesh (no vertices)")
+    vertices = np.asarray(vertices, float)
+    if faces is None or len(faces) == 0:
+        return vertices
+    from colonbench.datagen.holes import sample_surface
+
+    faces = np.asarray(faces)
+    usable = np.isfinite(vertices[faces]).all(axis=(1, 2))   # a face on a NaN vertex has no area to sample
+    points = sample_surface(np.random.default_rng(seed), vertices, faces[usable], density=MESH_DENSITY)
+    # too little area for one sample (a mesh in metres has a millionth of its area in mm^2): its vertices,
+    # so that the caller's unit check says what is wrong
+    return points if len(points) else vertices
 
 
 def write_mesh_ply(path, vertices, faces, colors=None) -> Path:

@@ -8,20 +8,13 @@ import numpy as np
 
 from colonbench.errors import InputError
 
-#: Suffixes ``read_reconstruction`` reads.
-RECONSTRUCTION_SUFFIXES = (".ply", ".obj", ".npy", ".xyz", ".txt")
-#: A mesh is sampled at this density (points/mm^2), the paper's and the shipped model's.
-MESH_DENSITY = 2.0
 #: Points within this bounding-box diagonal (in the file's unit) are taken for metres.
 METRES_BELOW = 5.0
 
 
 def read_reconstruction(path, seed: int = 0) -> np.ndarray:
-    """(n, 3) float points, mm, of a reconstruction: a point cloud, or a mesh sampled on its faces.
-
-    A mesh (``.ply`` or ``.obj`` with faces) is sampled uniformly at
-    :data:`MESH_DENSITY` points/mm^2, so that coarse faces of a fused surface
-    reach the method as the clouds it was trained on.
+    """(n, 3) float points, mm, of a reconstruction: a point cloud, or a mesh sampled on its faces
+    (:func:`colonbench.pointio.read_surface`; rows that are not finite dropped).
 
     Raises
     ------
@@ -29,36 +22,9 @@ def read_reconstruction(path, seed: int = 0) -> np.ndarray:
         Missing or unreadable file, unknown type, fewer than 100 points, or
         coordinates that look like metres.
     """
-    from colonbench.pointio import read_points
+    from colonbench.pointio import read_surface
 
-    path = Path(path)
-    suffix = path.suffix.lower()
-    if suffix not in RECONSTRUCTION_SUFFIXES:
-        raise InputError(f"{path}: unknown reconstruction type {suffix!r}; use one of "
-                         f"{', '.join(RECONSTRUCTION_SUFFIXES)}")
-    if not path.is_file():
-        raise InputError(f"{path}: no such file")
-    if suffix in (".ply", ".obj"):
-        import trimesh
-
-        try:
-            geom = trimesh.load(path, process=False, force="mesh") if suffix == ".obj" else trimesh.load(
-                path, process=False)
-        except Exception as exc:  # noqa: BLE001 - trimesh raises many types for a bad file
-            raise InputError(f"{path}: could not read it ({type(exc).__name__}: {exc})") from None
-        faces = getattr(geom, "faces", None)
-        if faces is not None and len(faces):
-            from colonbench.datagen.holes import sample_surface
-
-            points = sample_surface(np.random.default_rng(seed), geom.vertices, faces, density=MESH_DENSITY)
-        elif hasattr(geom, "vertices"):
-            points = np.asarray(geom.vertices, float)
-        else:
-            raise InputError(f"{path}: neither a point cloud nor a mesh")
-    else:
-        points = read_points(path)
-    points = np.asarray(points, float)
-    points = points[np.isfinite(points).all(axis=1)]
+    points, _ = read_surface(path, seed)
     if len(points) < 100:
         raise InputError(f"{path}: {len(points)} points; a colon reconstruction has thousands")
     check_millimetres(points, str(path))

@@ -80,3 +80,30 @@ def test_picture(tmp_path):
     assert r.returncode == 0, r.stderr
     png = (tmp_path / "seg.png").read_bytes()
     assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 10000
+
+
+def test_estimate_reads_a_mesh_on_its_faces_and_leaves_out_points_that_are_not_finite(tmp_path):
+    # a 60 mm tube of radius 15: as a coarse .obj mesh it is sampled on its faces at the training density
+    # (its 1440 vertices would be a sparse cloud); a NaN row of a cloud is left out with a note
+    from shapes import straight
+
+    from colonbench.datagen.colon import tube_colon
+    from colonbench.pointio import MESH_DENSITY, read_surface
+
+    mesh = tube_colon(straight(60.0), 15.0, ring_spacing_mm=2.5, n_around=60).mesh
+    mesh.export(tmp_path / "tube.obj")
+    pts, dropped = read_surface(tmp_path / "tube.obj")
+    assert dropped == 0 and len(pts) == round(MESH_DENSITY * mesh.area)
+    assert np.abs(np.linalg.norm(pts[:, :2], axis=1) - 15.0).max() < 0.2   # on the faces, not only the vertices
+    cloud = np.concatenate([pts, [[np.nan, 0.0, 0.0], [np.inf, 1.0, 2.0]]])
+    np.savetxt(tmp_path / "cloud.xyz", cloud)
+    again, dropped = read_surface(tmp_path / "cloud.xyz")
+    assert dropped == 2 and np.allclose(again, pts)
+    r = run("estimate", tmp_path / "cloud.xyz", tmp_path / "tube.obj", "--method", "unwrap-pca",
+            "--out-dir", tmp_path / "o")
+    assert r.returncode == 0, r.stderr
+    assert "cloud.xyz: 2 point(s) that are NaN or infinite left out" in r.stderr
+    assert json.loads((tmp_path / "o" / "tube.json").read_text())["coverage"] > 0.9
+    (tmp_path / "empty.xyz").write_text("")
+    r = run("estimate", tmp_path / "empty.xyz", "--out-dir", tmp_path / "o")
+    assert r.returncode == 2 and "0 point(s)" in r.stderr and "Warning" not in r.stderr

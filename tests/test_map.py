@@ -221,7 +221,8 @@ def test_bad_inputs_are_refused(tmp_path, capsys):
 
 def test_a_mesh_reconstruction_is_sampled_at_the_training_density(tmp_path):
     from colonbench.errors import InputError
-    from colonbench.mapping.inputs import MESH_DENSITY, read_reconstruction
+    from colonbench.mapping.inputs import read_reconstruction
+    from colonbench.pointio import MESH_DENSITY
 
     tube = tube_colon(straight(200.0), RADIUS, ring_spacing_mm=1.0, n_around=96)
     tube.mesh.export(tmp_path / "tube.obj")
