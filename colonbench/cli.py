@@ -14,6 +14,7 @@ from pathlib import Path
 
 from colonbench import __version__
 from colonbench.errors import ColonbenchError
+from colonbench.pointio import MESH_DENSITY
 
 
 def _generator_config(args):
@@ -601,7 +602,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_train)
 
     p = sub.add_parser("estimate", help="estimate coverage, holes and centerline of partial segments (mm)")
-    p.add_argument("files", nargs="+", help="partial segments, mm, one each: point clouds (.ply, .npy, .xyz, .txt) or meshes (.ply, .obj; sampled on their faces at 2 points/mm^2)")
+    p.add_argument("files", nargs="+", help="partial segments, mm, one each: point clouds (.ply, .npy, .xyz, .txt) "
+                   f"or meshes (.ply, .obj; sampled on their faces at {MESH_DENSITY:g} points/mm^2)")
     p.add_argument("--out-dir", required=True, help="folder for <name>.json per input")
     p.add_argument("--method", default="completion", help="method (default completion: the paper's)")
     _add_model_args(p, "model .safetensors from colonbench train, or a shipped model by name: small (the default), "
