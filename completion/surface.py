@@ -54,8 +54,8 @@ from colonbench.heatmaps import distance_to, voxelize_polyline
 #: Revision of the steps after the network, part of the methods' versions: 1 the paper's, 2 the sparse
 #: clouds' hole distance, 3 the cut rims, 4 the shell level, 5 the wall gaps, 6 the centerline's ends on the
 #: lumen's far ends and the cut rims held where the line runs past them, 7 an end with no cut rim pushed out to
-#: the cloud's extent.
-STEPS_VERSION = "7"
+#: the cloud's extent, 8 the wall gaps' stations run on from the line's ends to planes beyond them.
+STEPS_VERSION = "8"
 #: Voxels below this value are surface voxels.
 SURFACE_THRESHOLD = 0.15
 #: Faces with a vertex where the (trilinearly interpolated) heatmap is above this are dropped: off the
@@ -566,9 +566,57 @@ def inside_planes(points: np.ndarray, planes: list, inset: float = 0.0) -> np.nd
     return keep
 
 
-def _station_frames(centerline_vox: np.ndarray, planes: list, inset: float) -> tuple:
-    """Stations 1 voxel apart along the line between the planes, their unit tangents and two normals."""
+def reach_planes(centerline_vox: np.ndarray, planes: list, heatmap: np.ndarray | None = None,
+                 lumen: float = GAP_VALLEY) -> np.ndarray:
+    """The line run on straight from each end towards that end's plane, where the plane lies beyond the end.
+
+    A plane pushed out to the cloud's extent, or a cut rim found past the
+    line's end (:func:`rim_planes`), leaves a stretch of the segment beyond
+    the line; the line is extended there in steps of 1 voxel along the
+    plane's outward normal, up to the plane, and (given the heatmap) only
+    while it stays in the lumen: it stops before the first point where the
+    heatmap falls below ``lumen``, a wall's level (:data:`GAP_VALLEY`). A short
+    line that lies off the lumen's axis would otherwise run on across the
+    colon, and its stations would cast rays from outside the tube.
+
+    Parameters
+    ----------
+    centerline_vox : (m, 3) float
+        Ordered from the first plane's end to the second's, voxels.
+    planes : list of (point, inward normal)
+        One per end, in the line's order (:func:`segment_planes`); with any other count the line
+        comes back as it is.
+    heatmap : (S, S, S) float, optional
+        The target heatmap the line lies in.
+    lumen : float
+        The run-on stays where the heatmap is at or above this.
+
+    Returns
+    -------
+    (m + k, 3) float
+        The line with ``k`` points added before its start and after its end, voxels.
+    """
     c = np.asarray(centerline_vox, dtype=float)
+    if len(c) < 2 or len(planes) != 2:
+        return c
+    parts = [c]
+    for end, (point, inward), first in ((c[0], planes[0], True), (c[-1], planes[1], False)):
+        inward = np.asarray(inward, dtype=float)
+        beyond = float((end - np.asarray(point, dtype=float)) @ inward)     # how far the end lies inside
+        if beyond <= 1.0:
+            continue
+        ext = end - np.arange(1.0, np.ceil(beyond) + 1.0)[:, None] * inward
+        if heatmap is not None:
+            wall = np.nonzero(ndimage.map_coordinates(heatmap, ext.T, order=1, mode="nearest") < lumen)[0]
+            ext = ext[:wall[0]] if len(wall) else ext
+        parts = [ext[::-1]] + parts if first else parts + [ext]
+    return np.concatenate(parts)
+
+
+def _station_frames(centerline_vox: np.ndarray, planes: list, inset: float, heatmap: np.ndarray) -> tuple:
+    """Stations 1 voxel apart along the line (run on towards the planes in the lumen, :func:`reach_planes`)
+    between the planes, their unit tangents and two normals."""
+    c = reach_planes(centerline_vox, planes, heatmap)
     s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(c, axis=0), axis=1))])
     at = np.arange(0.5, s[-1], 1.0)
     p = np.stack([np.interp(at, s, c[:, k]) for k in range(3)], axis=1)
@@ -585,7 +633,8 @@ def wall_gaps(heatmap: np.ndarray, centerline_vox: np.ndarray, planes: list, thr
     """Patches of hole surface where the completed tube has no wall.
 
     From stations 1 voxel apart along the centerline, between the segment's
-    planes, ``rays`` rays perpendicular to the line are marched through the
+    planes (the line run on straight, in the lumen, towards a plane that lies
+    beyond its end: :func:`reach_planes`), ``rays`` rays perpendicular to the line are marched through the
     heatmap. A ray that meets no voxel below ``threshold`` inside the grid,
     or meets the first one farther than ``far`` times the station's median
     wall distance, passes where the heatmap holds no wall; it is a gap when
@@ -613,7 +662,7 @@ def wall_gaps(heatmap: np.ndarray, centerline_vox: np.ndarray, planes: list, thr
     none = (np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64))
     if len(centerline_vox) < 2:
         return none
-    p, t, u, v = _station_frames(centerline_vox, planes, inset)
+    p, t, u, v = _station_frames(centerline_vox, planes, inset, heatmap)
     if len(p) == 0:
         return none
     size = heatmap.shape[0]

@@ -286,6 +286,38 @@ def test_an_end_without_a_rim_keeps_the_line_plane_pushed_out_to_the_cloud():
     assert pushed_out(point, normal, pts[pts[:, 2] < 42.05])[0] is point
 
 
+def test_the_wall_gaps_run_on_past_the_line_to_a_pushed_out_plane():
+    # the cloud of the test above, and a prediction whose wall fades (0.3, the network unsure) on the
+    # unseen side (x < 32) past z = 43, where the line has ended: the stretch between the line's end (42)
+    # and the pushed-out plane (50) is in the segment, its unseen half has no surface voxel, and the wall
+    # gaps there come from stations on the line run on straight to the plane, in the lumen (steps 8). Coverage: the
+    # analytic 0.75 of the tube between z = 10 and 50; with stations on the line alone that half is
+    # simply left out (0.81)
+    from colonbench.completion.surface import reach_planes, rim_planes
+
+    pts, _ = _cut_tube_cloud()
+    pts = pts[(pts[:, 2] < 35.0) | (pts[:, 0] > 32.0 + 10.0)]
+    line = np.stack([np.full(25, 32.0), np.full(25, 32.0), np.linspace(18.0, 42.0, 25)], 1)
+    *_, hm = tube_heatmaps(straight(63.0), UNIT)
+    faint = hm.target.copy()
+    faint[:32, :, 44:] = np.maximum(faint[:32, :, 44:], 0.3)
+    planes = rim_planes(line, pts)
+    run_on = reach_planes(line, planes)
+    assert run_on[0, 2] == pytest.approx(10.0, abs=1.0) and run_on[-1, 2] == pytest.approx(50.0, abs=1.0)
+    assert np.allclose(run_on[:, :2], 32.0, atol=0.3)               # straight on, along the tube
+    assert np.array_equal(reach_planes(line, [planes[0]]), line)   # not one plane per end: as it is
+    assert reach_planes(line, planes, faint)[-1, 2] == pytest.approx(50.0, abs=1.0)   # in the lumen all along
+    walled = faint.copy()
+    walled[:, :, 46:48] = 0.0                                       # a wall across the tube: the run-on stops there
+    assert reach_planes(line, planes, walled)[-1, 2] == pytest.approx(45.0, abs=0.6)
+    comp = complete(faint, line, pts)
+    assert comp.coverage == pytest.approx(0.75, abs=0.02)
+    gap_v, gap_f = wall_gaps(faint, line, planes)
+    centroid = gap_v[gap_f].mean(axis=1)
+    assert (centroid[:, 2] > 42.0).all() and (centroid[:, 0] < 33.5).all()   # past the line, on the unseen side
+    assert triangle_areas(gap_v, gap_f).sum() == pytest.approx(np.pi * 20.0 * np.ptp(gap_v[:, 2]), rel=0.1)
+
+
 @pytest.mark.parametrize("density", [0.5, 2.0, 8.0])
 def test_a_cut_window_in_a_sparse_or_dense_cloud_is_a_hole_of_its_area(density):
     # the same window, the surface sampled uniformly at random at `density` points/mm^2 (a reconstruction's
