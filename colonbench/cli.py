@@ -237,7 +237,7 @@ def cmd_estimate(args):
     """Estimate coverage, holes and centerline of partial segments; one JSON per input."""
     from colonbench.benchmark.registry import as_estimate, load_method
     from colonbench.datagen.generate import write_points_ply
-    from colonbench.pointio import read_surface, write_mesh_ply
+    from colonbench.pointio import dropped_note, read_surface, write_mesh_ply
 
     files = [Path(f) for f in args.files]
     names = [estimate_name(f) for f in files]
@@ -256,7 +256,7 @@ def cmd_estimate(args):
         try:
             points, dropped = read_surface(f)
             if dropped:
-                print(f"colonbench: note: {f}: {dropped} point(s) that are NaN or infinite left out", file=sys.stderr)
+                print(dropped_note(f, dropped), file=sys.stderr)
             est = as_estimate(method.estimate(points), method.name)
         except ColonbenchError as exc:
             print(f"colonbench: error: {f}: {exc}", file=sys.stderr)
@@ -365,9 +365,12 @@ def cmd_map(args):
     from colonbench.completion.method import DEFAULT_MODEL
     from colonbench.mapping.colonmap import map_colon, write_map
     from colonbench.mapping.inputs import check_trajectory, read_reconstruction, read_trajectory
+    from colonbench.pointio import dropped_note
 
     t0 = time.perf_counter()
-    points = read_reconstruction(args.reconstruction)
+    points, dropped = read_reconstruction(args.reconstruction)
+    if dropped:
+        print(dropped_note(args.reconstruction, dropped), file=sys.stderr)
     positions = None
     if args.trajectory:
         positions = read_trajectory(args.trajectory)

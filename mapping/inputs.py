@@ -12,9 +12,15 @@ from colonbench.errors import InputError
 METRES_BELOW = 5.0
 
 
-def read_reconstruction(path, seed: int = 0) -> np.ndarray:
-    """(n, 3) float points, mm, of a reconstruction: a point cloud, or a mesh sampled on its faces
-    (:func:`colonbench.pointio.read_surface`; rows that are not finite dropped).
+def read_reconstruction(path, seed: int = 0) -> tuple[np.ndarray, int]:
+    """The points of a reconstruction, mm: a point cloud, or a mesh sampled on its faces
+    (:func:`colonbench.pointio.read_surface`).
+
+    Returns
+    -------
+    points : (n, 3) float
+    dropped : int
+        Rows left out for not being finite (NaN or infinite).
 
     Raises
     ------
@@ -24,11 +30,11 @@ def read_reconstruction(path, seed: int = 0) -> np.ndarray:
     """
     from colonbench.pointio import read_surface
 
-    points, _ = read_surface(path, seed)
+    points, dropped = read_surface(path, seed)
     if len(points) < 100:
         raise InputError(f"{path}: {len(points)} points; a colon reconstruction has thousands")
     check_millimetres(points, str(path))
-    return points
+    return points, dropped
 
 
 def check_millimetres(points: np.ndarray, what: str) -> None:

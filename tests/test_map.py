@@ -59,18 +59,20 @@ def test_helical_tube_centerline_and_planes(tmp_path):
 
 
 @pytest.mark.slow
-def test_straight_tube_segments_get_their_known_coverage(tmp_path):
+def test_straight_tube_segments_get_their_known_coverage(tmp_path, capsys):
     line = straight(300.0)
     pts, s, _ = tube_cloud(line, seed=1)
     theta = np.arctan2(pts[:, 1], pts[:, 0])
     # two windows of known area: a quarter of the wall over 70-100 mm, half of it over 190-230 mm
     cut = ((s > 70) & (s < 100) & (theta > 0) & (theta < np.pi / 2)) | ((s > 190) & (s < 230) & (theta > 0))
-    np.save(tmp_path / "tube.npy", pts[~cut])
+    # and two rows of invalid depth, left out with a note
+    np.save(tmp_path / "tube.npy", np.concatenate([pts[~cut], [[np.nan, 0.0, 0.0], [0.0, np.inf, 1.0]]]))
     traj = np.stack([np.zeros(31), np.zeros(31), np.linspace(300, 0, 31)], axis=1)  # withdrawal to z = 0
     np.savetxt(tmp_path / "traj.txt", np.concatenate([np.arange(31)[:, None], traj,
                                                       np.tile([0, 0, 0, 1.0], (31, 1))], axis=1))
     assert main(["map", str(tmp_path / "tube.npy"), "--out", str(tmp_path / "map"), "--trajectory",
                  str(tmp_path / "traj.txt"), "--quiet"]) == 0
+    assert "2 point(s) that are NaN or infinite left out" in capsys.readouterr().err
     segs = json.loads((tmp_path / "map" / "segments.json").read_text())["segments"]
     assert [round(x["start_mm"]) for x in segs] == [0, 60, 120, 180, 240]
     truth = [1.0, 1 - 30 / (4 * 60), 1.0, 1 - 40 / (2 * 60), 1.0]
@@ -226,7 +228,8 @@ def test_a_mesh_reconstruction_is_sampled_at_the_training_density(tmp_path):
 
     tube = tube_colon(straight(200.0), RADIUS, ring_spacing_mm=1.0, n_around=96)
     tube.mesh.export(tmp_path / "tube.obj")
-    pts = read_reconstruction(tmp_path / "tube.obj")
+    pts, dropped = read_reconstruction(tmp_path / "tube.obj")
+    assert dropped == 0
     assert len(pts) == pytest.approx(MESH_DENSITY * tube.mesh.area, rel=0.01)
     assert np.abs(np.linalg.norm(pts[:, :2], axis=1) - RADIUS).max() < 0.1  # on the surface
     (tmp_path / "bad.obj").write_text("this is not a mesh\n")
