@@ -197,6 +197,12 @@ def cmd_train(args):
           f"{result['seconds'] / 60:.1f} min in all: {how}. Model: {Path(args.out) / 'best.safetensors'}")
 
 
+def _note_dropped(path, dropped: int) -> None:
+    """Say on stderr how many rows of a user's file were left out for not being finite (nothing for none)."""
+    if dropped:
+        print(f"colonbench: note: {path}: {dropped} point(s) that are NaN or infinite left out", file=sys.stderr)
+
+
 def _model_sha256(model):
     """sha256 of a model file or shipped model's, None for None; a missing one is left for the command to report."""
     from colonbench.completion.method import model_path
@@ -237,7 +243,7 @@ def cmd_estimate(args):
     """Estimate coverage, holes and centerline of partial segments; one JSON per input."""
     from colonbench.benchmark.registry import as_estimate, load_method
     from colonbench.datagen.generate import write_points_ply
-    from colonbench.pointio import dropped_note, read_surface, write_mesh_ply
+    from colonbench.pointio import read_surface, write_mesh_ply
 
     files = [Path(f) for f in args.files]
     names = [estimate_name(f) for f in files]
@@ -255,8 +261,7 @@ def cmd_estimate(args):
     for f, name in zip(files, names):
         try:
             points, dropped = read_surface(f)
-            if dropped:
-                print(dropped_note(f, dropped), file=sys.stderr)
+            _note_dropped(f, dropped)
             est = as_estimate(method.estimate(points), method.name)
         except ColonbenchError as exc:
             print(f"colonbench: error: {f}: {exc}", file=sys.stderr)
@@ -365,12 +370,10 @@ def cmd_map(args):
     from colonbench.completion.method import DEFAULT_MODEL
     from colonbench.mapping.colonmap import map_colon, write_map
     from colonbench.mapping.inputs import check_trajectory, read_reconstruction, read_trajectory
-    from colonbench.pointio import dropped_note
 
     t0 = time.perf_counter()
     points, dropped = read_reconstruction(args.reconstruction)
-    if dropped:
-        print(dropped_note(args.reconstruction, dropped), file=sys.stderr)
+    _note_dropped(args.reconstruction, dropped)
     positions = None
     if args.trajectory:
         positions = read_trajectory(args.trajectory)

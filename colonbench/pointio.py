@@ -63,11 +63,6 @@ def read_surface(path, seed: int = 0) -> tuple[np.ndarray, int]:
     return pts[finite], int(np.count_nonzero(~finite))
 
 
-def dropped_note(path, dropped: int) -> str | None:
-    """The note a command prints on stderr for the rows :func:`read_surface` dropped (None for none)."""
-    return f"colonbench: note: {path}: {dropped} point(s) that are NaN or infinite left out" if dropped else None
-
-
 def _mesh_or_cloud(path: Path, suffix: str, seed: int) -> np.ndarray:
     """A ``.ply`` or ``.obj``: its faces sampled at :data:`MESH_DENSITY`, or its vertices if it has no faces
     (or too little area to sample)."""
