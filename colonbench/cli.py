@@ -186,7 +186,7 @@ def cmd_train(args):
 
     cfg = TrainConfig(network=args.network, batch_size=args.batch_size, lr=args.lr, epochs=args.epochs,
                       augment_prob=args.augment_prob, seed=args.seed, workers=args.workers, flips=args.flips,
-                      erase=args.erase,
+                      erase=args.erase, repeat=tuple(args.repeat or ()),
                       checkpoint_minutes=args.checkpoint_minutes, max_minutes=args.max_minutes,
                       keep_epochs=args.keep_epochs, init=args.init, init_sha256=_model_sha256(args.init))
     command = "colonbench train " + " ".join(sys.argv[2:]) if len(sys.argv) > 2 else ""
@@ -195,6 +195,17 @@ def cmd_train(args):
            "signal": "stopped on request; run the same command to resume"}.get(result["stopped"], "done")
     print(f"{result['epochs']} epochs, {result['steps']} steps, best validation L2 {result['best_val_l2']:.5f}, "
           f"{result['seconds'] / 60:.1f} min in all: {how}. Model: {Path(args.out) / 'best.safetensors'}")
+
+
+def _repeats(text: str) -> tuple:
+    """--repeat's comma-separated whole numbers >= 1."""
+    try:
+        values = tuple(int(v) for v in text.split(","))
+    except ValueError:
+        values = ()
+    if not values or min(values) < 1:
+        raise argparse.ArgumentTypeError(f"{text!r}: whole numbers >= 1, comma-separated, one per dataset")
+    return values
 
 
 def _note_dropped(path, dropped: int) -> None:
@@ -593,6 +604,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--erase", type=float, default=0.0, metavar="P",
                    help="share of a pack's training samples whose partial surface loses 1-3 ball-shaped patches "
                         "before its input heatmap is made: larger holes to complete (default 0)")
+    p.add_argument("--repeat", type=_repeats, default=None, metavar="N,N,...",
+                   help="times each dataset's training samples come up per epoch, one whole number per dataset in "
+                        "the order given (default 1 each): e.g. 1,8 gives a small real-colon set eight times its "
+                        "share beside a large procedural one")
     p.add_argument("--seed", type=int, default=0, help="seed of weights, sample order and augmentations")
     p.add_argument("--init", help="start from this model's weights (.safetensors or a shipped model's name, same "
                                   "network) instead of random ones: fine-tuning; its sha256 is recorded")

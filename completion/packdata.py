@@ -197,6 +197,8 @@ class PackSplit:
         The (first) pack's ``pack.json``.
     size : int
         Grid side S.
+    sizes : list of int
+        Samples of each pack, in the order given.
     """
 
     def __init__(self, pack_dir, split: str, device, cache: bool | None = None):
@@ -207,6 +209,7 @@ class PackSplit:
         if other:
             raise InputError(f"{other[0]} has another grid than {dirs[0]}; packs trained together need the same grid")
         self.size = int(self.info["grid_options"]["size"])
+        self.sizes = [len(bits[GRIDS[0]]) for _, bits in read]
         self.device = torch.device(device)
         self.bits = torch.from_numpy(np.concatenate([np.stack([bits[g] for g in GRIDS], axis=1)
                                                      for _, bits in read])).to(self.device)

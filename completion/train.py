@@ -81,6 +81,7 @@ class TrainConfig:
     erase: float = 0.0
     init: str | None = None
     init_sha256: str | None = None
+    repeat: tuple = ()
 
     def check(self):
         if self.network not in NETWORKS:
@@ -96,6 +97,8 @@ class TrainConfig:
             raise InputError("lr must be positive")
         if self.seed < 0 or self.workers < 0:
             raise InputError("seed and workers must be >= 0")
+        if any(not isinstance(r, int) or r < 1 for r in self.repeat):
+            raise InputError(f"repeat: whole numbers >= 1, one per dataset, not {list(self.repeat)}")
         from colonbench.datagen.config import from_dict
         from_dict(AugmentConfig, self.augment)
         return self
@@ -117,6 +120,25 @@ def _dist():
 def epoch_order(n: int, seed: int, epoch: int) -> np.ndarray:
     """The sample order of an epoch: a permutation drawn from stream ``("shuffle", epoch)``."""
     return seeding.rng(seed, "shuffle", epoch).permutation(n)
+
+
+def epoch_slots(sizes, repeat=()) -> np.ndarray:
+    """(m,) int: the training sample behind each slot of an epoch, each dataset's samples ``repeat`` times.
+
+    Several datasets train as one set, in the order given, ``sizes`` samples
+    each; dataset ``i`` fills ``repeat[i]`` slots per sample (all 1 when
+    ``repeat`` is empty), so a small source (two real colons beside 150
+    procedural ones) weighs more without being copied. An epoch visits the
+    slots in the order :func:`epoch_order` draws; flips and erasures are
+    drawn per slot, so a repeated sample is augmented differently each time.
+    With every repeat 1, slot ``k`` is sample ``k``.
+    """
+    sizes = [int(n) for n in sizes]
+    repeat = list(repeat) or [1] * len(sizes)
+    if len(repeat) != len(sizes):
+        raise InputError(f"--repeat gives {len(repeat)} number(s) for {len(sizes)} dataset(s); give one per dataset")
+    starts = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
+    return np.concatenate([np.tile(np.arange(a, a + n), r) for a, n, r in zip(starts, sizes, repeat)])
 
 
 def _collate(items):
@@ -178,13 +200,13 @@ def _data_lock(data_dir: Path) -> dict:
             "train_samples": samples}
 
 
-def _data_locks(data_dirs: list[Path]) -> dict:
+def _data_locks(data_dirs: list[Path], repeat=()) -> dict:
     """:func:`_data_lock` of one or more dataset folders trained on together.
 
     Several folders must all be shard datasets or all packs, with the same grid; their
     ``manifest_sha256`` is then the SHA-256 of theirs joined by ``+`` (in the
     order given), ``manifests`` lists theirs, and ``train_coverage_mean`` is
-    the mean over all their training samples.
+    the mean over all their training samples (each counted ``repeat`` times).
     """
     locks = [_data_lock(d) for d in data_dirs]
     if len(locks) == 1:
@@ -193,9 +215,10 @@ def _data_locks(data_dirs: list[Path]) -> dict:
         raise InputError("datasets trained together must be all shard folders or all packs, not both; "
                          "pack the others too (colonbench pack) or train on every dataset's shards")
     n = [lk["train_samples"] or 1 for lk in locks]
+    weights = [k * r for k, r in zip(n, list(repeat) or [1] * len(locks))]
     hashes = [lk["manifest_sha256"] for lk in locks]
     return {"manifest_sha256": hashlib.sha256("+".join(hashes).encode()).hexdigest(), "manifests": hashes,
-            "train_coverage_mean": float(np.average([lk["train_coverage_mean"] for lk in locks], weights=n)),
+            "train_coverage_mean": float(np.average([lk["train_coverage_mean"] for lk in locks], weights=weights)),
             "pack": locks[0]["pack"], "train_samples": sum(n)}
 
 
@@ -216,7 +239,8 @@ def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "a
         one (:mod:`colonbench.shards.pack`; heatmaps are then made on the
         training device, and only flips augment). Several dataset folders, or
         several packs (same grid), train together: their train splits are one
-        training set, their validation splits one validation set.
+        training set, their validation splits one validation set; the
+        config's ``repeat`` weighs their training samples (:func:`epoch_slots`).
     out_dir : path
         Run folder (log, checkpoints, best model). If it holds ``last.pt`` the
         run resumes; its settings must then match.
@@ -236,7 +260,10 @@ def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "a
     cfg = (config or TrainConfig()).check()
     data_dirs = [Path(d) for d in ([data_dir] if isinstance(data_dir, (str, os.PathLike)) else data_dir)]
     data_dir, out = data_dirs[0], Path(out_dir)
-    lock = _data_locks(data_dirs)
+    if cfg.repeat and len(cfg.repeat) != len(data_dirs):
+        raise InputError(f"--repeat gives {len(cfg.repeat)} number(s) for {len(data_dirs)} dataset(s); "
+                         "give one per dataset")
+    lock = _data_locks(data_dirs, cfg.repeat)
     data_hash = lock["manifest_sha256"]
     train_coverage = lock["train_coverage_mean"]
     rank, world = _dist()
@@ -255,6 +282,7 @@ def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "a
         from colonbench.completion.packdata import PackSplit
         train_ds, val_ds = PackSplit(data_dirs, "train", dev), PackSplit(data_dirs, "validation", dev)
         grid_options = train_ds.info["grid_options"]
+        sizes = train_ds.sizes
     else:
         from colonbench.shards.reader import ShardDataset, dataset_files
         aug = AugmentConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in cfg.augment.items()})
@@ -265,12 +293,16 @@ def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "a
         train_ds = ShardDataset(files["train"], augment=aug if cfg.augment_prob > 0 else None,
                                 seed=cfg.seed, augment_prob=cfg.augment_prob)
         val_ds = ShardDataset(files["validation"])
+        per_dir = [len(dataset_files(d, "train")) for d in data_dirs]
+        ends = np.cumsum([0] + per_dir)
+        sizes = [int(train_ds.offsets[b] - train_ds.offsets[a]) for a, b in zip(ends[:-1], ends[1:])]
         grid_options = train_ds.shards[0].grid_options
         other = [str(sh.path) for sh in train_ds.shards + val_ds.shards if sh.grid_options != grid_options]
         if other:
             raise InputError(f"{other[0]} has another grid ({len(other)} shard(s)) than {train_ds.shards[0].path}; "
                              "datasets trained together need the same grid")
 
+    slots = epoch_slots(sizes, cfg.repeat)
     torch.manual_seed(cfg.seed)
     net_cfg = network_config(cfg.network)
     net = build_network(net_cfg).to(dev)
@@ -335,18 +367,20 @@ def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "a
     bs = cfg.batch_size
     while state["epoch"] < cfg.epochs:
         epoch = state["epoch"]
-        order = epoch_order(len(train_ds), cfg.seed, epoch)
+        order = epoch_order(len(slots), cfg.seed, epoch)  # slots; with no --repeat, slot k is sample k
         n_batches = len(order) // (bs * world)
         if n_batches == 0:
             raise InputError(f"{data_dir}: {len(order)} training samples, fewer than one batch of {bs} per process")
         mine = order[: n_batches * bs * world][rank::world]
         todo = mine[state["position"] * bs:]
         if lock["pack"]:
-            batches = (train_ds.batch(todo[b:b + bs], [erasure(cfg.seed, epoch, int(i), cfg.erase)
-                                                       for i in todo[b:b + bs]]) for b in range(0, len(todo), bs))
+            batches = (train_ds.batch(slots[todo[b:b + bs]], [erasure(cfg.seed, epoch, int(i), cfg.erase)
+                                                              for i in todo[b:b + bs]])
+                       for b in range(0, len(todo), bs))
         else:
             train_ds.set_epoch(epoch)
-            batches = torch.utils.data.DataLoader(torch.utils.data.Subset(train_ds, todo.tolist()), **loader_kwargs)
+            batches = torch.utils.data.DataLoader(torch.utils.data.Subset(train_ds, slots[todo].tolist()),
+                                                  **loader_kwargs)
         bar = tqdm(total=n_batches, initial=state["position"], desc=f"epoch {epoch}", unit="batch",
                    disable=None if (progress and rank == 0) else True, dynamic_ncols=True)
         for k, (x, y) in enumerate(batches):

@@ -12,7 +12,7 @@ pytest.importorskip("monai")
 from colonbench.cli import main  # noqa: E402
 from colonbench.completion import packdata  # noqa: E402
 from colonbench.completion.network import build_network, load_model, network_config  # noqa: E402
-from colonbench.completion.train import TrainConfig, evaluate_l2, train  # noqa: E402
+from colonbench.completion.train import TrainConfig, epoch_slots, evaluate_l2, train  # noqa: E402
 from colonbench.errors import InputError  # noqa: E402
 from colonbench.heatmaps import distance_to as distance_np  # noqa: E402
 from colonbench.shards.pack import read_pack, write_pack  # noqa: E402
@@ -180,6 +180,33 @@ def test_several_packs_train_together_and_not_with_shards(smoke_pack, tmp_path):
     assert meta["data_manifests"] == [lock["manifest_sha256"]] * 2 and meta["data_format"] == "pack"
     with pytest.raises(InputError, match="all shard folders or all packs"):
         train([out, data], tmp_path / "mixed", cfg, device="cpu", progress=False)
+
+
+def test_repeat_weighs_each_dataset_by_its_count(smoke_pack, smoke_dataset, tmp_path):
+    # e.g. two real colons' pack beside a large procedural one: --repeat 1,8
+    import shutil
+
+    assert epoch_slots([3, 2], (1, 3)).tolist() == [0, 1, 2, 3, 4, 3, 4, 3, 4]
+    assert epoch_slots([3, 2]).tolist() == [0, 1, 2, 3, 4]      # no repeat: slot k is sample k
+    data, lock, out, _ = smoke_pack
+    copy = tmp_path / "copy"
+    shutil.copytree(out, copy)
+    n_train = len(packdata.PackSplit(out, "train", "cpu"))
+    cfg = TrainConfig(epochs=1, batch_size=1, workers=0, augment_prob=0.0, flips=True, repeat=(1, 3))
+    result = train([out, copy], tmp_path / "run", cfg, device="cpu", progress=False)
+    assert result["steps"] == 4 * n_train
+    _, _, meta = load_model(tmp_path / "run" / "best.safetensors")
+    assert meta["train_config"]["repeat"] == [1, 3]
+    shards = train(smoke_dataset[0], tmp_path / "shards", TrainConfig(epochs=1, batch_size=1, workers=0,
+                                                                       augment_prob=0.0, repeat=(2,)),
+                   device="cpu", progress=False)
+    assert shards["steps"] == 2 * n_train
+    with pytest.raises(InputError, match="one per dataset"):
+        train([out, copy], tmp_path / "bad", dataclasses.replace(cfg, repeat=(2,)), device="cpu", progress=False)
+    with pytest.raises(InputError, match="whole numbers >= 1"):
+        TrainConfig(repeat=(1, 0)).check()
+    with pytest.raises(SystemExit):
+        main(["train", str(out), "--out", str(tmp_path / "cli"), "--repeat", "1,x"])
 
 
 def test_flips_also_augment_training_on_shards(smoke_dataset, tmp_path):
