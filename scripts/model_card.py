@@ -19,9 +19,9 @@ def _commands(manifests: list[str], meta: dict) -> str:
     """The commands that made the model, from the data it was trained on."""
     names = [Path(m).stem for m in manifests]
     steps = [f"`colonbench generate {m} --out data/{n} --workers 2`" for m, n in zip(manifests, names)]
-    if meta.get("data_format") == "pack":
-        steps.append(f"`colonbench pack data/{names[0]} --out {meta.get('data_dir') and 'packs/' + meta['data_dir']} "
-                     "--workers 2`")
+    if meta.get("data_format") == "pack":  # data_dir: the packs' folder names joined by '+', in the order trained
+        packs = (meta.get("data_dir") or "+".join(names)).split("+")
+        steps += [f"`colonbench pack data/{n} --out packs/{p} --workers 2`" for n, p in zip(names, packs)]
     steps.append(f"`{meta.get('command') or 'colonbench train'}`")
     return ", then ".join(steps)
 
