@@ -325,6 +325,8 @@ def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "a
         if saved["settings"]["data_sha256"] != data_hash:
             raise InputError(f"{out} is a run on other data (dataset manifest differs); use another --out")
         old, new = _fixed_settings(saved["settings"]["train_config"]), _fixed_settings(asdict(cfg))
+        if old["init_sha256"] is not None and old["init_sha256"] == new["init_sha256"]:
+            new["init"] = old["init"]  # the same starting weights under another name (a shipped model renamed)
         if old != new or saved["settings"]["world_size"] != world:
             raise InputError(f"{out} holds a run with other settings ({old}, {saved['settings']['world_size']} "
                              "process(es)); resume with the same settings or use another --out")

@@ -425,6 +425,22 @@ def test_fine_tuning_starts_from_the_given_model(tiny_run, tmp_path):
     for (k, a), (_, b) in zip(start.named_parameters(), tuned.named_parameters()):
         assert torch.allclose(a, b, atol=1e-6), k
     assert meta["train_config"]["init"] == str(run / "best.safetensors")
+    # a resumed run may name its starting weights otherwise (a shipped model renamed), not give others
+    import dataclasses
+    import shutil
+
+    from colonbench.shards.schema import sha256_file
+
+    renamed = tmp_path / "renamed.safetensors"
+    shutil.copy(run / "best.safetensors", renamed)
+    cfg = dataclasses.replace(cfg, init_sha256=sha256_file(renamed))
+    train(out, tmp_path / "named", cfg, device="cpu", progress=False)
+    more = train(out, tmp_path / "named", dataclasses.replace(cfg, epochs=2, init=str(renamed)), device="cpu",
+                 progress=False)
+    assert more["epochs"] == 2
+    with pytest.raises(InputError, match="other settings"):
+        train(out, tmp_path / "named", dataclasses.replace(cfg, epochs=3, init=str(renamed), init_sha256="0" * 64),
+              device="cpu", progress=False)
     with pytest.raises(InputError, match="no such model file"):
         train(out, tmp_path / "other", TrainConfig(epochs=1, batch_size=2, workers=0, init=str(tmp_path / "none.safetensors")),
               device="cpu", progress=False)
