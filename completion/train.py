@@ -122,6 +122,14 @@ def epoch_order(n: int, seed: int, epoch: int) -> np.ndarray:
     return seeding.rng(seed, "shuffle", epoch).permutation(n)
 
 
+def per_dataset(repeat, n: int) -> list[int]:
+    """``repeat`` as one count per dataset of ``n`` (all 1 when empty), or an :class:`InputError`."""
+    repeat = list(repeat) or [1] * n
+    if len(repeat) != n:
+        raise InputError(f"--repeat gives {len(repeat)} number(s) for {n} dataset(s); give one per dataset")
+    return repeat
+
+
 def epoch_slots(sizes, repeat=()) -> np.ndarray:
     """(m,) int: the training sample behind each slot of an epoch, each dataset's samples ``repeat`` times.
 
@@ -134,9 +142,7 @@ def epoch_slots(sizes, repeat=()) -> np.ndarray:
     With every repeat 1, slot ``k`` is sample ``k``.
     """
     sizes = [int(n) for n in sizes]
-    repeat = list(repeat) or [1] * len(sizes)
-    if len(repeat) != len(sizes):
-        raise InputError(f"--repeat gives {len(repeat)} number(s) for {len(sizes)} dataset(s); give one per dataset")
+    repeat = per_dataset(repeat, len(sizes))
     starts = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
     return np.concatenate([np.tile(np.arange(a, a + n), r) for a, n, r in zip(starts, sizes, repeat)])
 
@@ -215,7 +221,7 @@ def _data_locks(data_dirs: list[Path], repeat=()) -> dict:
         raise InputError("datasets trained together must be all shard folders or all packs, not both; "
                          "pack the others too (colonbench pack) or train on every dataset's shards")
     n = [lk["train_samples"] or 1 for lk in locks]
-    weights = [k * r for k, r in zip(n, list(repeat) or [1] * len(locks))]
+    weights = [k * r for k, r in zip(n, per_dataset(repeat, len(locks)))]
     hashes = [lk["manifest_sha256"] for lk in locks]
     return {"manifest_sha256": hashlib.sha256("+".join(hashes).encode()).hexdigest(), "manifests": hashes,
             "train_coverage_mean": float(np.average([lk["train_coverage_mean"] for lk in locks], weights=weights)),
@@ -260,9 +266,7 @@ def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "a
     cfg = (config or TrainConfig()).check()
     data_dirs = [Path(d) for d in ([data_dir] if isinstance(data_dir, (str, os.PathLike)) else data_dir)]
     data_dir, out = data_dirs[0], Path(out_dir)
-    if cfg.repeat and len(cfg.repeat) != len(data_dirs):
-        raise InputError(f"--repeat gives {len(cfg.repeat)} number(s) for {len(data_dirs)} dataset(s); "
-                         "give one per dataset")
+    per_dataset(cfg.repeat, len(data_dirs))  # before any data is read
     lock = _data_locks(data_dirs, cfg.repeat)
     data_hash = lock["manifest_sha256"]
     train_coverage = lock["train_coverage_mean"]
@@ -289,12 +293,12 @@ def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "a
         if cfg.erase > 0:
             raise InputError("--erase takes patches out of a pack's partial-surface occupancies; make a pack of "
                              f"{data_dir} first (colonbench pack) and train on it")
-        files = {split: [f for d in data_dirs for f in dataset_files(d, split)] for split in ("train", "validation")}
+        per_dir = {split: [dataset_files(d, split) for d in data_dirs] for split in ("train", "validation")}
+        files = {split: [f for fs in per_dir[split] for f in fs] for split in per_dir}
         train_ds = ShardDataset(files["train"], augment=aug if cfg.augment_prob > 0 else None,
                                 seed=cfg.seed, augment_prob=cfg.augment_prob)
         val_ds = ShardDataset(files["validation"])
-        per_dir = [len(dataset_files(d, "train")) for d in data_dirs]
-        ends = np.cumsum([0] + per_dir)
+        ends = np.cumsum([0] + [len(fs) for fs in per_dir["train"]])
         sizes = [int(train_ds.offsets[b] - train_ds.offsets[a]) for a, b in zip(ends[:-1], ends[1:])]
         grid_options = train_ds.shards[0].grid_options
         other = [str(sh.path) for sh in train_ds.shards + val_ds.shards if sh.grid_options != grid_options]
