@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import hashlib
 import json
 import sys
 from pathlib import Path
@@ -41,6 +42,9 @@ def main(argv=None):
     ap.add_argument("--eval", nargs="*", default=[], help="JSON files of scripts/bench_completion.py --json")
     ap.add_argument("--leaderboard", nargs="*", default=[],
                     help="leaderboard.json files of colonbench leaderboard over runs of this model (one per suite)")
+    ap.add_argument("--evaluated-as", default=None,
+                    help="the weights file the leaderboards' runs were given (--model RUN/epoch-NNN.safetensors) when "
+                         "that is the model under another name: its sha256 must be the model's")
     ap.add_argument("--hardware", required=True)
     ap.add_argument("--data-manifest", nargs="+", default=["data_manifests/train-cpu.yaml"],
                     help="the manifest(s) of the training data, in the order given to colonbench train")
@@ -87,10 +91,19 @@ def main(argv=None):
                        f"{m['holes_recall_2mm']:.2f} | {m['centerline_precision_2mm']:.2f} / "
                        f"{m['centerline_recall_2mm']:.2f} | {e.get('estimate_per_segment', e['wall_per_segment']):.2f} | "
                        + (f"{e['constant_guess_mae_points']:.2f} |" if e.get("constant_guess_mae_points") else "- |"))
+    name = Path(args.model).stem
+    if args.evaluated_as:
+        if _sha256(args.evaluated_as) != _sha256(args.model):
+            raise SystemExit(f"--evaluated-as {args.evaluated_as} is not the same weights as {args.model}")
+        name = Path(args.evaluated_as).stem
     for path in args.leaderboard:
-        out += leaderboard_rows(path, f"{Path(args.model).stem}@{meta.get('steps')}")
+        out += leaderboard_rows(path, f"{name}@{meta.get('steps')}")
     print("\n".join(out))
     return 0
+
+
+def _sha256(path) -> str:
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
 def leaderboard_rows(path, version: str) -> list[str]:
