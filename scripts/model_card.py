@@ -8,12 +8,12 @@ from __future__ import annotations
 
 import argparse
 import csv
-import hashlib
 import json
 import sys
 from pathlib import Path
 
 from colonbench.completion.network import load_model
+from colonbench.shards.schema import sha256_file
 
 
 def _commands(manifests: list[str], meta: dict) -> str:
@@ -93,17 +93,13 @@ def main(argv=None):
                        + (f"{e['constant_guess_mae_points']:.2f} |" if e.get("constant_guess_mae_points") else "- |"))
     name = Path(args.model).stem
     if args.evaluated_as:
-        if _sha256(args.evaluated_as) != _sha256(args.model):
+        if sha256_file(args.evaluated_as) != sha256_file(args.model):
             raise SystemExit(f"--evaluated-as {args.evaluated_as} is not the same weights as {args.model}")
         name = Path(args.evaluated_as).stem
     for path in args.leaderboard:
         out += leaderboard_rows(path, f"{name}@{meta.get('steps')}")
     print("\n".join(out))
     return 0
-
-
-def _sha256(path) -> str:
-    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
 def leaderboard_rows(path, version: str) -> list[str]:
