@@ -170,6 +170,12 @@ class WholeConfig:
     camera_offset: float = _p(0.5, 0.0, 0.9, "fraction of the wall distance",
                               "largest offset of a view off the centerline (camera model)")
     fov_deg: float = _p(140.0, 30.0, 170.0, "degree", "field of view of each view (camera model)")
+    trajectory_offset: float = _p(0.5, 0.0, 0.9, "fraction of the wall distance",
+                                  "largest drift of the recorded camera positions off the centerline, as a SLAM "
+                                  "trajectory's (0: the centerline's points, as whole-colon shards were made "
+                                  "before this field)")
+    trajectory_drift_mm: float = _p(40.0, 1.0, 1000.0, "mm",
+                                    "arc length over which the recorded positions' drift changes (knot spacing)")
 
 
 @dataclass(frozen=True)

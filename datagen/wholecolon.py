@@ -1,7 +1,8 @@
 """A whole colon's partial reconstruction and its withdrawal trajectory (the map's demo and benchmark input).
 
 The camera positions follow the centerline from the caecum to the rectum (a
-withdrawal), with the back-and-forth of a real examination. Two hole models:
+withdrawal), with the back-and-forth of a real examination, drifting off the
+centerline as a SLAM trajectory does (:func:`trajectory`). Two hole models:
 
 - ``spheres`` (the paper's for CT colons): spheres centred on the surface crop
   the wall; a face is observed when its centroid is outside every sphere.
@@ -61,6 +62,41 @@ def withdrawal(colon, seed: int) -> np.ndarray:
     return np.clip(np.array(path), 0.0, length)
 
 
+def trajectory(colon, seed: int, config: WholeConfig | None = None, scene=None) -> np.ndarray:
+    """(k, 3) recorded camera positions, mm: the withdrawal (:func:`withdrawal`), drifting off the centerline.
+
+    A SLAM trajectory is not the colon's centerline: the scope wanders off it,
+    towards a wall in the bends. At knots ``config.trajectory_drift_mm`` apart
+    along the centerline a vector is drawn uniformly in the ball of radius
+    ``config.trajectory_offset``; between knots it is interpolated linearly,
+    and its part across the centerline's tangent is the position's offset as
+    a share of the distance to the wall in that direction. Positions at the
+    same arc length (a pull-back) coincide. ``trajectory_offset`` 0 gives the
+    centerline itself.
+    """
+    config = config or WholeConfig()
+    line = colon.centerline
+    s = withdrawal(colon, seed)
+    centre = line.point_at(s)
+    if config.trajectory_offset <= 0:
+        return centre
+    from colonbench.datagen.camera import SurfaceScene
+
+    rng = seeding.rng(seed, "whole", "trajectory-drift")
+    knots = np.arange(0.0, line.length + config.trajectory_drift_mm, config.trajectory_drift_mm)
+    w = rng.normal(size=(len(knots), 3))
+    w *= (config.trajectory_offset * rng.random(len(knots)) ** (1 / 3) / np.linalg.norm(w, axis=1))[:, None]
+    w = np.stack([np.interp(s, knots, w[:, i]) for i in range(3)], axis=1)
+    tangent = line.tangent_at(s)
+    side = w - np.sum(w * tangent, axis=1, keepdims=True) * tangent
+    share = np.linalg.norm(side, axis=1)
+    direction = side / np.maximum(share, 1e-12)[:, None]
+    scene = scene or SurfaceScene(colon.mesh.vertices, colon.mesh.faces)
+    wall, _ = scene.cast(centre, direction)
+    wall = np.where(np.isfinite(wall), wall, scene.distance(centre))
+    return centre + (share * wall)[:, None] * direction
+
+
 def camera_observed(colon, seed: int, config: WholeConfig | None = None) -> np.ndarray:
     """(f,) bool: faces a withdrawing colonoscope sees (see the module's description).
 
@@ -116,7 +152,7 @@ def whole_partial(colon, seed: int = 0, holes: str = "spheres", config: WholeCon
 
     config = config or WholeConfig()
     v, f = np.asarray(colon.mesh.vertices), np.asarray(colon.mesh.faces)
-    positions = colon.centerline.point_at(withdrawal(colon, seed))
+    positions = trajectory(colon, seed, config)
     if holes == "spheres":
         rng = seeding.rng(seed, "whole", "holes")
         count = max(int(round(config.holes_per_m * colon.centerline.length / 1000.0)), 1)

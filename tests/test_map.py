@@ -254,6 +254,26 @@ def test_whole_partials_hold_points_on_observed_faces_only():
         whole_partial(colon, holes="video")
 
 
+def test_the_recorded_trajectory_drifts_off_the_centerline_within_the_wall():
+    """On a straight tube of radius 15 mm (centerline the z axis) the recorded positions wander off the axis
+    as a SLAM trajectory does, by at most trajectory_offset of the way to the wall, and smoothly; with
+    trajectory_offset 0 they are the centerline's points."""
+    from colonbench.datagen.config import WholeConfig
+    from colonbench.datagen.wholecolon import trajectory, withdrawal
+
+    line = straight(240.0)
+    colon = tube_colon(line, RADIUS, ring_spacing_mm=1.0, n_around=96)
+    pos = trajectory(colon, seed=5, config=WholeConfig(trajectory_offset=0.5))
+    off = np.hypot(pos[:, 0], pos[:, 1])
+    # the faceted wall is 0.1 % inside the true circle
+    assert off.max() <= 0.5 * RADIUS + 0.05 and np.median(off) > 0.1 * RADIUS
+    np.testing.assert_allclose(pos[:, 2], line.point_at(withdrawal(colon, 5))[:, 2], atol=1e-9)  # the withdrawal
+    step = np.linalg.norm(np.diff(pos[:, :2], axis=0), axis=1)
+    assert step.max() < 1.0  # 2 mm a pose along the tube, knots 40 mm apart: no jumps across it
+    on_axis = trajectory(colon, seed=5, config=WholeConfig(trajectory_offset=0.0))
+    np.testing.assert_allclose(on_axis[:, :2], 0.0, atol=1e-9)
+
+
 def test_the_map_clips_at_its_own_planes_not_at_cut_rims():
     # the map splits a reconstruction by arc length, not by planes, so its segments' clouds end in no
     # planar rim: the completion method runs with its rim search off (a copy), the caller's own left as it is
