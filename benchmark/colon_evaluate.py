@@ -104,7 +104,7 @@ def run_colon_unit(data: str, shard_name: str, index: int, sigma: float, noise_s
     out, examples = {}, {}
     t = time.perf_counter()
     try:
-        pieces = colon_centerline(points)  # once for every method and track: the same segments
+        pieces = colon_centerline(points, positions=sample["positions"])  # once for every method and track
     except ColonbenchError:
         pieces = None  # map_colon raises it again, per map
     centerline_s = time.perf_counter() - t

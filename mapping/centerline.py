@@ -25,7 +25,9 @@ so the lumen cannot be flood-filled as for a closed mesh
    the smoothing) cut; then continued straight past its ends over the points
    beyond them (the rays near an open end
    of the colon escape through it, so the enclosed lumen stops short of the end
-   by about a radius).
+   by about a radius). With the camera trajectory, a path that leaves out part
+   of it (a shortcut through a hole where two limbs touch) is sought again
+   along it (:func:`_piece_path`).
 5. The pieces are chained end to nearest end into one order, and joined
    where the wall lines the gap between them (a hole on one side of the
    colon, large enough to let the rays out, is no interruption): the colon
@@ -53,6 +55,14 @@ ENCLOSED_SHARE = 0.8
 MIN_PIECE_MM = 20.0
 #: Gaussian smoothing of the voxel path, mm.
 SMOOTH_MM = 6.0
+#: With a camera trajectory (:func:`_piece_path`): the fall-off of the path's speed away from it, mm ...
+GUIDE_SIGMA_MM = 10.0
+#: ... the speed factor far from it ...
+GUIDE_FLOOR = 0.01
+#: ... the path's extremities lie within this of it, mm ...
+GUIDE_NEAR_MM = 15.0
+#: ... and the trajectory guides the path where the lumen's own path leaves out this much of it, mm.
+GUIDE_MISSED_MM = 20.0
 #: The ray directions: the 26-neighbourhood.
 DIRECTIONS = np.array([(i, j, k) for i in (-1, 0, 1) for j in (-1, 0, 1) for k in (-1, 0, 1)
                        if (i, j, k) != (0, 0, 0)])
@@ -140,14 +150,88 @@ def rasterise(points: np.ndarray, voxel_mm: float, pad: int):
     return occupied, lo
 
 
-def _piece_path(inside: np.ndarray, dist: np.ndarray, voxel_mm: float) -> np.ndarray:
-    """Voxel path between the geodesic extremities of one piece, keeping to its middle."""
-    seed = np.array(np.unravel_index(int(np.argmax(np.where(inside, dist, -1))), dist.shape))
-    a, _ = paths.farthest_voxel(inside, seed, dx=voxel_mm)
-    b, _ = paths.farthest_voxel(inside, a, dx=voxel_mm)
+def _piece_path(inside: np.ndarray, dist: np.ndarray, voxel_mm: float,
+                guide: np.ndarray | None = None) -> np.ndarray:
+    """Voxel path between the geodesic extremities of one piece, keeping to its middle.
+
+    ``guide`` ((X, Y, Z) float, mm, optional): each voxel's distance to the camera trajectory. Where the
+    trajectory passes through the piece, the extremities are sought among the voxels within
+    :data:`GUIDE_NEAR_MM` of it; and where the path leaves out part of the trajectory
+    (:func:`misses_trajectory`: a shortcut through a hole between two limbs that touch), it is sought
+    again with the speed falling off away from the trajectory (:func:`trajectory_weight`), so that it
+    follows the colon the scope went through. A path that misses nothing is kept as it is: the
+    trajectory wanders off the lumen's middle, and a path drawn to it everywhere would follow it.
+    """
+    near = inside
+    if guide is not None:  # the largest stretch of the lumen around the trajectory
+        label, n = ndimage.label(inside & (guide <= GUIDE_NEAR_MM))
+        if n:
+            sizes = np.bincount(label.ravel())[1:]
+            near = label == 1 + int(np.argmax(sizes))
+        if near.sum() < 8:  # the trajectory hardly enters this piece
+            near, guide = inside, None
+    seed = np.array(np.unravel_index(int(np.argmax(np.where(near, dist, -1))), dist.shape))
+    a, _ = paths.farthest_voxel(near, seed, dx=voxel_mm)
+    b, _ = paths.farthest_voxel(near, a, dx=voxel_mm)
     speed = (dist / max(float(dist[inside].max()), 1e-9)) ** 2
-    t = paths.travel_time(np.where(inside, np.maximum(speed, 1e-4), 0.0), a, mask=inside, dx=voxel_mm)
+    t = paths.travel_time(np.where(inside, np.maximum(speed, 1e-6), 0.0), a, mask=inside, dx=voxel_mm)
+    path = paths.backtrack(t, b)
+    if guide is None or not misses_trajectory(path, inside, dist, guide, voxel_mm):
+        return path
+    speed = speed * trajectory_weight(guide)
+    t = paths.travel_time(np.where(inside, np.maximum(speed, 1e-6), 0.0), a, mask=inside, dx=voxel_mm)
     return paths.backtrack(t, b)
+
+
+def misses_trajectory(path: np.ndarray, inside: np.ndarray, dist: np.ndarray, guide: np.ndarray,
+                      voxel_mm: float, missed_mm: float = GUIDE_MISSED_MM) -> bool:
+    """Whether a voxel path leaves out at least ``missed_mm`` of the trajectory through the lumen.
+
+    A trajectory voxel (``guide`` below half a voxel) of the lumen is left out
+    when it lies farther from the path than twice the path's median depth
+    and than :data:`GUIDE_NEAR_MM`: the path took a shortcut past the colon
+    the scope went through.
+    """
+    from scipy.spatial import cKDTree
+
+    on = np.argwhere(inside & (guide <= 0.5 * voxel_mm))
+    if len(on) == 0 or len(path) == 0:
+        return False
+    d, _ = cKDTree(path).query(on)
+    depth = float(np.median(dist[tuple(np.asarray(path).T)]))
+    far = d * voxel_mm > max(2.0 * depth, GUIDE_NEAR_MM)
+    return bool(far.sum() * voxel_mm >= missed_mm)
+
+
+def trajectory_weight(distance_mm: np.ndarray, sigma_mm: float = GUIDE_SIGMA_MM,
+                      floor: float = GUIDE_FLOOR) -> np.ndarray:
+    """Speed factor of a voxel at ``distance_mm`` from the camera trajectory: ``floor + exp(-(d / sigma)^2)``.
+
+    1 on the trajectory, 0.37 a sigma away, about ``floor`` beyond two sigmas: a path
+    through a hole between two limbs, a radius or more from where the scope went, costs
+    tens of times its length, while the lumen around the trajectory stays open to a path
+    that keeps to its middle.
+    """
+    return floor + np.exp(-(np.asarray(distance_mm, float) / sigma_mm) ** 2)
+
+
+def trajectory_distance(positions: np.ndarray, origin: np.ndarray, shape: tuple, voxel_mm: float) -> np.ndarray:
+    """(X, Y, Z) distance, mm, from each voxel of a grid (``origin`` the centre of voxel 0) to the trajectory.
+
+    The positions are joined in time order and resampled at half a voxel, so
+    that sparse poses still draw a continuous path; those outside the grid are
+    left out (their voxels' distances are then measured to the rest).
+    """
+    import edt
+
+    line = resample(np.asarray(positions, float), 0.5 * voxel_mm) if len(positions) > 1 else np.asarray(positions)
+    idx = np.round((line - origin) / voxel_mm).astype(np.int64)
+    idx = idx[np.all((idx >= 0) & (idx < np.array(shape)), axis=1)]
+    free = np.ones(shape, bool)
+    if len(idx) == 0:
+        return np.full(shape, np.inf)
+    free[tuple(idx.T)] = False
+    return edt.edt(free, anisotropy=(voxel_mm,) * 3)
 
 
 def _extend(line: np.ndarray, cloud: np.ndarray, radius: float, reach_mm: float = 10.0) -> np.ndarray:
@@ -277,7 +361,7 @@ def _drop_channels(pieces: list[tuple[Piece, float]], long_mm: float = 100.0, ap
 
 def colon_centerline(points, voxel_mm: float = VOXEL_MM, close_mm: float = CLOSE_MM,
                      enclosed_share: float = ENCLOSED_SHARE, min_piece_mm: float = MIN_PIECE_MM,
-                     smooth_mm: float = SMOOTH_MM) -> list[Piece]:
+                     smooth_mm: float = SMOOTH_MM, positions: np.ndarray | None = None) -> list[Piece]:
     """The centerline of a colon reconstruction, in uninterrupted pieces, chained in order.
 
     Parameters
@@ -286,6 +370,10 @@ def colon_centerline(points, voxel_mm: float = VOXEL_MM, close_mm: float = CLOSE
         The reconstruction's points, mm.
     voxel_mm, close_mm, enclosed_share, min_piece_mm, smooth_mm : float
         See the module's description.
+    positions : (k, 3) float, optional
+        Camera positions in time order, mm, the points' frame. Each piece's path then keeps to
+        the lumen the scope went through (:func:`_piece_path`); without them it is the lumen's
+        longest path, which can cut through a hole where two limbs of the colon touch.
 
     Returns
     -------
@@ -311,6 +399,9 @@ def colon_centerline(points, voxel_mm: float = VOXEL_MM, close_mm: float = CLOSE
     inside = ndimage.binary_opening(inside)
     # the wall was dilated by `close`: the lumen's distance to the true wall is `close` voxels more
     dist = edt.edt(inside, anisotropy=(voxel_mm,) * 3)
+    guide = None
+    if positions is not None and len(positions):
+        guide = trajectory_distance(positions, origin, inside.shape, voxel_mm)
     label, n = ndimage.label(inside)
     if n == 0:
         raise InputError("no lumen found: the points do not enclose a tube (is this a colon reconstruction "
@@ -324,7 +415,7 @@ def colon_centerline(points, voxel_mm: float = VOXEL_MM, close_mm: float = CLOSE
         # one empty voxel around the piece (the grid's padding holds it): fast marching needs a border
         box = tuple(slice(s.start - 1, s.stop + 1) for s in box)
         part = label[box] == lab
-        vox = _piece_path(part, dist[box], voxel_mm)
+        vox = _piece_path(part, dist[box], voxel_mm, None if guide is None else guide[box])
         # geodesic extremities lie at the rim of the enclosed lumen, off its axis: keep the path from where
         # it is at least 0.7 of its median depth (as for closed meshes, datagen.realmesh.compute_centerline)
         depth = dist[box][tuple(vox.T)]

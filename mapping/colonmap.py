@@ -245,7 +245,7 @@ def map_colon(points: np.ndarray, method, segment_mm: float = SEGMENT_MM, positi
         coverage is counted; a method without a completed mesh is then run on
         the segment alone.
     pieces : list of colonbench.mapping.centerline.Piece, optional
-        ``colon_centerline(points)`` when the caller has it already (several
+        ``colon_centerline(points, positions=positions)`` when the caller has it already (several
         methods or tracks mapping the same reconstruction).
 
     Returns
@@ -275,7 +275,7 @@ def map_colon(points: np.ndarray, method, segment_mm: float = SEGMENT_MM, positi
         raise InputError(f"--context-mm must be 0 or more, got {context_mm}")
     seconds = {}
     t0 = time.perf_counter()
-    pieces = colon_centerline(points) if pieces is None else pieces
+    pieces = colon_centerline(points, positions=positions) if pieces is None else pieces
     pieces, orientation = orient(pieces, positions)
     pieces = bridge_by_trajectory(pieces, positions, points)
     seconds["centerline"] = time.perf_counter() - t0
@@ -355,6 +355,10 @@ def map_colon(points: np.ndarray, method, segment_mm: float = SEGMENT_MM, positi
             out.append(seg)
             continue
         seg.seconds = time.perf_counter() - t
+        if not np.isfinite(est.coverage):  # an empty completed surface: no estimate, not a NaN in the sums
+            seg.error = "the method returned no coverage (its completed surface is empty): not estimated"
+            out.append(seg)
+            continue
         seg.coverage = float(est.coverage)
         if len(faces):
             from colonbench.completion.surface import mesh_coverage, triangle_areas

@@ -187,6 +187,67 @@ def test_a_trajectory_bridges_a_stretch_with_no_reconstruction():
     assert len(split["interruptions"]) == 1 and split["unreconstructed"] == []
 
 
+def u_tube(limb=200.0, bend=16.0, spacing=0.5):
+    """A U: two parallel 200 mm limbs 32 mm apart (their 15 mm walls 2 mm apart), joined by a half circle."""
+    from colonbench.datagen.centerline import Centerline
+
+    z = np.arange(0.0, limb, spacing)
+    t = np.arange(0.0, np.pi, spacing / bend)
+    p = np.concatenate([np.stack([0 * z, 0 * z, z], 1),
+                        np.stack([bend - bend * np.cos(t), 0 * t, limb + bend * np.sin(t)], 1),
+                        np.stack([0 * z + 2 * bend, 0 * z, limb - z], 1)])
+    return Centerline(p, np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))]))
+
+
+def test_the_trajectory_keeps_the_centerline_out_of_a_hole_between_touching_limbs():
+    """Two limbs of a U touch, and a hole through both walls 40 mm from the open ends joins their lumens
+    (as where a real colon's loops lie against each other). The lumen's longest path then cuts through the
+    hole and leaves out the 370 mm around the bend; the scope's trajectory keeps the line on the colon."""
+    line = u_tube()
+    pts, _, _ = tube_cloud(line)
+    pts = pts[np.linalg.norm(pts - [16.0, 0.0, 40.0], axis=1) > 9.0]
+    length = line.arclength[-1]
+
+    def recall(pieces):
+        found = np.concatenate([p.points for p in pieces])
+        return float(np.mean(cKDTree(found).query(line.points)[0] < 3.0))
+
+    blind = colon_centerline(pts)
+    assert sum(p.length for p in blind) < 0.7 * length and recall(blind) < 0.7  # the shortcut, without poses
+    traj = line.points[::-20] + [0.0, 2.0, 0.0]  # a withdrawal, 2 mm off the axis
+    guided = colon_centerline(pts, positions=traj)
+    assert len(guided) == 1 and guided[0].length == pytest.approx(length, rel=0.03)
+    assert recall(guided) > 0.9
+    # where the lumen's own path leaves nothing of the trajectory out, a trajectory off the axis does not pull it
+    line = straight(240.0)
+    pts, _, _ = tube_cloud(line)
+    (own,) = colon_centerline(pts)
+    (kept,) = colon_centerline(pts, positions=line.points[::-10] + [10.0, 0.0, 0.0])  # 2/3 of the way to the wall
+    assert np.median(np.hypot(kept.points[:, 0], kept.points[:, 1])) < 2.0  # within a voxel of the axis
+    np.testing.assert_allclose(kept.points, own.points)
+
+
+def test_a_segment_without_an_estimate_is_reported_and_left_out_of_the_whole_colon():
+    """A method that returns no coverage (NaN: an empty completed surface) for one segment: that segment
+    says so, and the whole-colon coverage is the others', not NaN."""
+    line = straight(360.0)
+    pts, _, _ = tube_cloud(line, density=1.0)
+
+    class NoSurfaceNearZero:
+        name = "no-surface"
+
+        def estimate(self, points):
+            cov = float("nan") if np.mean(points[:, 2]) < 60 else 0.8
+            return {"coverage": cov, "holes": np.zeros((0, 3)), "centerline": np.zeros((0, 3))}
+
+    from colonbench.mapping.colonmap import map_colon, whole_coverage
+
+    result = map_colon(pts, NoSurfaceNearZero(), segment_mm=60.0, positions=line.points[::-20], progress=False)
+    failed = [s for s in result["segments"] if s.coverage is None]
+    assert len(failed) == 1 and "no coverage" in failed[0].error and failed[0].start_mm == 0.0
+    assert whole_coverage(result["segments"]) == pytest.approx(0.8)
+
+
 def test_a_long_narrow_stretch_apart_from_the_wide_lumen_is_kept():
     """A wide tube (radius 25 mm) and, apart from it, a long tube of half its radius: the narrow one's enclosed
     lumen is under half as deep, as a channel's would be, but it is long and lies apart: a stretch of colon."""
