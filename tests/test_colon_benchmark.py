@@ -72,8 +72,11 @@ def test_whole_colon_shards_hold_exact_truth(colon_dataset):
         assert 0.5 < s["coverage"] < 1.0
         _, face = cKDTree(centroids).query(s["points"])
         assert s["observed_faces"][face].mean() > 0.97  # the cloud lies on observed faces only
-        # the trajectory withdraws: it ends near the rectum end of the true centerline
-        assert np.linalg.norm(s["positions"][-1] - truth["centerline"].points[-1]) < 5.0
+        # the trajectory withdraws: it ends at the rectum end of the true centerline, off it by its drift
+        line = truth["centerline"]
+        d, near = cKDTree(line.points).query(s["positions"])
+        assert line.arclength[near[-1]] > line.arclength[-1] - 3.0 and line.arclength[near[0]] < 3.0
+        assert 1.0 < np.median(d) and d.max() < 20.0  # at most half the way to the wall
     assert models == {"spheres", "camera"}  # 2 permutations of a half-and-half mix: one of each
 
 def test_a_broken_whole_colon_shard_is_reported(colon_dataset, tmp_path):
