@@ -150,6 +150,8 @@ dump("colon-test", "The whole-colon benchmark (colonbench evaluate --task colon)
 #: Whole-colon validation: where the map's own settings (its context margin) are chosen, never on colon-test.yaml.
 dump("colon-val", "Whole-colon validation, where the map's settings are chosen (colonbench evaluate --task colon "
      "--split validation): two whole partial reconstructions (withdrawal-camera or sphere holes, 2 points/mm^2) of "
-     "each of 4 of paper.yaml's validation colons and of the real training colon gca00090 (its segments are in "
-     "train-real.yaml, so the network's figures on it are optimistic; colon-test.yaml's colons are never used).",
-     20261123, {"validation": whole_colons(340, 4, 2, ["gca00090"])}, mesh_names=["gca00090"], task="colon")
+     "each of 4 of paper.yaml's validation colons and of the real training colons gca00090 and gca00080 (their "
+     "segments are in train-real.yaml, so the network's figures on them are optimistic; colon-test.yaml's colons "
+     "are never used).",
+     20261123, {"validation": whole_colons(340, 4, 2, ["gca00090", "gca00080"])},
+     mesh_names=["gca00090", "gca00080"], task="colon")
