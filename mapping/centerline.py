@@ -63,6 +63,12 @@ GUIDE_FLOOR = 0.01
 GUIDE_NEAR_MM = 15.0
 #: ... and the trajectory guides the path where the lumen's own path leaves out this much of it, mm.
 GUIDE_MISSED_MM = 20.0
+#: Cells on which the scope's path is loop-erased, mm (:func:`loop_erased`).
+LOOP_MM = 5.0
+#: A gap between two pieces is bridged straight only where the scope's path between their ends is
+#: at most this many times the gap plus :data:`AROUND_MM` (:func:`_bridge`).
+AROUND_FACTOR = 2.0
+AROUND_MM = 30.0
 #: The ray directions: the 26-neighbourhood.
 DIRECTIONS = np.array([(i, j, k) for i in (-1, 0, 1) for j in (-1, 0, 1) for k in (-1, 0, 1)
                        if (i, j, k) != (0, 0, 0)])
@@ -298,25 +304,73 @@ def _chain(pieces: list[Piece]) -> list[Piece]:
     return out
 
 
-def _bridge(pieces: list[Piece], cloud: np.ndarray, covered: float = 0.9) -> list[Piece]:
+def loop_erased(path: np.ndarray, cell_mm: float = LOOP_MM) -> np.ndarray:
+    """A polyline with its loops erased, on cells of ``cell_mm``: where it enters a cell it has passed
+    through before, everything since is dropped (loop erasure of the walk's cells).
+
+    A scope pushed back in and withdrawn again passes the same cells twice; the
+    erased path passes them once, in the order of its last pass. Consecutive
+    points in one cell keep the first.
+    """
+    path = np.asarray(path, float).reshape(-1, 3)
+    cells = [tuple(c) for c in np.floor(path / cell_mm).astype(np.int64)]
+    out, where = [], {}
+    for point, cell in zip(path, cells):
+        k = where.get(cell)
+        if k is not None:
+            for dropped in out[k + 1:]:
+                del where[dropped[1]]
+            del out[k + 1:]
+            continue
+        where[cell] = len(out)
+        out.append((point, cell))
+    return np.array([q for q, _ in out]).reshape(-1, 3)
+
+
+def _trajectory_between(positions: np.ndarray, a: np.ndarray, b: np.ndarray, near: float) -> np.ndarray | None:
+    """The scope's path from near ``a`` to near ``b`` (loop-erased, ends ``a`` and ``b``), or None where the
+    trajectory does not come within ``near`` of both."""
+    da, db = np.linalg.norm(positions - a, axis=1), np.linalg.norm(positions - b, axis=1)
+    ta, tb = int(np.argmin(da)), int(np.argmin(db))
+    if da[ta] > near or db[tb] > near or ta == tb:
+        return None
+    window = positions[min(ta, tb): max(ta, tb) + 1]
+    window = window if ta < tb else window[::-1]
+    return np.concatenate([[a], loop_erased(window), [b]])
+
+
+def _bridge(pieces: list[Piece], cloud: np.ndarray, covered: float = 0.9,
+            positions: np.ndarray | None = None) -> list[Piece]:
     """Consecutive pieces joined across gaps that the wall still lines (a large hole, not a missing stretch).
 
     A gap is bridged by the straight line between the two ends when at least
     ``covered`` of its 1 mm steps have a point of the cloud within 1.2 radii:
     one side of the colon unseen for a few centimetres opens the lumen to the
     rays but leaves the other side's wall along the gap. Where the colon is
-    missing, no wall lines the gap and the pieces stay apart.
+    missing, no wall lines the gap and the pieces stay apart. With the camera
+    ``positions``, a gap the scope went around (its path between the two
+    ends longer than :data:`AROUND_FACTOR` times the gap plus
+    :data:`AROUND_MM`) is not bridged straight: the ends face each other
+    across two limbs, whose walls line the straight line, and the colon runs
+    the long way (:func:`bridge_by_trajectory` joins them along the scope).
     """
     from scipy.spatial import cKDTree
 
     if len(pieces) < 2:
         return pieces
     tree = cKDTree(cloud)
+    pos = None if positions is None or len(positions) < 2 else np.asarray(positions, float)
     out = [pieces[0]]
     for p in pieces[1:]:
         a, b = out[-1].points[-1], p.points[0]
         gap = float(np.linalg.norm(b - a))
         radius = max(out[-1].radius, p.radius)
+        if pos is not None:
+            scope = _trajectory_between(pos, a, b, 1.5 * radius + 5.0)
+            if scope is not None and np.linalg.norm(np.diff(scope, axis=0), axis=1).sum() > (
+                    AROUND_FACTOR * gap + AROUND_MM):
+                out.append(p)
+                continue
         steps = np.linspace(0.0, 1.0, max(int(gap), 1) + 1)[1:-1]
         if len(steps):
             probe = a + steps[:, None] * (b - a)
@@ -447,11 +501,11 @@ def colon_centerline(points, voxel_mm: float = VOXEL_MM, close_mm: float = CLOSE
         mine = pts[owner[near] == i]
         if len(mine):
             pieces[i] = Piece(resample(_extend(p.points, mine, p.radius), 1.0), p.radius)
-    return _bridge(_chain(pieces), pts)
+    return _bridge(_chain(pieces), pts, positions=positions)
 
 
 def bridge_by_trajectory(pieces: list[Piece], positions: np.ndarray | None, cloud: np.ndarray | None = None,
-                         reach: float = 1.5, max_detour: float = 3.0, smooth_mm: float = 5.0,
+                         reach: float = 1.5, max_detour: float = 10.0, smooth_mm: float = 5.0,
                          min_unseen_mm: float = 5.0) -> list[Piece]:
     """Consecutive pieces joined along the camera trajectory where it passes from one to the next.
 
@@ -459,9 +513,11 @@ def bridge_by_trajectory(pieces: list[Piece], positions: np.ndarray | None, clou
     stretch the pipeline could not fuse) the pieces stay apart
     (:func:`colon_centerline`). If the colonoscope went from the end of one
     piece to the start of the next, the colon is continuous there: the pieces
-    are joined by the trajectory's path between them (only the poses that
-    bring it closer to the next piece, so that pushing the scope back in does
-    not fold the line; smoothed by ``smooth_mm``). Where the path's 2 mm thick
+    are joined by the trajectory's path between them (loop-erased,
+    :func:`loop_erased`, so that pushing the scope back in does not fold the
+    line; smoothed by ``smooth_mm``), however far around it goes: where two
+    limbs touch, the next piece's end can lie a few centimetres away across
+    them while the colon between runs for decimetres. Where the path's 2 mm thick
     cross-sections hold no point of the cloud within 1.5 radii for at least
     ``min_unseen_mm`` (no wall on any side), the stretch is recorded in the joined piece's ``unseen`` as
     not reconstructed; where the wall lines the path (a narrow or collapsed
@@ -478,7 +534,8 @@ def bridge_by_trajectory(pieces: list[Piece], positions: np.ndarray | None, clou
     reach : float
         The trajectory must come within ``reach`` radii (plus 5 mm) of both piece ends.
     max_detour : float
-        A path longer than ``max_detour`` times the straight gap plus 50 mm is not used.
+        A path longer than ``max_detour`` times the straight gap plus 50 mm is not used (the two ends
+        are then not consecutive along the colon).
     smooth_mm : float
         Gaussian smoothing of the path, mm.
 
@@ -499,15 +556,9 @@ def bridge_by_trajectory(pieces: list[Piece], positions: np.ndarray | None, clou
         prev = out[-1]
         a, b = prev.points[-1], p.points[0]
         near = reach * max(prev.radius, p.radius) + 5.0
-        da, db = np.linalg.norm(pos - a, axis=1), np.linalg.norm(pos - b, axis=1)
-        ta, tb = int(np.argmin(da)), int(np.argmin(db))
-        path = None
-        if da[ta] <= near and db[tb] <= near and ta != tb:
-            window = pos[min(ta, tb): max(ta, tb) + 1]
-            window = window if ta < tb else window[::-1]
-            to_b = np.linalg.norm(window - b, axis=1)
-            keep = to_b < np.minimum.accumulate(np.concatenate([[np.linalg.norm(a - b)], to_b[:-1]])) - 0.5
-            path = resample(np.concatenate([[a], window[keep], [b]]), 1.0)
+        path = _trajectory_between(pos, a, b, near)
+        if path is not None:
+            path = resample(path, 1.0)
             if len(path) > 4:
                 inner = ndimage.gaussian_filter1d(path, smooth_mm, axis=0, mode="nearest")
                 inner[0], inner[-1] = a, b

@@ -227,6 +227,35 @@ def test_the_trajectory_keeps_the_centerline_out_of_a_hole_between_touching_limb
     np.testing.assert_allclose(kept.points, own.points)
 
 
+def test_pieces_facing_each_other_across_touching_limbs_are_joined_around_the_bend_the_scope_took():
+    """The U's bend and 30 mm either side not reconstructed: the two limbs' ends face each other 32 mm
+    apart, their walls line the straight line between them, and the colon runs 110 mm around. Without a
+    trajectory the ends are bridged straight; with a withdrawal (pushed back in 20 mm in the gap) the
+    line goes around with the scope, and the 110 mm is reported as not reconstructed."""
+    from colonbench.mapping.centerline import bridge_by_trajectory, loop_erased
+    from colonbench.mapping.colonmap import orient
+
+    line = u_tube()
+    pts, s, _ = tube_cloud(line)
+    pts = pts[(s < 170) | (s > 280)]
+    arc = np.concatenate([np.arange(450.0, 230.0, -2.0), np.arange(230.0, 250.0, 2.0), np.arange(250.0, 0.0, -2.0)])
+    traj = line.point_at(arc) + [0.0, 2.0, 0.0]
+    erased = loop_erased(traj)  # the push-back erased: each place passed once, in order
+    assert len(erased) < len(traj) and np.all(np.diff(cKDTree(line.points).query(erased)[1]) <= 0)
+
+    def mapped(positions):
+        pieces, _ = orient(colon_centerline(pts, positions=positions), positions)
+        return bridge_by_trajectory(pieces, positions, pts)
+
+    (straight_across,) = mapped(None)
+    assert straight_across.length < 0.85 * line.arclength[-1]
+    (around,) = mapped(traj)
+    assert around.length == pytest.approx(line.arclength[-1], rel=0.03)
+    assert np.mean(cKDTree(around.points).query(line.points)[0] < 3.0) > 0.95
+    ((u0, u1),) = around.unseen  # from the rectum end: known arc length 450 - 280 = 170 on, 110 mm long
+    assert u0 == pytest.approx(170, abs=8) and u1 - u0 == pytest.approx(110, abs=12)
+
+
 def test_a_segment_without_an_estimate_is_reported_and_left_out_of_the_whole_colon():
     """A method that returns no coverage (NaN: an empty completed surface) for one segment: that segment
     says so, and the whole-colon coverage is the others', not NaN."""
