@@ -72,7 +72,8 @@ def trajectory(colon, seed: int, config: WholeConfig | None = None, scene=None) 
     and its part across the centerline's tangent is the position's offset as
     a share of the distance to the wall in that direction. Positions at the
     same arc length (a pull-back) coincide. ``trajectory_offset`` 0 gives the
-    centerline itself.
+    centerline itself. ``scene``: the colon mesh's
+    :class:`~colonbench.datagen.camera.SurfaceScene`, when the caller has one.
     """
     config = config or WholeConfig()
     line = colon.centerline
@@ -97,13 +98,15 @@ def trajectory(colon, seed: int, config: WholeConfig | None = None, scene=None) 
     return centre + (share * wall)[:, None] * direction
 
 
-def camera_observed(colon, seed: int, config: WholeConfig | None = None) -> np.ndarray:
+def camera_observed(colon, seed: int, config: WholeConfig | None = None, scene=None) -> np.ndarray:
     """(f,) bool: faces a withdrawing colonoscope sees (see the module's description).
 
     The views are ``config.camera_step_mm`` apart along the centerline; each
     looks up the colon tilted by up to ``camera_tilt_deg``, sits off the
     centerline by up to ``camera_offset`` of the way to the wall, and sees
-    ``camera_reach_mm`` far with a ``fov_deg`` field of view.
+    ``camera_reach_mm`` far with a ``fov_deg`` field of view. ``scene``: the
+    colon mesh's :class:`~colonbench.datagen.camera.SurfaceScene`, when the
+    caller has one.
     """
     from colonbench.datagen.camera import Poses, SurfaceScene, visible_faces
     from colonbench.datagen.centerline import perpendicular_basis
@@ -111,7 +114,7 @@ def camera_observed(colon, seed: int, config: WholeConfig | None = None) -> np.n
     config = config or WholeConfig()
     rng = seeding.rng(seed, "whole", "camera")
     line = colon.centerline
-    scene = SurfaceScene(colon.mesh.vertices, colon.mesh.faces)
+    scene = scene or SurfaceScene(colon.mesh.vertices, colon.mesh.faces)
     s = np.arange(0.0, line.length, config.camera_step_mm)
     centre, tangent = line.point_at(s), line.tangent_at(s)
     u, v = perpendicular_basis(tangent)
@@ -152,7 +155,12 @@ def whole_partial(colon, seed: int = 0, holes: str = "spheres", config: WholeCon
 
     config = config or WholeConfig()
     v, f = np.asarray(colon.mesh.vertices), np.asarray(colon.mesh.faces)
-    positions = trajectory(colon, seed, config)
+    scene = None  # the ray-casting scene, built once for the trajectory and the camera's views
+    if config.trajectory_offset > 0 or holes == "camera":
+        from colonbench.datagen.camera import SurfaceScene
+
+        scene = SurfaceScene(v, f)
+    positions = trajectory(colon, seed, config, scene)
     if holes == "spheres":
         rng = seeding.rng(seed, "whole", "holes")
         count = max(int(round(config.holes_per_m * colon.centerline.length / 1000.0)), 1)
@@ -161,7 +169,7 @@ def whole_partial(colon, seed: int = 0, holes: str = "spheres", config: WholeCon
         observed = ~inside_spheres(v[f].mean(axis=1), centres, radii)
         spheres = np.concatenate([centres, radii[:, None]], axis=1)
     elif holes == "camera":
-        observed = camera_observed(colon, seed, config)
+        observed = camera_observed(colon, seed, config, scene)
         spheres = np.zeros((0, 4))
     else:
         raise InputError(f"unknown whole-colon hole model {holes!r}; use one of {list(WHOLE_HOLE_MODELS)}")

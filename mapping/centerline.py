@@ -63,6 +63,9 @@ GUIDE_FLOOR = 0.01
 GUIDE_NEAR_MM = 15.0
 #: ... and the trajectory guides the path where the lumen's own path leaves out this much of it, mm.
 GUIDE_MISSED_MM = 20.0
+#: The trajectory is taken to pass a piece's end when it comes within this many of the piece's radii
+#: plus 5 mm (:func:`trajectory_reach`).
+TRAJECTORY_REACH = 1.5
 #: Cells on which the scope's path is loop-erased, mm (:func:`loop_erased`).
 LOOP_MM = 5.0
 #: A gap between two pieces is bridged straight only where the scope's path between their ends is
@@ -179,14 +182,14 @@ def _piece_path(inside: np.ndarray, dist: np.ndarray, voxel_mm: float,
     seed = np.array(np.unravel_index(int(np.argmax(np.where(near, dist, -1))), dist.shape))
     a, _ = paths.farthest_voxel(near, seed, dx=voxel_mm)
     b, _ = paths.farthest_voxel(near, a, dx=voxel_mm)
+    def march(speed):  # fast marching from a through the piece, back from b
+        return paths.backtrack(paths.travel_time(speed, a, mask=inside, dx=voxel_mm), b)
+
     speed = (dist / max(float(dist[inside].max()), 1e-9)) ** 2
-    t = paths.travel_time(np.where(inside, np.maximum(speed, 1e-6), 0.0), a, mask=inside, dx=voxel_mm)
-    path = paths.backtrack(t, b)
+    path = march(speed)
     if guide is None or not misses_trajectory(path, inside, dist, guide, voxel_mm):
         return path
-    speed = speed * trajectory_weight(guide)
-    t = paths.travel_time(np.where(inside, np.maximum(speed, 1e-6), 0.0), a, mask=inside, dx=voxel_mm)
-    return paths.backtrack(t, b)
+    return march(speed * trajectory_weight(guide))
 
 
 def misses_trajectory(path: np.ndarray, inside: np.ndarray, dist: np.ndarray, guide: np.ndarray,
@@ -327,6 +330,11 @@ def loop_erased(path: np.ndarray, cell_mm: float = LOOP_MM) -> np.ndarray:
     return np.array([q for q, _ in out]).reshape(-1, 3)
 
 
+def trajectory_reach(radius: float, reach: float = TRAJECTORY_REACH) -> float:
+    """How near a piece's end of ``radius`` (mm) the trajectory must come to pass it, mm."""
+    return reach * radius + 5.0
+
+
 def _trajectory_between(positions: np.ndarray, a: np.ndarray, b: np.ndarray, near: float) -> np.ndarray | None:
     """The scope's path from near ``a`` to near ``b`` (loop-erased, ends ``a`` and ``b``), or None where the
     trajectory does not come within ``near`` of both."""
@@ -366,7 +374,7 @@ def _bridge(pieces: list[Piece], cloud: np.ndarray, covered: float = 0.9,
         gap = float(np.linalg.norm(b - a))
         radius = max(out[-1].radius, p.radius)
         if pos is not None:
-            scope = _trajectory_between(pos, a, b, 1.5 * radius + 5.0)
+            scope = _trajectory_between(pos, a, b, trajectory_reach(radius))
             if scope is not None and np.linalg.norm(np.diff(scope, axis=0), axis=1).sum() > (
                     AROUND_FACTOR * gap + AROUND_MM):
                 out.append(p)
@@ -505,7 +513,7 @@ def colon_centerline(points, voxel_mm: float = VOXEL_MM, close_mm: float = CLOSE
 
 
 def bridge_by_trajectory(pieces: list[Piece], positions: np.ndarray | None, cloud: np.ndarray | None = None,
-                         reach: float = 1.5, max_detour: float = 10.0, smooth_mm: float = 5.0,
+                         reach: float = TRAJECTORY_REACH, max_detour: float = 10.0, smooth_mm: float = 5.0,
                          min_unseen_mm: float = 5.0) -> list[Piece]:
     """Consecutive pieces joined along the camera trajectory where it passes from one to the next.
 
@@ -555,8 +563,7 @@ def bridge_by_trajectory(pieces: list[Piece], positions: np.ndarray | None, clou
     for p in pieces[1:]:
         prev = out[-1]
         a, b = prev.points[-1], p.points[0]
-        near = reach * max(prev.radius, p.radius) + 5.0
-        path = _trajectory_between(pos, a, b, near)
+        path = _trajectory_between(pos, a, b, trajectory_reach(max(prev.radius, p.radius), reach))
         if path is not None:
             path = resample(path, 1.0)
             if len(path) > 4:
