@@ -254,3 +254,40 @@ class PackSplit:
             x = x.clone()
             x[todo] = input_heatmap(distance_to(cut)).unsqueeze(1)
         return x, y
+
+
+class PackBatches(torch.utils.data.Dataset):
+    """The training batches of one epoch of a CPU pack split, made in DataLoader worker processes.
+
+    On the CPU a batch's distance transforms (``edt``, about 30 ms per sample
+    on this project's CPU) take as long as the small network's training step;
+    made in a worker process (``colonbench train --workers N``) they overlap
+    with it. Item ``k`` is exactly what the training loop would make for its
+    ``k``-th batch itself: the same samples, the same erased patches.
+
+    Parameters
+    ----------
+    split : PackSplit
+        On the CPU.
+    samples : (m,) int array
+        The epoch's samples (pack indices), in training order.
+    slots : (m,) int array
+        Their slots in the epoch (what :func:`erasure` draws from).
+    batch_size : int
+    seed, epoch : int
+    erase : float
+        Share of samples with erased patches (:func:`erasure`).
+    """
+
+    def __init__(self, split: PackSplit, samples, slots, batch_size: int, seed: int, epoch: int, erase: float):
+        self.split, self.samples, self.slots = split, np.asarray(samples), np.asarray(slots)
+        self.batch_size, self.seed, self.epoch, self.erase = batch_size, seed, epoch, erase
+
+    def __len__(self) -> int:
+        return -(-len(self.samples) // self.batch_size)
+
+    def __getitem__(self, k: int) -> tuple[torch.Tensor, torch.Tensor]:
+        at = slice(k * self.batch_size, (k + 1) * self.batch_size)
+        return self.split.batch(self.samples[at], [erasure(self.seed, self.epoch, int(i), self.erase)
+                                                   for i in self.slots[at]])
+

@@ -3,18 +3,21 @@
 Usage::
 
     python scripts/bench_train.py PACK [--device cuda] [--network small] [--batch-sizes 8,32,64] [--steps 10] \
-        [--erase 0.5]
+        [--erase 0.5] [--precision fp32,bf16]
 
 Uses the pack's validation split (its samples are only read). On a CUDA
 device it first checks that the min-plus distance transform used there
 equals the ``edt`` package's on one batch. ``--erase P`` times the batches
 as ``colonbench train --erase P`` makes them (patches erased from a share of
-the partial surfaces, their input heatmaps made again).
+the partial surfaces, their input heatmaps made again). ``--precision`` times
+the training step in each arithmetic ``colonbench train --precision`` offers.
+Peak memory is the GPU's, or on the CPU the process's resident peak so far.
 """
 
 from __future__ import annotations
 
 import argparse
+import resource
 import time
 
 import numpy as np
@@ -22,6 +25,7 @@ import torch
 
 from colonbench.completion import packdata
 from colonbench.completion.network import build_network, network_config, resolve_device
+from colonbench.completion.train import PRECISIONS, memory_format, train_step
 
 
 def sync(dev):
@@ -38,6 +42,7 @@ def main():
     ap.add_argument("--steps", type=int, default=10)
     ap.add_argument("--split", default="validation")
     ap.add_argument("--erase", type=float, default=0.0, help="share of samples with erased patches (as in training)")
+    ap.add_argument("--precision", default="fp32", help=f"comma-separated, of {', '.join(PRECISIONS)} (default fp32)")
     args = ap.parse_args()
     dev = resolve_device(args.device)
     t = time.perf_counter()
@@ -50,14 +55,14 @@ def main():
         fast = packdata.distance_to(occ, "min-plus").cpu()
         ref = packdata.distance_to(occ.cpu(), "edt")
         print(f"min-plus vs edt on {len(occ)} grids: max |difference| {float((fast - ref).abs().max()):.2e} voxels")
-    net = build_network(network_config(args.network)).to(dev)
+    net = build_network(network_config(args.network)).to(dev, memory_format=memory_format(dev))
     opt = torch.optim.Adam(net.parameters(), lr=1e-3)
     print(f"network {args.network}: {sum(p.numel() for p in net.parameters()) / 1e6:.2f} M parameters")
     if args.erase:
         print(f"erasing patches from a share {args.erase} of the samples")
-    print(f"{'batch':>5} {'heatmaps ms':>12} {'step ms':>9} {'samples/s':>10} {'peak MiB':>9}")
+    print(f"{'precision':>9} {'batch':>5} {'heatmaps ms':>12} {'step ms':>9} {'samples/s':>10} {'peak MiB':>9}")
     rng = np.random.default_rng(0)
-    for bs in [int(b) for b in args.batch_sizes.split(",")]:
+    for precision, bs in [(p, int(b)) for p in args.precision.split(",") for b in args.batch_sizes.split(",")]:
         if dev.type == "cuda":
             torch.cuda.reset_peak_memory_stats(dev)
         t_h = t_s = 0.0
@@ -68,18 +73,16 @@ def main():
             x, y = split.batch(idx, [packdata.erasure(0, step, int(i), args.erase) for i in idx])
             sync(dev)
             b = time.perf_counter()
-            opt.zero_grad(set_to_none=True)
-            loss = torch.mean((net(x) - y) ** 2)
-            loss.backward()
-            opt.step()
+            train_step(net, opt, x, y, precision)
             sync(dev)
             c = time.perf_counter()
             if step >= 2:  # two warm-up steps
                 t_h += b - a
                 t_s += c - b
         n = args.steps
-        peak = torch.cuda.max_memory_allocated(dev) / 2**20 if dev.type == "cuda" else float("nan")
-        print(f"{bs:>5} {1e3 * t_h / n:>12.1f} {1e3 * t_s / n:>9.1f} {bs * n / (t_h + t_s):>10.1f} {peak:>9.0f}")
+        peak = (torch.cuda.max_memory_allocated(dev) if dev.type == "cuda"
+                else resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024) / 2**20
+        print(f"{precision:>9} {bs:>5} {1e3 * t_h / n:>12.1f} {1e3 * t_s / n:>9.1f} {bs * n / (t_h + t_s):>10.1f} {peak:>9.0f}")
 
 
 if __name__ == "__main__":

@@ -239,3 +239,29 @@ def test_pack_refuses_bad_input_and_damage(smoke_dataset, smoke_pack, tmp_path, 
     assert main(["pack", str(data), "--out", str(copy), "--splits", "validation", "--quiet"]) == 0
     again = json.loads((copy / "pack.json").read_text())
     assert again["manifest_sha256"] == info["manifest_sha256"] and set(again["splits"]) == {"train", "validation"}
+
+
+def test_cpu_training_makes_a_packs_batches_in_workers_and_steps_in_bf16(smoke_pack, tmp_path):
+    # a worker process makes the batches the loop would make itself (same samples, same erased patches):
+    # the epoch's mean training loss is the same (the training step then runs on one thread instead of
+    # two, which moves the weights after Adam's steps, and the validation loss, by a few 1e-3 of it);
+    # bf16 steps train, and are a setting a resume must keep
+    *_, out, _ = smoke_pack
+    cfg = TrainConfig(epochs=1, batch_size=2, augment_prob=0.0, flips=True, erase=1.0)
+    logs = {}
+    for workers in (0, 1):
+        torch.manual_seed(0)
+        train(out, tmp_path / f"w{workers}", dataclasses.replace(cfg, workers=workers), device="cpu", progress=False)
+        logs[workers] = (tmp_path / f"w{workers}" / "log.csv").read_text().splitlines()[1].split(",")
+    assert float(logs[1][3]) == pytest.approx(float(logs[0][3]), rel=1e-4)      # train L2
+    assert float(logs[1][4]) == pytest.approx(float(logs[0][4]), rel=2e-2)      # validation L2
+    threads = torch.get_num_threads()
+    bf16 = dataclasses.replace(cfg, precision="bf16")
+    result = train(out, tmp_path / "bf16", bf16, device="cpu", progress=False)
+    assert result["steps"] == 2 and np.isfinite(result["best_val_l2"])
+    assert torch.get_num_threads() == threads                                   # the workers' cores given back
+    assert load_model(tmp_path / "bf16" / "best.safetensors")[2]["train_config"]["precision"] == "bf16"
+    with pytest.raises(InputError, match="other settings"):
+        train(out, tmp_path / "bf16", dataclasses.replace(cfg, epochs=2), device="cpu", progress=False)
+    with pytest.raises(InputError, match="precision 'fp16'"):
+        TrainConfig(precision="fp16").check()
