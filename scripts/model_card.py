@@ -64,7 +64,9 @@ def main(argv=None):
                "their train splits as one; their validation splits as one") + " for model selection |",
             f"| command | {_commands(args.data_manifest, meta)} (rerun the same command to resume a stopped run) |",
             f"| settings | batch {tc.get('batch_size')}, Adam lr {tc.get('lr')}, L2 loss, geometric augmentation "
-            f"share {tc.get('augment_prob')}, axis flips {'on' if tc.get('flips') else 'off'}, seed {tc.get('seed')} |",
+            f"share {tc.get('augment_prob')}, axis flips {'on' if tc.get('flips') else 'off'}, seed {tc.get('seed')}"
+            + (f", repeat {tc['repeat']}" if tc.get("repeat") else "")
+            + f", forward pass in {tc.get('precision', 'fp32')} |",
             f"| selected | epoch {meta.get('epoch')}, {meta.get('steps')} steps, {meta.get('samples_seen')} samples seen, "
             f"validation L2 {meta.get('val_l2'):.5f} |",
             f"| hardware | {args.hardware} ({meta.get('device')}, {meta.get('world_size')} process(es)) |",
