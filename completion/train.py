@@ -321,10 +321,6 @@ def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "a
     train_coverage = lock["train_coverage_mean"]
     rank, world = _dist()
     dev = resolve_device(device)
-    threads = torch.get_num_threads()
-    if dev.type == "cpu" and lock["pack"] and cfg.workers > 0:
-        # the batch workers take a core each; the training step takes the rest (one at least)
-        torch.set_num_threads(max(1, min(threads, len(os.sched_getaffinity(0)) - cfg.workers)))
     if dev.type == "cuda":
         torch.backends.cudnn.benchmark = True  # fixed input shapes: let cuDNN pick its fastest 3D convolutions
     if dev.type == "cuda" and world > 1:
@@ -416,6 +412,10 @@ def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "a
     if world == 1 and threading.current_thread() is threading.main_thread():
         for sig in (signal.SIGINT, signal.SIGTERM):
             previous[sig] = signal.signal(sig, lambda signum, frame: stop_signal.append(signum))
+    threads = torch.get_num_threads()
+    if dev.type == "cpu" and lock["pack"] and cfg.workers > 0:
+        # the batch workers take a core each; the training step takes the rest (one at least)
+        torch.set_num_threads(max(1, min(threads, len(os.sched_getaffinity(0)) - cfg.workers)))
     start = time.perf_counter()
     base_seconds = state["seconds"]
     last_ckpt = start
