@@ -99,3 +99,40 @@ def farthest_voxel(mask: np.ndarray, start, dx: float = 1.0):
     t = travel_time(mask.astype(float), start, mask=mask, dx=dx)
     finite = np.where(np.isfinite(t), t, -1.0)
     return np.array(np.unravel_index(int(np.argmax(finite)), t.shape)), t
+
+
+def largest_component(mask: np.ndarray) -> np.ndarray:
+    """The largest face-connected piece of a boolean voxel mask (all False where the mask is empty)."""
+    from scipy import ndimage
+
+    label, n = ndimage.label(mask)
+    if n == 0:
+        return np.zeros_like(mask, dtype=bool)
+    return label == 1 + int(np.argmax(np.bincount(label.ravel())[1:]))
+
+
+def extremities(mask: np.ndarray, depth: np.ndarray, dx: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """The two ends of a tube's longest geodesic path: from its deepest voxel, the farthest voxel ``a``,
+    then the voxel ``b`` farthest from ``a`` (both (3,) int).
+
+    ``depth``: each voxel's distance to the wall, same shape as ``mask``.
+    """
+    seed = np.array(np.unravel_index(int(np.argmax(np.where(mask, depth, -1))), depth.shape))
+    a, _ = farthest_voxel(mask, seed, dx=dx)
+    b, _ = farthest_voxel(mask, a, dx=dx)
+    return a, b
+
+
+def middle_path(mask: np.ndarray, depth: np.ndarray, a, b, dx: float = 1.0,
+                weight: np.ndarray | None = None) -> np.ndarray:
+    """(m, 3) int voxel path from ``a`` to ``b`` inside ``mask`` that keeps to the tube's middle.
+
+    Fast marching with the speed ``(depth / max depth)^2`` (times ``weight``,
+    a per-voxel factor, where given): the minimal path stays where the wall
+    is farthest.
+    """
+    speed = (depth / max(float(depth[mask].max()), 1e-9)) ** 2
+    if weight is not None:
+        speed = speed * weight
+    return backtrack(travel_time(speed, a, mask=mask, dx=dx), b)
+

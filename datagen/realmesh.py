@@ -156,21 +156,11 @@ def compute_centerline(mesh: trimesh.Trimesh, voxel_mm: float = 1.0, smooth_mm: 
     if not mesh.is_watertight:
         raise InputError("computing a centerline needs a closed (watertight) mesh; give the centerline instead")
     inside, origin = voxelize_lumen(mesh, voxel_mm)
-    from scipy.ndimage import label
-
-    lab, n = label(inside)
-    if n == 0:
+    if not inside.any():
         raise InputError("the mesh encloses no voxels at this resolution; try a smaller voxel size")
-    sizes = np.bincount(lab.ravel())[1:]
-    inside = lab == (1 + int(np.argmax(sizes)))
+    inside = paths.largest_component(inside)
     dist = edt.edt(inside, anisotropy=(voxel_mm,) * 3)
-    seed = np.array(np.unravel_index(int(np.argmax(dist)), dist.shape))
-    a, _ = paths.farthest_voxel(inside, seed, dx=voxel_mm)
-    b, _ = paths.farthest_voxel(inside, a, dx=voxel_mm)
-    # speed grows with the distance to the wall: the path keeps to the middle
-    speed = (dist / dist.max()) ** 2
-    t = paths.travel_time(speed, a, mask=inside, dx=voxel_mm)
-    vox = paths.backtrack(t, b)
+    vox = paths.middle_path(inside, dist, *paths.extremities(inside, dist, voxel_mm), voxel_mm)
     # geodesic extremities lie on the wall (the rim of a pole): trim each end to
     # where the path is at least half its median distance away from the wall
     wall = dist[tuple(vox.T)]

@@ -173,23 +173,14 @@ def _piece_path(inside: np.ndarray, dist: np.ndarray, voxel_mm: float,
     """
     near = inside
     if guide is not None:  # the largest stretch of the lumen around the trajectory
-        label, n = ndimage.label(inside & (guide <= GUIDE_NEAR_MM))
-        if n:
-            sizes = np.bincount(label.ravel())[1:]
-            near = label == 1 + int(np.argmax(sizes))
+        near = paths.largest_component(inside & (guide <= GUIDE_NEAR_MM))
         if near.sum() < 8:  # the trajectory hardly enters this piece
             near, guide = inside, None
-    seed = np.array(np.unravel_index(int(np.argmax(np.where(near, dist, -1))), dist.shape))
-    a, _ = paths.farthest_voxel(near, seed, dx=voxel_mm)
-    b, _ = paths.farthest_voxel(near, a, dx=voxel_mm)
-    def march(speed):  # fast marching from a through the piece, back from b
-        return paths.backtrack(paths.travel_time(speed, a, mask=inside, dx=voxel_mm), b)
-
-    speed = (dist / max(float(dist[inside].max()), 1e-9)) ** 2
-    path = march(speed)
+    a, b = paths.extremities(near, dist, voxel_mm)
+    path = paths.middle_path(inside, dist, a, b, voxel_mm)
     if guide is None or not misses_trajectory(path, inside, dist, guide, voxel_mm):
         return path
-    return march(speed * trajectory_weight(guide))
+    return paths.middle_path(inside, dist, a, b, voxel_mm, weight=trajectory_weight(guide))
 
 
 def misses_trajectory(path: np.ndarray, inside: np.ndarray, dist: np.ndarray, guide: np.ndarray,
