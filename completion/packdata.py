@@ -257,18 +257,19 @@ class PackSplit:
 
 
 class PackBatches(torch.utils.data.Dataset):
-    """The training batches of one epoch of a CPU pack split, made in DataLoader worker processes.
+    """The training batches of one epoch of a pack split: item ``k`` is the ``k``-th batch, its samples and
+    their erased patches (:func:`erasure`).
 
-    On the CPU a batch's distance transforms (``edt``, about 30 ms per sample
-    on this project's CPU) take as long as the small network's training step;
-    made in a worker process (``colonbench train --workers N``) they overlap
-    with it. Item ``k`` is exactly what the training loop would make for its
-    ``k``-th batch itself: the same samples, the same erased patches.
+    Training takes the items in order, in its own process on a GPU (the
+    heatmaps are made on the device), and on the CPU in DataLoader worker
+    processes (``colonbench train --workers N``): there a batch's distance
+    transforms (``edt``, about 30 ms per sample on this project's CPU) take
+    as long as the small network's training step, and made in a worker they
+    overlap with it. The batches are the same either way.
 
     Parameters
     ----------
     split : PackSplit
-        On the CPU.
     samples : (m,) int array
         The epoch's samples (pack indices), in training order.
     slots : (m,) int array

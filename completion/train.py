@@ -52,7 +52,7 @@ import torch
 from colonbench import seeding
 from colonbench._version import __version__
 from colonbench.augment import AugmentConfig
-from colonbench.completion.packdata import PackBatches, apply_flips, erasure, flips
+from colonbench.completion.packdata import PackBatches, apply_flips, flips
 from colonbench.completion.network import (NETWORKS, build_network, network_config, resolve_device,
                                            save_model)
 from colonbench.errors import InputError
@@ -432,14 +432,13 @@ def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "a
             raise InputError(f"{data_dir}: {len(order)} training samples, fewer than one batch of {bs} per process")
         mine = order[: n_batches * bs * world][rank::world]
         todo = mine[state["position"] * bs:]
-        if lock["pack"] and dev.type == "cpu" and cfg.workers > 0:
-            batches = torch.utils.data.DataLoader(
-                PackBatches(train_ds, slots[todo], todo, bs, cfg.seed, epoch, cfg.erase), batch_size=None,
-                num_workers=cfg.workers, worker_init_fn=_pack_worker, persistent_workers=False)
-        elif lock["pack"]:
-            batches = (train_ds.batch(slots[todo[b:b + bs]], [erasure(cfg.seed, epoch, int(i), cfg.erase)
-                                                              for i in todo[b:b + bs]])
-                       for b in range(0, len(todo), bs))
+        if lock["pack"]:
+            made = PackBatches(train_ds, slots[todo], todo, bs, cfg.seed, epoch, cfg.erase)
+            if dev.type == "cpu" and cfg.workers > 0:  # made in worker processes while the step runs
+                batches = torch.utils.data.DataLoader(made, batch_size=None, num_workers=cfg.workers,
+                                                      worker_init_fn=_pack_worker, persistent_workers=False)
+            else:  # on a GPU the heatmaps are made on the device, in this process
+                batches = (made[k] for k in range(len(made)))
         else:
             train_ds.set_epoch(epoch)
             batches = torch.utils.data.DataLoader(torch.utils.data.Subset(train_ds, slots[todo].tolist()),

@@ -242,11 +242,19 @@ def test_pack_refuses_bad_input_and_damage(smoke_dataset, smoke_pack, tmp_path, 
 
 
 def test_cpu_training_makes_a_packs_batches_in_workers_and_steps_in_bf16(smoke_pack, tmp_path):
-    # a worker process makes the batches the loop would make itself (same samples, same erased patches):
+    # a worker process makes the batches the loop makes itself on a GPU (same samples, same erased patches):
     # the epoch's mean training loss is the same (the training step then runs on one thread instead of
     # two, which moves the weights after Adam's steps, and the validation loss, by a few 1e-3 of it);
     # bf16 steps train, and are a setting a resume must keep
     *_, out, _ = smoke_pack
+    # the k-th batch: the epoch's k-th pair of samples, each erased as its slot draws
+    split = packdata.PackSplit(out, "train", "cpu")
+    made = packdata.PackBatches(split, [1, 0, 1], [2, 0, 1], 2, seed=0, epoch=3, erase=1.0)
+    assert len(made) == 2
+    for k, (samples, slots) in enumerate([([1, 0], [2, 0]), ([1], [1])]):
+        x, y = split.batch(samples, [packdata.erasure(0, 3, i, 1.0) for i in slots])
+        assert torch.equal(made[k][0], x) and torch.equal(made[k][1], y)
+    assert not torch.equal(made[0][0][0], made[1][0][0])     # sample 1 in slots 2 and 1: other patches
     cfg = TrainConfig(epochs=1, batch_size=2, augment_prob=0.0, flips=True, erase=1.0)
     logs = {}
     for workers in (0, 1):
