@@ -155,3 +155,14 @@ dump("colon-val", "Whole-colon validation, where the map's settings are chosen (
      "are never used).",
      20261123, {"validation": whole_colons(340, 4, 2, ["gca00090", "gca00080"])},
      mesh_names=["gca00090", "gca00080"], task="colon")
+
+#: Whole-colon training data of the context model (issue 12): its context samples are cut from these
+#: reconstructions (colonbench pack --context); paper.yaml's train colons and the real training colons only.
+dump("colon-train", "Whole-colon training data for the in-context model (colonbench pack DATA --context, then "
+     "colonbench train): three whole partial reconstructions (withdrawal-camera or sphere holes, 2 points/mm^2) of "
+     "each of 20 of paper.yaml's train colons and of the real training colons gca00090 and gca00080, validated on 2 "
+     "of paper.yaml's validation colons that colon-val.yaml does not use. colon-val.yaml's and colon-test.yaml's "
+     "colons are never trained on.",
+     20261126, {"train": whole_colons(0, 20, 3, ["gca00090", "gca00080"]),
+                "validation": whole_colons(346, 2, 1, None)},
+     mesh_names=["gca00090", "gca00080"], task="colon")

@@ -54,6 +54,9 @@ PACK_FORMAT = "colonbench-pack"
 PACK_VERSION = 1
 #: The occupancy grids a pack stores per sample, in this order.
 GRIDS = ("s0", "s1", "c")
+#: The fourth grid of a context pack (:mod:`colonbench.shards.contextpack`): the segment's slab
+#: (:func:`colonbench.slab.slab_occupancy`), the in-context model's second input channel.
+SLAB = "slab"
 #: Largest difference between a stored (float16) heatmap and the one recomputed from the occupancies.
 CHECK_TOLERANCE = 2e-3
 
@@ -131,8 +134,6 @@ def write_pack(data_dir, out_dir, splits=("train", "validation"), workers: int =
     dict
         The contents of ``pack.json``.
     """
-    from tqdm.auto import tqdm
-
     from colonbench.shards.reader import ShardDataset
 
     data_dir, out = Path(data_dir), Path(out_dir)
@@ -163,43 +164,75 @@ def write_pack(data_dir, out_dir, splits=("train", "validation"), workers: int =
         info["grid_options"] = ds.shards[0].grid_options
         if split == "train":
             info["train_coverage_mean"] = lock["splits"]["train"]["statistics"]["coverage"]["mean"]
-        row = size ** 3 // 8
-        final = out / f"{split}.h5"
-        tmp = out / f"{split}.h5.tmp-{os.getpid()}"
-        worst = 0.0
         files = [sh.path for sh in ds.shards]
-        bar = tqdm(total=n, desc=f"pack {split}", unit="sample", disable=None if progress else True)
-        try:
-            with h5py.File(tmp, "w", track_order=True) as h5, _pool(workers) as pool:
-                h5.attrs["grid_size"] = size
-                sets = {g: h5.create_dataset(g, (n, row), dtype=np.uint8, chunks=(1, row), compression="gzip",
-                                             compression_opts=9) for g in GRIDS}
-                at = 0
-                for path, (rows, diff) in zip(files, pool.map(_pack_shard, files)):
-                    worst = max(worst, diff)
-                    if diff > CHECK_TOLERANCE:
-                        raise InputError(f"{path}: the heatmaps made from its occupancies differ from the stored "
-                                         f"ones by {diff:.3g}; the shards were not made by this heatmap definition, "
-                                         "so a pack of them would train on other targets")
-                    k = len(rows["s0"])
-                    for g in GRIDS:
-                        sets[g][at:at + k] = rows[g]
-                    at += k
-                    bar.update(k)
-        except BaseException:
-            tmp.unlink(missing_ok=True)
-            raise
-        finally:
-            bar.close()
-        with open(tmp, "rb+") as fh:
-            os.fsync(fh.fileno())
-        os.replace(tmp, final)
-        info["splits"][split] = {"samples": n, "file": final.name, "sha256": sha256_file(final),
-                                 "bytes": final.stat().st_size, "max_heatmap_difference": worst}
+
+        def checked(files, parts):
+            for path, (rows, diff) in zip(files, parts):
+                if diff > CHECK_TOLERANCE:
+                    raise InputError(f"{path}: the heatmaps made from its occupancies differ from the stored "
+                                     f"ones by {diff:.3g}; the shards were not made by this heatmap definition, "
+                                     "so a pack of them would train on other targets")
+                yield rows, diff
+
+        with _pool(workers) as pool:
+            info["splits"][split] = write_split(out, split, size, n, GRIDS,
+                                                checked(files, pool.map(_pack_shard, files)),
+                                                progress)
     tmp = out / (PACK_NAME + ".tmp")
     tmp.write_text(json.dumps(info, indent=1) + "\n")
     os.replace(tmp, out / PACK_NAME)
     return info
+
+
+def write_split(out: Path, split: str, size: int, n: int, grids, parts, progress: bool = True) -> dict:
+    """Write ``<split>.h5`` of a pack, atomically, from parts of packed rows; its entry in ``pack.json``.
+
+    Parameters
+    ----------
+    out : Path
+        The pack folder.
+    split : str
+    size : int
+        Grid side S.
+    n : int
+        Samples in all.
+    grids : sequence of str
+        The datasets written (:data:`GRIDS`, and ``slab`` in a context pack).
+    parts : iterable of (dict, float)
+        Per part, its rows (grid name -> (k, S^3 / 8) uint8) and the largest heatmap difference checked.
+    progress : bool
+    """
+    from tqdm.auto import tqdm
+
+    row = size ** 3 // 8
+    final = out / f"{split}.h5"
+    tmp = out / f"{split}.h5.tmp-{os.getpid()}"
+    worst, at = 0.0, 0
+    bar = tqdm(total=n, desc=f"pack {split}", unit="sample", disable=None if progress else True)
+    try:
+        with h5py.File(tmp, "w", track_order=True) as h5:
+            h5.attrs["grid_size"] = size
+            sets = {g: h5.create_dataset(g, (n, row), dtype=np.uint8, chunks=(1, row), compression="gzip",
+                                         compression_opts=9) for g in grids}
+            for rows, diff in parts:
+                worst = max(worst, diff)
+                k = len(rows[grids[0]])
+                for g in grids:
+                    sets[g][at:at + k] = rows[g]
+                at += k
+                bar.update(k)
+        if at != n:
+            raise InputError(f"{split}: {at} samples were packed where {n} were counted")
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    finally:
+        bar.close()
+    with open(tmp, "rb+") as fh:
+        os.fsync(fh.fileno())
+    os.replace(tmp, final)
+    return {"samples": n, "file": final.name, "sha256": sha256_file(final), "bytes": final.stat().st_size,
+            "max_heatmap_difference": worst}
 
 
 class _Serial:
@@ -229,7 +262,7 @@ def read_pack(pack_dir, split: str) -> tuple[dict, dict]:
     info : dict
         ``pack.json``.
     bits : dict
-        ``s0``, ``s1``, ``c``: (n, S^3 / 8) uint8 packed occupancies.
+        ``s0``, ``s1``, ``c`` (and ``slab`` in a context pack): (n, S^3 / 8) uint8 packed occupancies.
     """
     pack = Path(pack_dir)
     if not is_pack(pack):
@@ -248,7 +281,7 @@ def read_pack(pack_dir, split: str) -> tuple[dict, dict]:
         raise InputError(f"{path}: its sha256 differs from the one in {PACK_NAME}; the file is damaged or "
                          "from another pack")
     with h5py.File(path, "r") as h5:
-        bits = {g: h5[g][()] for g in GRIDS}
+        bits = {g: h5[g][()] for g in GRIDS + ((SLAB,) if SLAB in h5 else ())}
     if any(len(b) != meta["samples"] for b in bits.values()):
         raise InputError(f"{path}: sample counts disagree with {PACK_NAME}")
     return info, bits
