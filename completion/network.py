@@ -28,10 +28,13 @@ except ImportError as exc:  # pragma: no cover - exercised only without the extr
 
 @dataclass(frozen=True)
 class NetworkConfig:
-    """A MONAI ``UNet(spatial_dims=3, in_channels=1, out_channels=1, ...)``.
+    """A MONAI ``UNet(spatial_dims=3, in_channels=..., out_channels=1, ...)``.
 
     Attributes
     ----------
+    in_channels : int
+        1: the input heatmap (the paper's network); 2: the input heatmap and the segment's slab, the
+        in-context model (:mod:`colonbench.slab`).
     channels : tuple of int
         Feature channels per level, finest first.
     strides : tuple of int
@@ -48,15 +51,19 @@ class NetworkConfig:
     num_res_units: int = 1
     norm: str = "batch"
     dropout: float = 0.0
+    in_channels: int = 1
 
     def to_json(self) -> str:
-        return json.dumps(asdict(self))
+        d = asdict(self)
+        if self.in_channels == 1:  # the paper's network: its files stay as they were
+            del d["in_channels"]
+        return json.dumps(d)
 
     @classmethod
     def from_json(cls, text: str) -> "NetworkConfig":
         d = json.loads(text)
         return cls(channels=tuple(d["channels"]), strides=tuple(d["strides"]), num_res_units=int(d["num_res_units"]),
-                   norm=str(d["norm"]), dropout=float(d["dropout"]))
+                   norm=str(d["norm"]), dropout=float(d["dropout"]), in_channels=int(d.get("in_channels", 1)))
 
 
 #: Named configurations: ``small`` trains on a CPU in hours (0.6 M parameters,
@@ -78,10 +85,28 @@ def network_config(name_or_config) -> NetworkConfig:
 
 
 def build_network(config: NetworkConfig) -> "torch.nn.Module":
-    """The UNet; maps (B, 1, S, S, S) input heatmaps to (B, 1, S, S, S) target heatmaps (linear output)."""
-    return UNet(spatial_dims=3, in_channels=1, out_channels=1, channels=tuple(config.channels),
+    """The UNet; maps (B, C, S, S, S) inputs (C = ``config.in_channels``) to (B, 1, S, S, S) target heatmaps
+    (linear output)."""
+    return UNet(spatial_dims=3, in_channels=config.in_channels, out_channels=1, channels=tuple(config.channels),
                 strides=tuple(config.strides), num_res_units=config.num_res_units, norm=config.norm,
                 dropout=config.dropout)
+
+
+def widen_inputs(state: dict, in_channels: int) -> dict:
+    """A 1-input-channel network's weights for ``in_channels`` inputs: the new channels' weights are zero.
+
+    The weights whose input dimension reads the network's input (the first convolution and, with residual
+    units, the first block's residual projection: those with 1 input channel) gain zero-filled input
+    channels, so the widened network computes exactly what the original did until training moves them.
+    An in-context model starts so from a segment model (``colonbench train --init``).
+    """
+    out = {}
+    for key, w in state.items():
+        if w.ndim == 5 and w.shape[1] == 1 and key.startswith("model.0."):
+            extra = torch.zeros((w.shape[0], in_channels - 1) + tuple(w.shape[2:]), dtype=w.dtype)
+            w = torch.cat([w, extra], dim=1)
+        out[key] = w
+    return out
 
 
 def save_model(path, net: "torch.nn.Module", config: NetworkConfig, meta: dict | None = None) -> Path:
@@ -130,7 +155,7 @@ def load_model(path, device: str = "cpu") -> tuple["torch.nn.Module", NetworkCon
 
 
 def for_inference(net: "torch.nn.Module", size: int, device: "torch.device"):
-    """``net`` as a callable for (1, 1, size, size, size) inputs, made faster for inference where it can be.
+    """``net`` as a callable for (1, C, size, size, size) inputs, made faster for inference where it can be.
 
     On the CPU the network is traced and passed through
     ``torch.jit.optimize_for_inference``, which folds each batch norm into its
@@ -151,7 +176,7 @@ def for_inference(net: "torch.nn.Module", size: int, device: "torch.device"):
     try:
         with torch.inference_mode(), warnings.catch_warnings():
             warnings.simplefilter("ignore", DeprecationWarning)
-            x = torch.zeros((1, 1) + (int(size),) * 3, device=device)
+            x = torch.zeros((1, getattr(net, "in_channels", 1)) + (int(size),) * 3, device=device)
             fast = torch.jit.optimize_for_inference(torch.jit.trace(net, x, check_trace=False))
             fast(x)
     except Exception:  # noqa: BLE001 - any failure leaves the eager network, which is always right

@@ -40,7 +40,7 @@ import torch
 from colonbench import seeding
 from colonbench.errors import InputError
 from colonbench.heatmaps import heatmaps_from_occupancy, input_heatmap
-from colonbench.shards.pack import GRIDS, read_pack
+from colonbench.shards.pack import GRIDS, SLAB, read_pack
 
 #: Elements of the broadcast (n, S, S, S, S) tensor of one min-plus step, at most.
 _CHUNK_ELEMENTS = 1 << 28
@@ -164,7 +164,7 @@ def erase_patches(s0: torch.Tensor, rng: np.random.Generator, patches: tuple = E
 
 
 def apply_flips(x: torch.Tensor, y: torch.Tensor, axes: list) -> tuple[torch.Tensor, torch.Tensor]:
-    """Flip the grid axes ``axes[k]`` of item ``k`` of (n, 1, S, S, S) input and target batches."""
+    """Flip the grid axes ``axes[k]`` of item ``k`` of (n, C, S, S, S) input and target batches."""
     if not any(axes):
         return x, y
     x, y = x.clone(), y.clone()
@@ -208,10 +208,16 @@ class PackSplit:
         other = [str(d) for d, (info, _) in zip(dirs, read) if info["grid_options"] != self.info["grid_options"]]
         if other:
             raise InputError(f"{other[0]} has another grid than {dirs[0]}; packs trained together need the same grid")
+        with_slab = [SLAB in bits for _, bits in read]
+        if any(with_slab) and not all(with_slab):
+            raise InputError(f"{dirs[with_slab.index(False)]} is a segment pack and {dirs[with_slab.index(True)]} a "
+                             "context pack; an in-context model trains on context packs only")
+        self.grid_names = GRIDS + ((SLAB,) if all(with_slab) else ())
+        self.in_channels = 2 if all(with_slab) else 1
         self.size = int(self.info["grid_options"]["size"])
         self.sizes = [len(bits[GRIDS[0]]) for _, bits in read]
         self.device = torch.device(device)
-        self.bits = torch.from_numpy(np.concatenate([np.stack([bits[g] for g in GRIDS], axis=1)
+        self.bits = torch.from_numpy(np.concatenate([np.stack([bits[g] for g in self.grid_names], axis=1)
                                                      for _, bits in read])).to(self.device)
         self._shifts = torch.arange(7, -1, -1, dtype=torch.uint8, device=self.device)
         self._cache = None
@@ -226,17 +232,23 @@ class PackSplit:
         return len(self.bits)
 
     def grids(self, indices) -> torch.Tensor:
-        """(n, 3, S, S, S) bool occupancies (``s0``, ``s1``, ``c``) of samples ``indices``, on the device."""
+        """(n, G, S, S, S) bool occupancies (``s0``, ``s1``, ``c``, and ``slab`` in a context pack) of samples
+        ``indices``, on the device."""
         rows = self.bits[torch.as_tensor(np.asarray(indices, dtype=np.int64), device=self.device)]
-        return ((rows.unsqueeze(-1) >> self._shifts) & 1).bool().reshape(len(rows), 3, *(self.size,) * 3)
+        return ((rows.unsqueeze(-1) >> self._shifts) & 1).bool().reshape(len(rows), len(self.grid_names),
+                                                                          *(self.size,) * 3)
 
     def _make(self, indices) -> tuple[torch.Tensor, torch.Tensor]:
         grids = self.grids(indices)
         h_in, h_t = heatmaps(grids[:, 0], grids[:, 1], grids[:, 2])
-        return h_in.unsqueeze(1), h_t.unsqueeze(1)
+        x = h_in.unsqueeze(1)
+        if self.in_channels == 2:  # the in-context model's second channel: the segment's slab (colonbench.slab)
+            x = torch.cat([x, grids[:, 3:4].float()], dim=1)
+        return x, h_t.unsqueeze(1)
 
     def batch(self, indices, erase=None) -> tuple[torch.Tensor, torch.Tensor]:
-        """(input, target) heatmaps of samples ``indices``: (n, 1, S, S, S) float32 on the device.
+        """(input, target) of samples ``indices``: (n, C, S, S, S) and (n, 1, S, S, S) float32 on the device
+        (C = :attr:`in_channels`: the input heatmap, and the slab in a context pack).
 
         ``erase``: per sample None or a generator (:func:`erasure`); those
         samples' input heatmaps are made from their partial surface with
@@ -252,7 +264,7 @@ class PackSplit:
             s0 = self.grids([indices[k] for k in todo])[:, 0]
             cut = torch.stack([erase_patches(s0[j], erase[k]) for j, k in enumerate(todo)])
             x = x.clone()
-            x[todo] = input_heatmap(distance_to(cut)).unsqueeze(1)
+            x[todo, :1] = input_heatmap(distance_to(cut)).unsqueeze(1)
         return x, y
 
 

@@ -43,7 +43,7 @@ import os
 import signal
 import threading
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -357,16 +357,23 @@ def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "a
 
     slots = epoch_slots(sizes, cfg.repeat)
     torch.manual_seed(cfg.seed)
-    net_cfg = network_config(cfg.network)
+    # a context pack's samples carry the segment's slab: the in-context model's second input channel
+    net_cfg = replace(network_config(cfg.network), in_channels=getattr(train_ds, "in_channels", 1))
     net = build_network(net_cfg).to(dev, memory_format=memory_format(dev))
     if cfg.init is not None and not (out / "last.pt").exists():
         from colonbench.completion.method import model_path
         from colonbench.completion.network import load_model
 
+        from colonbench.completion.network import widen_inputs
+
         start, start_cfg, _ = load_model(model_path(cfg.init), "cpu")
-        if start_cfg != net_cfg:
+        if (replace(start_cfg, in_channels=net_cfg.in_channels) != net_cfg
+                or start_cfg.in_channels > net_cfg.in_channels):
             raise InputError(f"{cfg.init}: a {start_cfg} network, not the {cfg.network!r} network this run trains")
-        net.load_state_dict(start.state_dict())
+        weights = start.state_dict()
+        if start_cfg.in_channels < net_cfg.in_channels:  # a segment model starts an in-context one
+            weights = widen_inputs(weights, net_cfg.in_channels)
+        net.load_state_dict(weights)
     opt = torch.optim.Adam(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
     sched = torch.optim.lr_scheduler.ReduceLROnPlateau(opt, factor=cfg.lr_factor, patience=cfg.lr_patience)
     state = {"epoch": 0, "position": 0, "steps": 0, "samples": 0, "best_val": float("inf"), "seconds": 0.0,
