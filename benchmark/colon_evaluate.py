@@ -175,7 +175,7 @@ def _unit_key(shard_name: str, index: int, sigma: float) -> str:
 
 def evaluate_colons(data, methods, out, noise=(0.0, 0.5), contexts=CONTEXTS_MM, segment_mm: float = SEGMENT_MM,
                     split: str = "test", limit: int | None = None, workers: int = 1, model=None,
-                    device: str = "cpu", noise_seed: int = 0, progress: bool = True) -> Path:
+                    device: str = "cpu", noise_seed: int = 0, progress: bool = True, context_model=None) -> Path:
     """Map every whole-colon sample of a split with every method and track; write (or finish) a run folder.
 
     Parameters
@@ -194,6 +194,9 @@ def evaluate_colons(data, methods, out, noise=(0.0, 0.5), contexts=CONTEXTS_MM, 
         Segment arc length, mm.
     split, limit, workers, model, device, noise_seed, progress
         As for :func:`colonbench.benchmark.evaluate.evaluate`.
+    context_model : path or str, optional
+        An in-context model for the tracks with context (methods that take one: ``completion``); the
+        segment-only track keeps ``model``, the paper's protocol.
 
     Returns
     -------
@@ -211,7 +214,8 @@ def evaluate_colons(data, methods, out, noise=(0.0, 0.5), contexts=CONTEXTS_MM, 
         raise InputError(f"--segment-length must be positive, got {segment_mm}")
     identity, picks = select(data, split, limit)
     ColonShard(data / picks[0][0])  # a clear error for a segment dataset
-    options = {"model": str(model) if model is not None else None, "device": device}
+    options = {"model": str(model) if model is not None else None, "device": device,
+               "context_model": str(context_model) if context_model is not None else None}
     t0 = time.perf_counter()
     loaded = load_methods(specs, options, refuse_truth="it cannot map a whole reconstruction (the segment "
                                                        "benchmark's reference rows)")

@@ -225,14 +225,17 @@ def _model_sha256(model):
 
 def cmd_pack(args):
     """Write a dataset's samples as compact voxel occupancies (a pack) for training on another machine."""
+    from colonbench.shards.contextpack import write_context_pack
     from colonbench.shards.pack import write_pack
 
     splits = [s.strip() for s in args.splits.split(",") if s.strip()]
-    info = write_pack(args.data, args.out, splits, workers=args.workers, progress=not args.quiet)
+    write = write_context_pack if args.context else write_pack
+    info = write(args.data, args.out, splits, workers=args.workers, progress=not args.quiet)
     for split, meta in info["splits"].items():
         print(f"{split}: {meta['samples']} samples, {meta['bytes'] / 2**20:.1f} MiB "
-              f"({meta['bytes'] / meta['samples'] / 1024:.1f} KiB/sample), heatmaps remade from the occupancies "
-              f"within {meta['max_heatmap_difference']:.1e} of the stored ones")
+              f"({meta['bytes'] / meta['samples'] / 1024:.1f} KiB/sample)"
+              + ("" if args.context else ", heatmaps remade from the occupancies within "
+                 f"{meta['max_heatmap_difference']:.1e} of the stored ones"))
     print(f"wrote {Path(args.out)}; train on it with colonbench train {args.out} --augment-prob 0 --flips ...")
 
 
@@ -319,6 +322,9 @@ def cmd_evaluate(args):
                               f"{'task: colon' if task == 'colon' else 'segment'} manifest's data")
     if task == "colon":
         return _evaluate_colons(args)
+    if args.context_model:
+        raise ColonbenchError("--context-model is for whole-colon maps (--task colon), where segments have planes "
+                              "and context; the segment benchmark keeps the paper's protocol")
     t = time.perf_counter()
     run = evaluate(args.data, _method_list(args.methods), args.out, noise=args.noise, split=args.split,
                    limit=args.limit, workers=args.workers, model=args.model, device=args.device,
@@ -349,7 +355,7 @@ def _evaluate_colons(args):
     run = evaluate_colons(args.data, methods, args.out, noise=args.noise, contexts=args.contexts,
                           segment_mm=args.segment_length, split=args.split, limit=args.limit, workers=args.workers,
                           model=args.model, device=args.device, noise_seed=args.noise_seed,
-                          progress=not args.quiet)
+                          progress=not args.quiet, context_model=args.context_model)
     meta, segments, colons = load_colon_results(run)
     tab = colon_table(segments, colons)
     for _, r in tab.iterrows():
@@ -389,7 +395,7 @@ def cmd_map(args):
     if args.trajectory:
         positions = read_trajectory(args.trajectory)
         check_trajectory(positions, points, str(args.trajectory))
-    method = load_method(args.method, model=args.model, device=args.device)
+    method = load_method(args.method, model=args.model, device=args.device, context_model=args.context_model)
     if getattr(method, "uses_truth", False):
         raise ColonbenchError(f"method {method.name!r} is a reference that needs ground truth; it runs only in "
                               "colonbench evaluate")
@@ -584,6 +590,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="pack folder to write")
     p.add_argument("--splits", default="train,validation", help="splits to pack (default train,validation)")
     p.add_argument("--workers", type=int, default=1, help="processes reading and checking shards (default 1)")
+    p.add_argument("--context", action="store_true",
+                   help="a whole-colon dataset (task: colon): cut its reconstructions into segments in context, "
+                        "each with its slab, to train the in-context model (docs/mapping.md)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_pack)
 
@@ -658,6 +667,10 @@ def build_parser() -> argparse.ArgumentParser:
                         f"coverage on its completed surface between the planes only (default {CONTEXT_MM:g}; 0: "
                         "each segment alone, the paper's segment-only protocol)")
     _add_model_args(p, "model .safetensors, or a shipped model by name (default: small)")
+    p.add_argument("--context-model", help="an in-context model (.safetensors, or a shipped one by name) for "
+                                           "the segments given context (--context-mm above 0): it sees the "
+                                           "segment's planes; trained with colonbench pack --context "
+                                           "(docs/mapping.md)")
     p.add_argument("--no-figure", action="store_true", help="skip map.png (the headless rendering)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_map)
@@ -702,6 +715,8 @@ def build_parser() -> argparse.ArgumentParser:
                         f"{CONTEXT_MM:g})")
     p.add_argument("--segment-length", type=float, default=SEGMENT_MM,
                    help=f"--task colon: segment arc length of the maps, mm (default {SEGMENT_MM:g})")
+    p.add_argument("--context-model", help="--task colon: an in-context model for the tracks with context (the "
+                                           "segment-only track keeps --model; docs/mapping.md)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_evaluate)
 

@@ -153,18 +153,42 @@ class Predictor:
         self.grid_options = self.meta.get("grid_options", {})
         self._cache: OrderedDict[bytes, Prediction] = OrderedDict()
 
-    def __call__(self, points) -> Prediction:
-        """The :class:`Prediction` of a checked partial cloud (mm); cached."""
+    @property
+    def in_context(self) -> bool:
+        """Whether the model is an in-context model (a second input channel: the segment's slab)."""
+        return self.config.in_channels > 1
+
+    def __call__(self, points, slab=None) -> Prediction:
+        """The :class:`Prediction` of a checked partial cloud (mm); cached.
+
+        ``slab`` (:class:`colonbench.slab.Slab`): the segment's stretch of centerline, which an in-context
+        model needs (its grid and second input channel); a segment model does without it.
+        """
         pts = np.ascontiguousarray(points, dtype=float)
-        key = hashlib.sha1(pts.tobytes()).digest() + str(pts.shape).encode()
+        if not self.in_context:
+            slab = None
+        elif slab is None:
+            raise InputError(f"{self.path.name} is an in-context model: it needs the segment's stretch of "
+                             "centerline and its planes, which colonbench map gives it (--context-mm); estimate "
+                             "single segments with a segment model (the default)")
+        key = hashlib.sha1(pts.tobytes() + (slab.key() if slab is not None else b"")).digest() \
+            + str(pts.shape).encode()
         if key in self._cache:
             self._cache.move_to_end(key)
             return self._cache[key]
         import torch
 
         t = time.perf_counter()
-        grid = fit_grid(pts, **self.grid_options)
-        h_in, _ = input_from_points(grid, pts)
+        if slab is None:
+            grid = fit_grid(pts, **self.grid_options)
+            h_in, _ = input_from_points(grid, pts)
+            x_np = h_in[None, None]
+        else:
+            from colonbench.slab import context_grid, slab_occupancy
+
+            grid = context_grid(pts, slab, **self.grid_options)
+            h_in, _ = input_from_points(grid, pts)
+            x_np = np.stack([h_in, slab_occupancy(grid, slab).astype(np.float32)])[None]
         # the first cloud runs the eager network; from the second on, the network made fast for inference
         # (its set-up, about 1 s, pays off over a few clouds, not for a single one)
         if grid.size in self._seen and grid.size not in self._forward:
@@ -173,7 +197,7 @@ class Predictor:
             self._forward[grid.size] = for_inference(self.net, grid.size, self.device)
         self._seen.add(grid.size)
         with torch.inference_mode():
-            x = torch.from_numpy(h_in[None, None]).to(self.device)
+            x = torch.from_numpy(x_np).to(self.device)
             pred = self._forward.get(grid.size, self.net)(x)[0, 0].float().cpu().numpy()
         out = Prediction(grid, h_in, np.clip(pred, 0.0, 1.0), {"network": time.perf_counter() - t})
         self._cache[key] = out
@@ -243,6 +267,9 @@ class CompletionMethod:
     end_level : float or None
         The centerline's ends move to the far ends of the predicted heatmap's voxels at or above this
         (docs/method.md step 3, from steps version 6); None keeps the ends of its ridge.
+    context_model : path, optional
+        An in-context model (``colonbench train`` on a context pack, docs/mapping.md): it estimates the
+        segments given with their slab (``colonbench map`` with a context margin); ``model`` estimates the rest.
 
     The model is loaded once (and shared with the other methods built on the
     same model in this process); call :meth:`estimate` on as many clouds as
@@ -252,14 +279,20 @@ class CompletionMethod:
     name = "completion"
 
     def __init__(self, model=None, device: str = "cpu", hole_distance: float | None = None, cut_rims: bool = True,
-                 shell_level: float | None = SHELL_LEVEL, gaps: bool = True, end_level: float | None = END_LEVEL):
+                 shell_level: float | None = SHELL_LEVEL, gaps: bool = True, end_level: float | None = END_LEVEL,
+                 context_model=None):
         self.predictor = shared_predictor(model, device)
+        self.context_predictor = shared_predictor(context_model, device) if context_model is not None else None
+        if self.context_predictor is not None and not self.context_predictor.in_context:
+            raise InputError(f"--context-model {context_model}: a segment model (one input channel), not an "
+                             "in-context model (colonbench train on a context pack, docs/mapping.md)")
         self.hole_distance = hole_distance
         self.cut_rims = cut_rims
         self.shell_level = shell_level
         self.gaps = gaps
         self.end_level = end_level
-        self.version = f"{self.predictor.version},{steps_version(shell_level, gaps, end_level)}"
+        self.version = f"{self.predictor.version},{steps_version(shell_level, gaps, end_level)}" + (
+            f",context={self.context_predictor.version}" if self.context_predictor is not None else "")
         self.meta = self.predictor.meta
 
     def predict(self, points) -> tuple[Grid, np.ndarray, np.ndarray]:
@@ -267,12 +300,29 @@ class CompletionMethod:
         p = self.predictor(check_cloud(points))
         return p.grid, p.input, p.heatmap
 
-    def estimate(self, points) -> Estimate:
-        """Coverage, holes and centerline of one partial segment (points in mm)."""
+    @property
+    def takes_slab(self) -> bool:
+        """Whether :meth:`estimate` uses a segment's slab when given one (an in-context model)."""
+        return self.predictor.in_context or self.context_predictor is not None
+
+    @property
+    def needs_slab(self) -> bool:
+        """Whether :meth:`estimate` needs a slab for every segment (its model is an in-context model)."""
+        return self.predictor.in_context
+
+    def estimate(self, points, slab=None) -> Estimate:
+        """Coverage, holes and centerline of one partial segment (points in mm).
+
+        ``slab`` (:class:`colonbench.slab.Slab`): the segment's stretch of the map's centerline. Given one,
+        the in-context model estimates (``context_model``, or ``model`` when that is one); a segment model
+        ignores it.
+        """
         t0 = time.perf_counter()
         pts = check_cloud(points)
         t1 = time.perf_counter()
-        p = self.predictor(pts)
+        predictor = self.context_predictor if slab is not None and self.context_predictor is not None \
+            else self.predictor
+        p = predictor(pts, slab)
         if self.end_level == END_LEVEL:
             cl = p.centerline_vox        # shared with the other methods on this prediction
             shared = p.seconds

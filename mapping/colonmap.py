@@ -204,13 +204,14 @@ def for_mapping(method, context_mm: float = 0.0):
     that follows the lumen's core past the segment's ends (docs/method.md step 3), and on a segment
     alone the mesh is not clipped to the segment's stretch either: there the line's ends on the core
     cost the segment-only track 3 points (docs/mapping.md), while in context, clipped to the stretch,
-    they gained. Such a method comes back as a shallow copy (sharing its loaded model); the caller's
+    they gained. An in-context model (``needs_slab``) is always clipped to its segment's stretch, so it keeps its
+    ends on the core. Such a method comes back as a shallow copy (sharing its loaded model); the caller's
     object is left as it is.
     """
     changes = {}
     if getattr(method, "cut_rims", False):
         changes["cut_rims"] = False
-    if context_mm <= 0 and getattr(method, "end_level", None) is not None:
+    if context_mm <= 0 and not getattr(method, "needs_slab", False) and getattr(method, "end_level", None) is not None:
         changes["end_level"] = None
     if not changes:
         return method
@@ -325,6 +326,9 @@ def map_colon(points: np.ndarray, method, segment_mm: float = SEGMENT_MM, positi
     out = []
     name = getattr(method, "name", "method")
     method = for_mapping(method, context_mm)
+    # an in-context model is given the segment's stretch of centerline: in every track when it is the method's
+    # model, in the tracks with context when it is its context model
+    in_context = bool(getattr(method, "needs_slab", False)) or (context_mm > 0 and getattr(method, "takes_slab", False))
     for seg, mask, ctx, (pa, ps, last, radius) in tqdm(segments, desc="segments", unit="seg",
                                                         disable=not progress):
         length = seg.end_mm - seg.start_mm
@@ -340,9 +344,12 @@ def map_colon(points: np.ndarray, method, segment_mm: float = SEGMENT_MM, positi
             continue
         t = time.perf_counter()
         try:
-            est = as_estimate(method.estimate(points[ctx]), name)
+            if in_context:  # an in-context model: given the segment's stretch of centerline
+                est = as_estimate(method.estimate(points[ctx], slab=_slab(pa, ps, seg, context_mm)), name)
+            else:
+                est = as_estimate(method.estimate(points[ctx]), name)
             faces = est.mesh_faces
-            if context_mm > 0 and len(faces):  # the completed context, clipped to the segment's stretch
+            if (context_mm > 0 or in_context) and len(faces):  # the completed context, clipped to the segment's stretch
                 hi = seg.end_mm + (1e-6 if last else 0.0)
                 faces = clip_between(est.mesh_vertices, faces, pa, ps, seg.start_mm, hi)
                 if len(faces) == 0:
@@ -380,6 +387,15 @@ def map_colon(points: np.ndarray, method, segment_mm: float = SEGMENT_MM, positi
     return {"segments": out, "centerline": line, "arclength": arc, "interruptions": interruptions,
             "unreconstructed": [{"from_mm": round(a, 2), "to_mm": round(b, 2)} for a, b in unseen],
             "orientation": orientation, "context_mm": float(context_mm), "seconds": seconds}
+
+
+def _slab(line: np.ndarray, arc: np.ndarray, seg: Segment, context_mm: float):
+    """The :class:`colonbench.slab.Slab` of a segment: its piece's centerline over the segment and its context."""
+    from colonbench.slab import Slab
+
+    a = max(int(np.searchsorted(arc, seg.start_mm - context_mm)) - 1, 0)
+    b = min(int(np.searchsorted(arc, seg.end_mm + context_mm, side="right")) + 1, len(arc))
+    return Slab(line[a:b], arc[a:b], seg.start_mm, seg.end_mm)
 
 
 def _add_unreconstructed(seg: Segment, radius: float) -> None:
