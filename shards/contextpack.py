@@ -34,8 +34,8 @@ from colonbench import seeding
 from colonbench._version import __version__
 from colonbench.errors import InputError
 from colonbench.heatmaps import voxelize_mesh, voxelize_points, voxelize_polyline
-from colonbench.shards.pack import GRIDS, PACK_FORMAT, PACK_NAME, PACK_VERSION, SLAB, _pool, write_split
-from colonbench.shards.schema import LOCK_NAME
+from colonbench.shards.pack import (GRIDS, PACK_FORMAT, PACK_NAME, PACK_VERSION, SLAB, _pool, dataset_lock,
+                                    write_split)
 from colonbench.slab import Slab, context_grid, slab_occupancy
 
 #: Context margin of a sample, mm (uniform): from none (the segment alone, its planes known) to 15 mm.
@@ -167,22 +167,17 @@ def write_context_pack(data_dir, out_dir, splits=("train", "validation"), worker
     dict
         The contents of ``pack.json``.
     """
+    import yaml
+
+    from colonbench.shards.dataset import MANIFEST_NAME
+    from colonbench.shards.manifest import task
+
     data_dir, out = Path(data_dir), Path(out_dir)
-    lock_path = data_dir / LOCK_NAME
-    if not lock_path.is_file():
-        raise InputError(f"{data_dir}: no {LOCK_NAME}; generate the dataset first (colonbench generate)")
-    lock = json.loads(lock_path.read_text())
-    manifest = lock.get("manifest") or {}
-    if (data_dir / "manifest.yaml").is_file():
-        import yaml
-        manifest = yaml.safe_load((data_dir / "manifest.yaml").read_text())
-    if manifest.get("task") != "colon":
+    lock = dataset_lock(data_dir, splits)
+    manifest = yaml.safe_load((data_dir / MANIFEST_NAME).read_text()) or {}
+    if task(manifest) != "colon":
         raise InputError(f"{data_dir}: not a whole-colon dataset (its manifest has no task: colon); --context cuts "
                          "segments in context out of whole reconstructions")
-    missing = [s for s in splits if s not in lock.get("splits", {})]
-    if missing:
-        raise InputError(f"{data_dir}: the dataset has no split {', '.join(missing)} "
-                         f"(it has {', '.join(lock.get('splits', {})) or 'none'})")
     if (out / PACK_NAME).exists():
         raise InputError(f"{out} holds a pack already; a context pack is written whole: use another --out")
     grid = manifest["grid"]

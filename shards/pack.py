@@ -114,6 +114,19 @@ def _pack_shard(path) -> tuple[dict, float]:
     return {g: np.stack(r) for g, r in rows.items()}, worst
 
 
+def dataset_lock(data_dir: Path, splits) -> dict:
+    """A generated dataset's lock file, checked to hold ``splits``; an :class:`InputError` otherwise."""
+    lock_path = Path(data_dir) / LOCK_NAME
+    if not lock_path.is_file():
+        raise InputError(f"{data_dir}: no {LOCK_NAME}; generate the dataset first (colonbench generate)")
+    lock = json.loads(lock_path.read_text())
+    missing = [s for s in splits if s not in lock.get("splits", {})]
+    if missing:
+        raise InputError(f"{data_dir}: the dataset has no split {', '.join(missing)} "
+                         f"(it has {', '.join(lock.get('splits', {})) or 'none'})")
+    return lock
+
+
 def write_pack(data_dir, out_dir, splits=("train", "validation"), workers: int = 1, progress: bool = True) -> dict:
     """Write the pack of a generated dataset's splits.
 
@@ -137,14 +150,7 @@ def write_pack(data_dir, out_dir, splits=("train", "validation"), workers: int =
     from colonbench.shards.reader import ShardDataset
 
     data_dir, out = Path(data_dir), Path(out_dir)
-    lock_path = data_dir / LOCK_NAME
-    if not lock_path.is_file():
-        raise InputError(f"{data_dir}: no {LOCK_NAME}; generate the dataset first (colonbench generate)")
-    lock = json.loads(lock_path.read_text())
-    missing = [s for s in splits if s not in lock.get("splits", {})]
-    if missing:
-        raise InputError(f"{data_dir}: the dataset has no split {', '.join(missing)} "
-                         f"(it has {', '.join(lock.get('splits', {})) or 'none'})")
+    lock = dataset_lock(data_dir, splits)
     info = {"format": PACK_FORMAT, "format_version": PACK_VERSION, "colonbench": __version__,
             "manifest_name": lock.get("manifest_name"), "manifest_sha256": lock["manifest_sha256"],
             "source": data_dir.name, "splits": {}}
