@@ -2,7 +2,7 @@
 
 Usage::
 
-    python scripts/bench_map.py [--colons 2] [--segment-length 60] [--model small] [--threads 2]
+    python scripts/bench_map.py [--colons 2] [--segment-length 60] [--model small] [--context-model M] [--threads 2]
 
 Each colon is a procedural colon of the default generator with sphere or
 withdrawal-camera holes over its whole length at 2 points/mm^2
@@ -26,6 +26,8 @@ def main() -> None:
     parser.add_argument("--colons", type=int, default=2)
     parser.add_argument("--segment-length", type=float, default=60.0)
     parser.add_argument("--model", default=None)
+    parser.add_argument("--context-model", default=None,
+                        help="an in-context model for the margins above 0 (colonbench map --context-model)")
     parser.add_argument("--threads", type=int, default=2, help="torch threads (the CPU cores used)")
     parser.add_argument("--holes", default="spheres", choices=["spheres", "camera"],
                         help="whole-colon hole model (datagen.wholecolon)")
@@ -43,7 +45,7 @@ def main() -> None:
     from colonbench.reports.coverage_map import map_mesh, render_map
 
     torch.set_num_threads(args.threads)
-    method = load_method("completion", model=args.model)
+    method = load_method("completion", model=args.model, context_model=args.context_model)
     print(f"{'colon':>5} {'context':>7} {'length mm':>9} {'points':>8} {'segs':>4} {'centerline s':>12} "
           f"{'cut s':>6} {'estimate s':>10} {'s/seg':>6} {'figure s':>8} {'total s':>7} {'coverage':>8} "
           f"{'truth':>6} {'seg MAE':>7} {'CL P/R @2mm':>11}")
