@@ -190,8 +190,20 @@ def tube_axes(points, neighbours: int = NORMAL_NEIGHBOURS, max_points: int = NOR
         axis = spread @ free
     else:
         axis = vecs[:, 0]
+    return axes_around(axis, pts)
+
+
+def axes_around(axis, points) -> np.ndarray:
+    """(3, 3) rotation whose first row is ``axis`` (normalised) and whose other rows are the principal axes of
+    ``points`` projected on the plane across it, larger first; signs as :func:`principal_axes`.
+
+    The grid of a tube once its axis is known: :func:`tube_axes` finds it from the points' normals,
+    :func:`colonbench.slab.context_rotation` from a known centerline.
+    """
+    pts = np.asarray(points, dtype=float)
+    centred = pts - pts.mean(axis=0)
+    axis = np.asarray(axis, dtype=float)
     axis = axis / np.linalg.norm(axis)
-    # cross-section axes: principal axes of the points projected on the plane across the axis
     across = centred - np.outer(centred @ axis, axis)
     _, cv = np.linalg.eigh(across.T @ across)
     second = cv[:, 2] - (cv[:, 2] @ axis) * axis

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from colonbench.errors import InputError
-from colonbench.grid import GRID_MARGIN, GRID_MIN_EXTENT_MM, GRID_SIZE, Grid, _oriented, check_points, fit_grid
+from colonbench.grid import GRID_MARGIN, GRID_MIN_EXTENT_MM, GRID_SIZE, Grid, axes_around, check_points, fit_grid
 
 #: How far the centerline is extended straight past each end when voxels are assigned to arc lengths, mm.
 EXTEND_MM = 200.0
@@ -103,8 +103,8 @@ def context_rotation(points: np.ndarray, slab: Slab) -> np.ndarray:
     """(3, 3) grid rotation of a segment in context: first row along the chord of its stretch of centerline.
 
     The chord from the centerline at ``lo`` to the one at ``hi`` is the segment's axis, however short and
-    wide the segment is; the other two rows are the points' principal axes across it (as
-    :func:`colonbench.grid.tube_axes`), signs as :func:`colonbench.grid.principal_axes`.
+    wide the segment is; the other two rows are the points' principal axes across it
+    (:func:`colonbench.grid.axes_around`, as :func:`colonbench.grid.tube_axes` does).
     """
     ends = np.stack([np.interp([slab.lo, slab.hi], slab.arc, slab.line[:, k]) for k in range(3)], axis=1)
     axis = ends[1] - ends[0]
@@ -112,13 +112,7 @@ def context_rotation(points: np.ndarray, slab: Slab) -> np.ndarray:
         axis = slab.line[-1] - slab.line[0]
     if np.linalg.norm(axis) < 1e-6:
         raise InputError("a slab's centerline has no direction (its ends coincide)")
-    axis = axis / np.linalg.norm(axis)
-    centred = points - points.mean(axis=0)
-    across = centred - np.outer(centred @ axis, axis)
-    _, cv = np.linalg.eigh(across.T @ across)
-    second = cv[:, 2] - (cv[:, 2] @ axis) * axis
-    second /= np.linalg.norm(second)
-    return _oriented(np.stack([axis, second, np.cross(axis, second)]), centred)
+    return axes_around(axis, points)
 
 
 def context_grid(points, slab: Slab, size: int = GRID_SIZE, margin: int = GRID_MARGIN,
