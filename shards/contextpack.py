@@ -33,6 +33,7 @@ import numpy as np
 from colonbench import seeding
 from colonbench._version import __version__
 from colonbench.errors import InputError
+from colonbench.completion.method import MIN_POINTS
 from colonbench.heatmaps import voxelize_mesh, voxelize_points, voxelize_polyline
 from colonbench.shards.pack import (GRIDS, PACK_FORMAT, PACK_NAME, PACK_VERSION, SLAB, _pool, dataset_lock,
                                     write_split)
@@ -46,8 +47,6 @@ LENGTH_MM = (40.0, 80.0)
 NOISE_MM = {0.0: 0.4, 0.25: 0.15, 0.5: 0.2, 0.75: 0.1, 1.0: 0.15}
 #: Passes over each reconstruction (each its own offset, lengths, margins and noise).
 PASSES = 2
-#: Fewest points a segment and its context need to make a sample (as :data:`colonbench.completion.method.MIN_POINTS`).
-MIN_POINTS = 200
 #: The grids a context pack stores per sample.
 CONTEXT_GRIDS = GRIDS + (SLAB,)
 
@@ -65,7 +64,8 @@ def segment_windows(length: float, rng: np.random.Generator, lengths=LENGTH_MM) 
 
 def context_sample(points: np.ndarray, point_s: np.ndarray, colon: dict, observed: np.ndarray, lo: float,
                    hi: float, margin: float, grid_options: dict) -> tuple[dict, float] | None:
-    """The occupancy grids of one segment in context, and its true coverage; None with too few points.
+    """The occupancy grids of one segment in context, and its true coverage; None with fewer points than the
+    method estimates (:data:`colonbench.completion.method.MIN_POINTS`).
 
     Parameters
     ----------
@@ -115,8 +115,8 @@ def context_sample(points: np.ndarray, point_s: np.ndarray, colon: dict, observe
     return grids, coverage
 
 
-def _pack_colon_shard(job) -> tuple[dict, float, list]:
-    """Packed context samples of one whole-colon shard: rows (grid -> (k, S^3 / 8) uint8), 0.0, coverages."""
+def _pack_colon_shard(job) -> tuple[dict, list]:
+    """Packed context samples of one whole-colon shard: rows (grid -> (k, S^3 / 8) uint8) and coverages."""
     from scipy.spatial import cKDTree
 
     from colonbench.shards.colonshard import ColonShard
@@ -143,8 +143,7 @@ def _pack_colon_shard(job) -> tuple[dict, float, list]:
                     rows[g].append(np.packbits(made[0][g].ravel()))
                 coverages.append(made[1])
     size = grid_options["size"]
-    return ({g: np.stack(r) if r else np.zeros((0, size ** 3 // 8), np.uint8) for g, r in rows.items()}, 0.0,
-            coverages)
+    return {g: np.stack(r) if r else np.zeros((0, size ** 3 // 8), np.uint8) for g, r in rows.items()}, coverages
 
 
 def write_context_pack(data_dir, out_dir, splits=("train", "validation"), workers: int = 1,
@@ -197,13 +196,13 @@ def write_context_pack(data_dir, out_dir, splits=("train", "validation"), worker
             raise InputError(f"{data_dir}: split {split} has no shards")
         with _pool(workers) as pool:
             made = list(pool.map(_pack_colon_shard, [(f, seed, grid_options) for f in files]))
-        n = sum(len(rows["s0"]) for rows, _, _ in made)
+        n = sum(len(rows["s0"]) for rows, _ in made)
         if n == 0:
             raise InputError(f"{data_dir}: split {split} gave no segment with {MIN_POINTS} points or more")
         info["splits"][split] = write_split(out, split, grid_options["size"], n, CONTEXT_GRIDS,
-                                            ((rows, diff) for rows, diff, _ in made), progress)
+                                            (rows for rows, _ in made), progress)
         if split == "train":
-            info["train_coverage_mean"] = float(np.nanmean(np.concatenate([c for _, _, c in made])))
+            info["train_coverage_mean"] = float(np.nanmean(np.concatenate([c for _, c in made])))
     tmp = out / (PACK_NAME + ".tmp")
     tmp.write_text(json.dumps(info, indent=1) + "\n")
     tmp.replace(out / PACK_NAME)

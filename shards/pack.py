@@ -172,18 +172,20 @@ def write_pack(data_dir, out_dir, splits=("train", "validation"), workers: int =
             info["train_coverage_mean"] = lock["splits"]["train"]["statistics"]["coverage"]["mean"]
         files = [sh.path for sh in ds.shards]
 
+        worst = [0.0]
+
         def checked(files, parts):
             for path, (rows, diff) in zip(files, parts):
                 if diff > CHECK_TOLERANCE:
                     raise InputError(f"{path}: the heatmaps made from its occupancies differ from the stored "
                                      f"ones by {diff:.3g}; the shards were not made by this heatmap definition, "
                                      "so a pack of them would train on other targets")
-                yield rows, diff
+                worst[0] = max(worst[0], diff)
+                yield rows
 
         with _pool(workers) as pool:
-            info["splits"][split] = write_split(out, split, size, n, GRIDS,
-                                                checked(files, pool.map(_pack_shard, files)),
-                                                progress)
+            entry = write_split(out, split, size, n, GRIDS, checked(files, pool.map(_pack_shard, files)), progress)
+        info["splits"][split] = {**entry, "max_heatmap_difference": worst[0]}
     tmp = out / (PACK_NAME + ".tmp")
     tmp.write_text(json.dumps(info, indent=1) + "\n")
     os.replace(tmp, out / PACK_NAME)
@@ -204,8 +206,8 @@ def write_split(out: Path, split: str, size: int, n: int, grids, parts, progress
         Samples in all.
     grids : sequence of str
         The datasets written (:data:`GRIDS`, and ``slab`` in a context pack).
-    parts : iterable of (dict, float)
-        Per part, its rows (grid name -> (k, S^3 / 8) uint8) and the largest heatmap difference checked.
+    parts : iterable of dict
+        Per part, its rows: grid name -> (k, S^3 / 8) uint8.
     progress : bool
     """
     from tqdm.auto import tqdm
@@ -213,15 +215,14 @@ def write_split(out: Path, split: str, size: int, n: int, grids, parts, progress
     row = size ** 3 // 8
     final = out / f"{split}.h5"
     tmp = out / f"{split}.h5.tmp-{os.getpid()}"
-    worst, at = 0.0, 0
+    at = 0
     bar = tqdm(total=n, desc=f"pack {split}", unit="sample", disable=None if progress else True)
     try:
         with h5py.File(tmp, "w", track_order=True) as h5:
             h5.attrs["grid_size"] = size
             sets = {g: h5.create_dataset(g, (n, row), dtype=np.uint8, chunks=(1, row), compression="gzip",
                                          compression_opts=9) for g in grids}
-            for rows, diff in parts:
-                worst = max(worst, diff)
+            for rows in parts:
                 k = len(rows[grids[0]])
                 for g in grids:
                     sets[g][at:at + k] = rows[g]
@@ -237,8 +238,7 @@ def write_split(out: Path, split: str, size: int, n: int, grids, parts, progress
     with open(tmp, "rb+") as fh:
         os.fsync(fh.fileno())
     os.replace(tmp, final)
-    return {"samples": n, "file": final.name, "sha256": sha256_file(final), "bytes": final.stat().st_size,
-            "max_heatmap_difference": worst}
+    return {"samples": n, "file": final.name, "sha256": sha256_file(final), "bytes": final.stat().st_size}
 
 
 class _Serial:
