@@ -159,10 +159,17 @@ dump("colon-val", "Whole-colon validation, where the map's settings are chosen (
 #: Whole-colon training data of the context model (issue 12): its context samples are cut from these
 #: reconstructions (colonbench pack --context); paper.yaml's train colons and the real training colons only.
 dump("colon-train", "Whole-colon training data for the in-context model (colonbench pack DATA --context, then "
-     "colonbench train): three whole partial reconstructions (withdrawal-camera or sphere holes, 2 points/mm^2) of "
-     "each of 20 of paper.yaml's train colons and of the real training colons gca00090 and gca00080, validated on 2 "
-     "of paper.yaml's validation colons that colon-val.yaml does not use. colon-val.yaml's and colon-test.yaml's "
-     "colons are never trained on.",
-     20261126, {"train": whole_colons(0, 20, 3, ["gca00090", "gca00080"]),
+     "colonbench train, with colon-train-wide.yaml): three whole partial reconstructions (withdrawal-camera or "
+     "sphere holes, 2 points/mm^2) of each of 20 of paper.yaml's train colons and of the real training colon "
+     "gca00090, validated on 2 of paper.yaml's validation colons that colon-val.yaml does not use. The real colon "
+     "gca00080 is left out so that colon-val.yaml can judge the in-context model on a real colon it did not learn "
+     "from; colon-val.yaml's and colon-test.yaml's colons are never trained on.",
+     20261126, {"train": whole_colons(0, 20, 3, ["gca00090"]),
                 "validation": whole_colons(346, 2, 1, None)},
-     mesh_names=["gca00090", "gca00080"], task="colon")
+     mesh_names=["gca00090"], task="colon")
+dump("colon-train-wide", "Whole-colon training data for the in-context model from the widened generator (trained "
+     "together with colon-train.yaml): two whole partial reconstructions (withdrawal-camera or sphere holes, "
+     "2 points/mm^2) of each of 24 widened colons (wide.yaml's ranges under this manifest's own seed), validated on "
+     "2 others.",
+     20261127, {"train": whole_colons(0, 24, 2, None), "validation": whole_colons(24, 2, 1, None)},
+     WIDE, task="colon")
