@@ -315,16 +315,7 @@ def dataset_task(data) -> str:
     InputError
         Not a generated dataset folder.
     """
-    import yaml
-
-    from colonbench.shards.dataset import MANIFEST_NAME
+    from colonbench.shards.dataset import dataset_manifest
     from colonbench.shards.manifest import task
 
-    path = Path(data) / MANIFEST_NAME
-    if not path.is_file():
-        raise InputError(f"{data}: not a dataset folder (no {MANIFEST_NAME}); generate the dataset first "
-                         "(colonbench generate)")
-    try:
-        return str(task(yaml.safe_load(path.read_text()) or {}))
-    except (yaml.YAMLError, AttributeError) as exc:
-        raise InputError(f"{path}: unreadable ({exc})") from None
+    return str(task(dataset_manifest(data)))

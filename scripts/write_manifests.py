@@ -157,7 +157,8 @@ dump("colon-val", "Whole-colon validation, where the map's settings are chosen (
      mesh_names=["gca00090", "gca00080"], task="colon")
 
 #: Whole-colon training data of the context model (issue 12): its context samples are cut from these
-#: reconstructions (colonbench pack --context); paper.yaml's train colons and the real training colons only.
+#: reconstructions (colonbench pack --context): paper.yaml's train colons and the real colon gca00090, and
+#: colons of the widened generator; gca00080 stays out for colon-val.yaml to judge on.
 dump("colon-train", "Whole-colon training data for the in-context model (colonbench pack DATA --context, then "
      "colonbench train, with colon-train-wide.yaml): three whole partial reconstructions (withdrawal-camera or "
      "sphere holes, 2 points/mm^2) of each of 20 of paper.yaml's train colons and of the real training colon "

@@ -166,14 +166,12 @@ def write_context_pack(data_dir, out_dir, splits=("train", "validation"), worker
     dict
         The contents of ``pack.json``.
     """
-    import yaml
-
-    from colonbench.shards.dataset import MANIFEST_NAME
+    from colonbench.shards.dataset import dataset_manifest
     from colonbench.shards.manifest import task
 
     data_dir, out = Path(data_dir), Path(out_dir)
     lock = dataset_lock(data_dir, splits)
-    manifest = yaml.safe_load((data_dir / MANIFEST_NAME).read_text()) or {}
+    manifest = dataset_manifest(data_dir)
     if task(manifest) != "colon":
         raise InputError(f"{data_dir}: not a whole-colon dataset (its manifest has no task: colon); --context cuts "
                          "segments in context out of whole reconstructions")

@@ -183,6 +183,27 @@ def _generate_locked(resolved, digest, out: Path, workers, scheduler, splits, pr
     return write_lock(resolved, out, hashes)
 
 
+def dataset_manifest(data_dir) -> dict:
+    """The manifest a generated dataset folder was made from (its saved ``manifest.yaml``, as resolved).
+
+    Raises
+    ------
+    InputError
+        Not a generated dataset folder, or its manifest is not a readable YAML mapping.
+    """
+    path = Path(data_dir) / MANIFEST_NAME
+    if not path.is_file():
+        raise InputError(f"{data_dir}: not a dataset folder (no {MANIFEST_NAME}); generate the dataset first "
+                         "(colonbench generate)")
+    try:
+        manifest = yaml.safe_load(path.read_text()) or {}
+    except (yaml.YAMLError, UnicodeDecodeError) as exc:
+        raise InputError(f"{path}: unreadable ({exc})") from None
+    if not isinstance(manifest, dict):
+        raise InputError(f"{path}: unreadable (not a mapping)")
+    return manifest
+
+
 def _locked_shards(out: Path) -> dict:
     """The ``shards`` entries of the lock in ``out`` ({} when there is none or it is unreadable)."""
     try:
