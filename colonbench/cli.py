@@ -229,8 +229,13 @@ def cmd_pack(args):
     from colonbench.shards.pack import write_pack
 
     splits = [s.strip() for s in args.splits.split(",") if s.strip()]
-    write = write_context_pack if args.context else write_pack
-    info = write(args.data, args.out, splits, workers=args.workers, progress=not args.quiet)
+    if args.context_line != "truth" and not args.context:
+        raise ColonbenchError("--context-line is for context packs (--context)")
+    if args.context:
+        info = write_context_pack(args.data, args.out, splits, workers=args.workers, progress=not args.quiet,
+                                  line=args.context_line)
+    else:
+        info = write_pack(args.data, args.out, splits, workers=args.workers, progress=not args.quiet)
     for split, meta in info["splits"].items():
         print(f"{split}: {meta['samples']} samples, {meta['bytes'] / 2**20:.1f} MiB "
               f"({meta['bytes'] / meta['samples'] / 1024:.1f} KiB/sample)"
@@ -593,6 +598,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--context", action="store_true",
                    help="a whole-colon dataset (task: colon): cut its reconstructions into segments in context, "
                         "each with its slab, to train the in-context model (docs/mapping.md)")
+    p.add_argument("--context-line", choices=("truth", "map"), default="truth",
+                   help="--context: cut along the true centerline (default) or along the one colonbench map finds "
+                        "in each noisy reconstruction, as inference sees it (docs/mapping.md)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_pack)
 

@@ -99,6 +99,19 @@ def extended(line: np.ndarray, arc: np.ndarray, extend_mm: float = EXTEND_MM, st
     return np.vstack([head, line, tail]), np.concatenate([arc[0] - t[::-1], arc, arc[-1] + t])
 
 
+def point_at(line: np.ndarray, arc: np.ndarray, at: float) -> np.ndarray:
+    """(3,) the point of a polyline at arc length ``at`` (mm; clamped to its ends), linearly interpolated."""
+    return np.array([np.interp(at, arc, line[:, k]) for k in range(3)])
+
+
+def stretch(line: np.ndarray, arc: np.ndarray, lo: float, hi: float, context_mm: float) -> Slab:
+    """The :class:`Slab` of the segment ``[lo, hi]`` of a centerline: its points over the segment and
+    ``context_mm`` beyond each end, with one more point on each side where there is one."""
+    a = max(int(np.searchsorted(arc, lo - context_mm)) - 1, 0)
+    b = min(int(np.searchsorted(arc, hi + context_mm, side="right")) + 1, len(arc))
+    return Slab(line[a:b], arc[a:b], lo, hi)
+
+
 def context_rotation(points: np.ndarray, slab: Slab) -> np.ndarray:
     """(3, 3) grid rotation of a segment in context: first row along the chord of its stretch of centerline.
 

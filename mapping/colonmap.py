@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from colonbench.errors import InputError
+from colonbench.slab import point_at
 
 #: Default segment arc length, mm (the paper's 6 cm).
 SEGMENT_MM = 60.0
@@ -127,7 +128,7 @@ def _frame(line: np.ndarray, s: np.ndarray, at: float, half_mm: float = 8.0) -> 
     hi = int(np.clip(np.searchsorted(s, at + half_mm), 0, len(s) - 1))
     t = line[hi] - line[lo]
     t = t / max(np.linalg.norm(t), 1e-12)
-    p = np.array([np.interp(at, s, line[:, k]) for k in range(3)])
+    p = point_at(line, s, at)
     return {"point": np.round(p, 3).tolist(), "normal": np.round(t, 6).tolist()}
 
 
@@ -221,6 +222,92 @@ def for_mapping(method, context_mm: float = 0.0):
     return mapped
 
 
+def map_centerline(points: np.ndarray, positions: np.ndarray | None = None, pieces: list | None = None):
+    """The map's centerline of a reconstruction: its pieces found, oriented and joined along the trajectory.
+
+    Parameters
+    ----------
+    points : (n, 3) float
+        The reconstruction, mm.
+    positions : (k, 3) float, optional
+        Camera positions in time order, mm, same frame.
+    pieces : list of colonbench.mapping.centerline.Piece, optional
+        ``colon_centerline(points, positions=positions)`` when the caller has it already.
+
+    Returns
+    -------
+    pieces : list of colonbench.mapping.centerline.Piece
+        In map order (:func:`orient`), bridged where the trajectory passes between them.
+    orientation : str
+    """
+    from colonbench.mapping.centerline import bridge_by_trajectory, colon_centerline
+
+    pieces = colon_centerline(points, positions=positions) if pieces is None else pieces
+    pieces, orientation = orient(pieces, positions)
+    return bridge_by_trajectory(pieces, positions, points), orientation
+
+
+@dataclass
+class JoinedLine:
+    """The map's pieces as one centerline, arc length running on over the gaps between them (mm).
+
+    Attributes
+    ----------
+    lines, arcs : list of (m_k,) arrays
+        Each piece's points ((m_k, 3)) and arc lengths ((m_k,)) on the joined line.
+    line : (m, 3) float
+    arc : (m,) float
+        All pieces' points and arc lengths, in order.
+    owner : (m,) int
+        The piece of each point of ``line``.
+    spans : list of (float, float)
+        Each piece's first and last arc length.
+    interruptions : list of dict
+        ``after_mm``, ``gap_mm``, ``point_before``, ``point_after`` of each gap between pieces.
+    unseen : list of (float, float)
+        Stretches a trajectory bridges with no reconstruction, arc lengths.
+    """
+
+    lines: list
+    arcs: list
+    line: np.ndarray
+    arc: np.ndarray
+    owner: np.ndarray
+    spans: list
+    interruptions: list
+    unseen: list
+
+    def assign(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Arc length ((n,) mm) and piece ((n,) int) of each point's nearest centerline point."""
+        from scipy.spatial import cKDTree
+
+        _, nearest = cKDTree(self.line).query(points)
+        return self.arc[nearest], self.owner[nearest]
+
+
+def join_pieces(pieces: list) -> JoinedLine:
+    """The :class:`JoinedLine` of the map's pieces (:func:`map_centerline`), in their order."""
+    lines, arcs, owner, interruptions, spans, unseen = [], [], [], [], [], []
+    s0 = 0.0
+    for k, p in enumerate(pieces):
+        if k:
+            gap = float(np.linalg.norm(p.points[0] - lines[-1][-1]))
+            interruptions.append({"after_mm": round(s0, 2), "gap_mm": round(gap, 2),
+                                  "point_before": np.round(lines[-1][-1], 3).tolist(),
+                                  "point_after": np.round(p.points[0], 3).tolist()})
+            s0 += gap
+        seg = np.linalg.norm(np.diff(p.points, axis=0), axis=1)
+        s = s0 + np.concatenate([[0.0], np.cumsum(seg)])
+        lines.append(p.points)
+        arcs.append(s)
+        owner.append(np.full(len(s), k))
+        spans.append((s[0], s[-1]))
+        unseen += [(s[0] + u0, s[0] + u1) for u0, u1 in p.unseen]
+        s0 = s[-1]
+    return JoinedLine(lines, arcs, np.concatenate(lines), np.concatenate(arcs), np.concatenate(owner), spans,
+                      interruptions, unseen)
+
+
 def map_colon(points: np.ndarray, method, segment_mm: float = SEGMENT_MM, positions: np.ndarray | None = None,
               progress: bool = True, context_mm: float = 0.0, pieces: list | None = None) -> dict:
     """The coverage map of a reconstruction.
@@ -263,12 +350,11 @@ def map_colon(points: np.ndarray, method, segment_mm: float = SEGMENT_MM, positi
         No tube found, or a colon no longer than two segments (a single
         segment: use ``colonbench estimate``).
     """
-    from scipy.spatial import cKDTree
     from tqdm import tqdm
 
     from colonbench.benchmark.registry import as_estimate
     from colonbench.errors import ColonbenchError
-    from colonbench.mapping.centerline import bridge_by_trajectory, colon_centerline
+    from colonbench.slab import stretch
 
     if segment_mm <= 0:
         raise InputError(f"--segment-length must be positive, got {segment_mm}")
@@ -276,40 +362,20 @@ def map_colon(points: np.ndarray, method, segment_mm: float = SEGMENT_MM, positi
         raise InputError(f"--context-mm must be 0 or more, got {context_mm}")
     seconds = {}
     t0 = time.perf_counter()
-    pieces = colon_centerline(points, positions=positions) if pieces is None else pieces
-    pieces, orientation = orient(pieces, positions)
-    pieces = bridge_by_trajectory(pieces, positions, points)
+    pieces, orientation = map_centerline(points, positions, pieces)
     seconds["centerline"] = time.perf_counter() - t0
     total = sum(p.length for p in pieces)
     if total < 2 * segment_mm:
         raise InputError(f"the centerline found is {total:.0f} mm long, not more than two segments of "
                          f"{segment_mm:g} mm: this looks like a single segment, not a colon; use colonbench "
                          "estimate for one segment")
-    # one centerline: the pieces joined, arc length running on over the gaps
-    lines, arcs, owner, interruptions, spans, unseen = [], [], [], [], [], []
-    s0 = 0.0
-    for k, p in enumerate(pieces):
-        if k:
-            gap = float(np.linalg.norm(p.points[0] - lines[-1][-1]))
-            interruptions.append({"after_mm": round(s0, 2), "gap_mm": round(gap, 2),
-                                  "point_before": np.round(lines[-1][-1], 3).tolist(),
-                                  "point_after": np.round(p.points[0], 3).tolist()})
-            s0 += gap
-        seg = np.linalg.norm(np.diff(p.points, axis=0), axis=1)
-        s = s0 + np.concatenate([[0.0], np.cumsum(seg)])
-        lines.append(p.points)
-        arcs.append(s)
-        owner.append(np.full(len(s), k))
-        spans.append((s[0], s[-1]))
-        unseen += [(s[0] + u0, s[0] + u1) for u0, u1 in p.unseen]
-        s0 = s[-1]
-    line, arc, owner = np.concatenate(lines), np.concatenate(arcs), np.concatenate(owner)
+    joined = join_pieces(pieces)
+    line, arc, spans, unseen = joined.line, joined.arc, joined.spans, joined.unseen
     t0 = time.perf_counter()
-    _, nearest = cKDTree(line).query(points)
-    point_s, point_piece = arc[nearest], owner[nearest]
+    point_s, point_piece = joined.assign(points)
     segments = []
     for k, (a, b) in enumerate(spans):
-        ps, pa = arcs[k], lines[k]
+        ps, pa = joined.arcs[k], joined.lines[k]
         for lo, hi in windows(b - a, segment_mm):
             lo, hi = a + lo, a + hi
             last = hi >= b - 1e-9
@@ -345,7 +411,8 @@ def map_colon(points: np.ndarray, method, segment_mm: float = SEGMENT_MM, positi
         t = time.perf_counter()
         try:
             if in_context:  # an in-context model: given the segment's stretch of centerline
-                est = as_estimate(method.estimate(points[ctx], slab=_slab(pa, ps, seg, context_mm)), name)
+                slab = stretch(pa, ps, seg.start_mm, seg.end_mm, context_mm)
+                est = as_estimate(method.estimate(points[ctx], slab=slab), name)
             else:
                 est = as_estimate(method.estimate(points[ctx]), name)
             faces = est.mesh_faces
@@ -384,18 +451,9 @@ def map_colon(points: np.ndarray, method, segment_mm: float = SEGMENT_MM, positi
             _add_unreconstructed(seg, radius)
         out.append(seg)
     seconds["estimate"] = time.perf_counter() - t0
-    return {"segments": out, "centerline": line, "arclength": arc, "interruptions": interruptions,
+    return {"segments": out, "centerline": line, "arclength": arc, "interruptions": joined.interruptions,
             "unreconstructed": [{"from_mm": round(a, 2), "to_mm": round(b, 2)} for a, b in unseen],
             "orientation": orientation, "context_mm": float(context_mm), "seconds": seconds}
-
-
-def _slab(line: np.ndarray, arc: np.ndarray, seg: Segment, context_mm: float):
-    """The :class:`colonbench.slab.Slab` of a segment: its piece's centerline over the segment and its context."""
-    from colonbench.slab import Slab
-
-    a = max(int(np.searchsorted(arc, seg.start_mm - context_mm)) - 1, 0)
-    b = min(int(np.searchsorted(arc, seg.end_mm + context_mm, side="right")) + 1, len(arc))
-    return Slab(line[a:b], arc[a:b], seg.start_mm, seg.end_mm)
 
 
 def _add_unreconstructed(seg: Segment, radius: float) -> None:

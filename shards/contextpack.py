@@ -2,7 +2,7 @@
 
 ``colonbench pack DATA --context`` on a whole-colon dataset (a ``task: colon``
 manifest, such as ``colon-train.yaml``) cuts each reconstruction the way
-``colonbench map`` does, along the true centerline into consecutive segments:
+``colonbench map`` does, by default along the true centerline, into consecutive segments:
 
 - each pass over a reconstruction starts at a random offset and draws each
   segment's arc length from :data:`LENGTH_MM`, its context margin from
@@ -12,6 +12,12 @@ manifest, such as ``colon-train.yaml``) cuts each reconstruction the way
   window widened by the margin (the map's rule), its true surface the faces
   whose ``face_arclength`` does, and its centerline that stretch of the true
   centerline;
+- with ``--context-line map`` the reconstruction is cut instead along the
+  centerline ``colonbench map`` finds in each noisy pass (its pieces, its
+  trajectory bridges), as inference cuts it: the slab and the grid follow that
+  line, and the truth of a window is the stretch of the true centerline between
+  the true points nearest to its ends (the whole-colon benchmark's rule); the
+  target surface and centerline are the true ones either way;
 - its grid and slab are :func:`colonbench.slab.context_grid` and
   :func:`colonbench.slab.slab_occupancy`, as at inference.
 
@@ -49,6 +55,10 @@ NOISE_MM = {0.0: 0.4, 0.25: 0.15, 0.5: 0.2, 0.75: 0.1, 1.0: 0.15}
 PASSES = 2
 #: The grids a context pack stores per sample.
 CONTEXT_GRIDS = GRIDS + (SLAB,)
+#: The centerlines a context pack can cut along: the true one, or the one ``colonbench map`` finds in the cloud.
+LINES = ("truth", "map")
+#: A map window whose true stretch differs from its own arc length by more than this share of it is skipped.
+MAX_STRETCH = 0.5
 
 
 def segment_windows(length: float, rng: np.random.Generator, lengths=LENGTH_MM) -> list[tuple[float, float]]:
@@ -62,25 +72,27 @@ def segment_windows(length: float, rng: np.random.Generator, lengths=LENGTH_MM) 
         lo = hi
 
 
-def context_sample(points: np.ndarray, point_s: np.ndarray, colon: dict, observed: np.ndarray, lo: float,
-                   hi: float, margin: float, grid_options: dict) -> tuple[dict, float] | None:
+def context_sample(pts: np.ndarray, slab: Slab, colon: dict, observed: np.ndarray, window: tuple[float, float],
+                   context: tuple[float, float], grid_options: dict) -> tuple[dict, float] | None:
     """The occupancy grids of one segment in context, and its true coverage; None with fewer points than the
     method estimates (:data:`colonbench.completion.method.MIN_POINTS`).
 
     Parameters
     ----------
-    points : (n, 3) float
-        The whole reconstruction, mm (noise included).
-    point_s : (n,) float
-        Arc length of each point's nearest true-centerline point, mm.
+    pts : (n, 3) float
+        The segment's points and its context's, mm (noise included).
+    slab : colonbench.slab.Slab
+        The stretch of the centerline the segment is cut along (the true one, or the map's), with the segment's
+        window on it.
     colon : dict
         :meth:`colonbench.shards.colonshard.ColonShard.colon`.
     observed : (f,) bool
         Observed faces of the reconstruction.
-    lo, hi : float
-        The segment's window, mm of arc length.
-    margin : float
-        Context margin, mm.
+    window : (float, float)
+        The segment on the true centerline, arc lengths in mm: its true coverage.
+    context : (float, float)
+        The segment and its context on the true centerline, mm: the true surface and centerline the target
+        heatmap is made of.
     grid_options : dict
         ``size``, ``margin``, ``min_extent_mm``.
 
@@ -89,17 +101,15 @@ def context_sample(points: np.ndarray, point_s: np.ndarray, colon: dict, observe
     grids : dict
         ``s0``, ``s1``, ``c``, ``slab``: (S, S, S) bool.
     coverage : float
-        Observed share of the true surface between ``lo`` and ``hi`` (by area).
+        Observed share of the true surface in ``window`` (by area).
     """
     from colonbench.completion.surface import triangle_areas
 
-    a, b = lo - margin, hi + margin
-    pts = points[(point_s >= a) & (point_s <= b)]
+    (lo, hi), (a, b) = window, context
     cl = colon["centerline"]
     on = (cl.arclength >= a) & (cl.arclength <= b)
     if len(pts) < MIN_POINTS or on.sum() < 2:
         return None
-    slab = Slab(cl.points[on], cl.arclength[on], lo, hi)
     grid = context_grid(pts, slab, **grid_options)
     fs = colon["face_arclength"]
     faces = colon["faces"][(fs >= a) & (fs <= b)]
@@ -109,45 +119,96 @@ def context_sample(points: np.ndarray, point_s: np.ndarray, colon: dict, observe
     used, local = np.unique(faces, return_inverse=True)
     grids = {"s0": voxelize_points(grid, pts)[0],
              "s1": voxelize_mesh(grid, colon["vertices"][used], local.reshape(faces.shape))[0],
-             "c": voxelize_polyline(grid, slab.line)[0], SLAB: slab_occupancy(grid, slab)}
+             "c": voxelize_polyline(grid, cl.points[on])[0], SLAB: slab_occupancy(grid, slab)}
     if not all(g.any() for g in grids.values()):
         return None
     return grids, coverage
 
 
-def _pack_colon_shard(job) -> tuple[dict, list]:
-    """Packed context samples of one whole-colon shard: rows (grid -> (k, S^3 / 8) uint8) and coverages."""
+def _true_line_samples(pts: np.ndarray, colon: dict, rng: np.random.Generator):
+    """Windows cut along the true centerline: ``(points, slab, window, context)`` per segment."""
     from scipy.spatial import cKDTree
 
+    cl = colon["centerline"]
+    point_s = cl.arclength[cKDTree(cl.points).query(pts)[1]]
+    for lo, hi in segment_windows(float(cl.arclength[-1]), rng):
+        margin = float(rng.uniform(*CONTEXT_MM))
+        a, b = lo - margin, hi + margin
+        on = (cl.arclength >= a) & (cl.arclength <= b)
+        if on.sum() < 2:
+            continue
+        yield pts[(point_s >= a) & (point_s <= b)], Slab(cl.points[on], cl.arclength[on], lo, hi), (lo, hi), (a, b)
+
+
+def _map_line_samples(pts: np.ndarray, colon: dict, positions, rng: np.random.Generator, skipped: dict):
+    """Windows cut along the centerline ``colonbench map`` finds in the noisy cloud, as the map cuts them.
+
+    Each window's truth is the stretch of the true centerline between the true points nearest to its ends
+    (the whole-colon benchmark's rule, :func:`colonbench.benchmark.colon_metrics.segment_truth`). A window
+    whose true stretch differs from its own length by more than :data:`MAX_STRETCH` of it (the map's line
+    jumped between limbs, or ran back on itself) is skipped and counted in ``skipped``.
+    """
+    from scipy.spatial import cKDTree
+
+    from colonbench.errors import ColonbenchError
+    from colonbench.mapping.colonmap import join_pieces, map_centerline
+    from colonbench.slab import point_at, stretch
+
+    try:
+        joined = join_pieces(map_centerline(pts, positions)[0])
+    except ColonbenchError:
+        skipped["no centerline"] = skipped.get("no centerline", 0) + 1
+        return
+    cl = colon["centerline"]
+    tree = cKDTree(cl.points)
+    point_s, point_piece = joined.assign(pts)
+    for k, (start, stop) in enumerate(joined.spans):
+        line, arc = joined.lines[k], joined.arcs[k]
+        for lo, hi in segment_windows(stop - start, rng):
+            lo, hi = start + lo, start + hi
+            margin = float(rng.uniform(*CONTEXT_MM))
+            ends = [point_at(line, arc, x) for x in (lo, hi, max(lo - margin, start), min(hi + margin, stop))]
+            t = cl.arclength[tree.query(np.array(ends))[1]]
+            window, context = tuple(sorted(t[:2])), tuple(sorted(t[2:]))
+            if abs((window[1] - window[0]) - (hi - lo)) > MAX_STRETCH * (hi - lo):
+                skipped["stretch"] = skipped.get("stretch", 0) + 1
+                continue
+            sel = (point_piece == k) & (point_s >= lo - margin) & (point_s <= hi + margin)
+            yield pts[sel], stretch(line, arc, lo, hi, margin), window, context
+
+
+def _pack_colon_shard(job) -> tuple[dict, list, dict]:
+    """Packed context samples of one whole-colon shard: rows (grid -> (k, S^3 / 8) uint8), coverages, and the
+    count of map windows skipped (by reason)."""
     from colonbench.shards.colonshard import ColonShard
 
-    path, seed, grid_options = job
+    path, seed, grid_options, line = job
     shard = ColonShard(path)
     colon = shard.colon()
-    tree = cKDTree(colon["centerline"].points)
     rows = {g: [] for g in CONTEXT_GRIDS}
-    coverages = []
+    coverages, skipped = [], {}
     for i in range(len(shard)):
         smp = shard.sample(i)
         for p in range(PASSES):
             rng = seeding.rng(seed, "context", shard.name, i, p)
             sigma = float(rng.choice(list(NOISE_MM), p=np.array(list(NOISE_MM.values())) / sum(NOISE_MM.values())))
             pts = smp["points"] + (rng.normal(0.0, sigma, smp["points"].shape) if sigma > 0 else 0.0)
-            point_s = colon["centerline"].arclength[tree.query(pts)[1]]
-            for lo, hi in segment_windows(float(colon["centerline"].arclength[-1]), rng):
-                made = context_sample(pts, point_s, colon, smp["observed_faces"], lo, hi,
-                                      float(rng.uniform(*CONTEXT_MM)), grid_options)
+            cut = _true_line_samples(pts, colon, rng) if line == "truth" else \
+                _map_line_samples(pts, colon, smp.get("positions"), rng, skipped)
+            for seg_pts, slab, window, context in cut:
+                made = context_sample(seg_pts, slab, colon, smp["observed_faces"], window, context, grid_options)
                 if made is None:
                     continue
                 for g in CONTEXT_GRIDS:
                     rows[g].append(np.packbits(made[0][g].ravel()))
                 coverages.append(made[1])
     size = grid_options["size"]
-    return {g: np.stack(r) if r else np.zeros((0, size ** 3 // 8), np.uint8) for g, r in rows.items()}, coverages
+    return ({g: np.stack(r) if r else np.zeros((0, size ** 3 // 8), np.uint8) for g, r in rows.items()},
+            coverages, skipped)
 
 
 def write_context_pack(data_dir, out_dir, splits=("train", "validation"), workers: int = 1,
-                       progress: bool = True) -> dict:
+                       progress: bool = True, line: str = "truth") -> dict:
     """Write the context pack of a whole-colon dataset's splits.
 
     Parameters
@@ -160,6 +221,10 @@ def write_context_pack(data_dir, out_dir, splits=("train", "validation"), worker
     workers : int
         Processes cutting shards (spawn pool; 1 = this process).
     progress : bool
+    line : {"truth", "map"}
+        The centerline the reconstructions are cut along: the true one, or the one ``colonbench map`` finds
+        in each noisy cloud (with the sample's camera positions), so that training sees the slabs and grids
+        inference sees; the target heatmap is made of the true surface and centerline either way.
 
     Returns
     -------
@@ -169,6 +234,8 @@ def write_context_pack(data_dir, out_dir, splits=("train", "validation"), worker
     from colonbench.shards.dataset import dataset_manifest
     from colonbench.shards.manifest import task
 
+    if line not in LINES:
+        raise InputError(f"--context-line {line!r}: one of {', '.join(LINES)}")
     data_dir, out = Path(data_dir), Path(out_dir)
     lock = dataset_lock(data_dir, splits)
     manifest = dataset_manifest(data_dir)
@@ -184,7 +251,8 @@ def write_context_pack(data_dir, out_dir, splits=("train", "validation"), worker
             "manifest_name": lock.get("manifest_name"), "manifest_sha256": lock["manifest_sha256"],
             "source": data_dir.name, "inputs": ["heatmap", SLAB], "grid_options": {**grid_options, "context": True},
             "context": {"context_mm": list(CONTEXT_MM), "length_mm": list(LENGTH_MM),
-                        "noise_mm": {str(k): v for k, v in NOISE_MM.items()}, "passes": PASSES},
+                        "noise_mm": {str(k): v for k, v in NOISE_MM.items()}, "passes": PASSES,
+                        "line": line},
             "splits": {}}
     out.mkdir(parents=True, exist_ok=True)
     seed = int(manifest["seed"])
@@ -193,14 +261,20 @@ def write_context_pack(data_dir, out_dir, splits=("train", "validation"), worker
         if not files:
             raise InputError(f"{data_dir}: split {split} has no shards")
         with _pool(workers) as pool:
-            made = list(pool.map(_pack_colon_shard, [(f, seed, grid_options) for f in files]))
-        n = sum(len(rows["s0"]) for rows, _ in made)
+            made = list(pool.map(_pack_colon_shard, [(f, seed, grid_options, line) for f in files]))
+        n = sum(len(rows["s0"]) for rows, _, _ in made)
         if n == 0:
             raise InputError(f"{data_dir}: split {split} gave no segment with {MIN_POINTS} points or more")
         info["splits"][split] = write_split(out, split, grid_options["size"], n, CONTEXT_GRIDS,
-                                            (rows for rows, _ in made), progress)
+                                            (rows for rows, _, _ in made), progress)
+        if line == "map":
+            skipped = {}
+            for _, _, counts in made:
+                for reason, count in counts.items():
+                    skipped[reason] = skipped.get(reason, 0) + count
+            info["splits"][split]["skipped"] = skipped
         if split == "train":
-            info["train_coverage_mean"] = float(np.nanmean(np.concatenate([c for _, c in made])))
+            info["train_coverage_mean"] = float(np.nanmean(np.concatenate([c for _, c, _ in made])))
     tmp = out / (PACK_NAME + ".tmp")
     tmp.write_text(json.dumps(info, indent=1) + "\n")
     tmp.replace(out / PACK_NAME)

@@ -85,6 +85,18 @@ def test_a_short_wide_segment_in_context_takes_its_axis_from_its_centerline():
     assert np.degrees(np.arccos(abs(principal_axes(pts)[0] @ axis))) > 20  # what the cloud alone would say
 
 
+def test_the_stretch_of_a_straight_line_spans_the_segment_and_its_context():
+    from colonbench.slab import point_at, stretch
+
+    line = straight(200.0)  # points 0.5 mm apart along z
+    slab = stretch(line.points, line.arclength, 60.0, 120.0, 15.0)
+    assert (slab.lo, slab.hi) == (60.0, 120.0)
+    assert slab.arc[0] == pytest.approx(44.5) and slab.arc[-1] == pytest.approx(135.5)  # one point past each end
+    assert stretch(line.points, line.arclength, 0.0, 40.0, 15.0).arc[0] == 0.0  # clamped at the line's start
+    np.testing.assert_allclose(point_at(line.points, line.arclength, 72.25), [0.0, 0.0, 72.25], atol=1e-9)
+    np.testing.assert_allclose(point_at(line.points, line.arclength, 250.0), line.points[-1])
+
+
 def test_a_slab_refuses_a_line_that_is_no_line():
     with pytest.raises(InputError, match="non-decreasing"):
         Slab(np.zeros((3, 3)), np.array([0.0, 2.0, 1.0]), 0.0, 1.0)
@@ -151,6 +163,37 @@ def test_a_context_pack_holds_each_segment_with_its_slab(context_pack):
     assert again["splits"]["train"]["sha256"] == info["splits"]["train"]["sha256"]
     with pytest.raises(InputError, match="written whole"):
         write_context_pack(root / "data", root / "pack", progress=False)
+
+
+def test_a_context_pack_cut_along_the_maps_centerline_keeps_each_window_on_its_true_stretch(context_pack):
+    """The map's own centerline (what inference cuts along): each window's truth is the true stretch between its
+    ends, about as long as the window, and the window's points lie on it."""
+    from scipy.spatial import cKDTree
+
+    from colonbench.shards.colonshard import ColonShard
+    from colonbench.shards.contextpack import _map_line_samples, write_context_pack
+
+    root, truth = context_pack
+    shard = ColonShard(root / "data" / "train" / "colon-00000.h5")
+    colon, smp = shard.colon(), shard.sample(0)
+    cl = colon["centerline"]
+    tree = cKDTree(cl.points)
+    cuts = list(_map_line_samples(smp["points"], colon, smp["positions"], np.random.default_rng(0), {}))
+    assert len(cuts) >= 4
+    for pts, slab, (lo, hi), (a, b) in cuts:
+        assert a <= lo < hi <= b
+        assert abs((hi - lo) - (slab.hi - slab.lo)) < 0.25 * (slab.hi - slab.lo)
+        s = cl.arclength[tree.query(pts)[1]]
+        assert np.mean((s >= a - 5.0) & (s <= b + 5.0)) > 0.95
+    info = write_context_pack(root / "data", root / "pack-map", splits=("train",), progress=False, line="map")
+    assert info["context"]["line"] == "map" and truth["context"]["line"] == "truth"
+    assert info["splits"]["train"]["skipped"] == {}
+    n = truth["splits"]["train"]["samples"]
+    assert abs(info["splits"]["train"]["samples"] - n) <= max(2, 0.25 * n)
+    assert info["train_coverage_mean"] == pytest.approx(truth["train_coverage_mean"], abs=0.03)
+    assert info["splits"]["train"]["sha256"] != truth["splits"]["train"]["sha256"]  # other slabs and grids
+    with pytest.raises(InputError, match="context-line"):
+        write_context_pack(root / "data", root / "pack-axis", progress=False, line="axis")
 
 
 def test_context_packs_need_a_whole_colon_dataset_and_train_alone(context_pack, smoke_dataset, tmp_path):
