@@ -224,6 +224,9 @@ def test_pack_refuses_bad_input_and_damage(smoke_dataset, smoke_pack, tmp_path, 
     assert "generate the dataset first" in capsys.readouterr().err
     assert main(["pack", str(data), "--out", str(tmp_path / "p"), "--splits", "train,bogus"]) == 2
     assert "no split bogus" in capsys.readouterr().err
+    assert main(["pack", str(data), "--out", str(tmp_path / "p"), "--context-line", "map"]) == 2
+    assert "--context-line is for context packs" in capsys.readouterr().err
+    assert not (tmp_path / "p").exists()
     with pytest.raises(InputError, match="not a pack"):
         read_pack(tmp_path, "train")
     copy = tmp_path / "copy"
