@@ -32,6 +32,7 @@ pack is made again the same from the same dataset.
 from __future__ import annotations
 
 import json
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -127,10 +128,8 @@ def context_sample(pts: np.ndarray, slab: Slab, colon: dict, observed: np.ndarra
 
 def _true_line_samples(pts: np.ndarray, colon: dict, rng: np.random.Generator):
     """Windows cut along the true centerline: ``(points, slab, window, context)`` per segment."""
-    from scipy.spatial import cKDTree
-
     cl = colon["centerline"]
-    point_s = cl.arclength[cKDTree(cl.points).query(pts)[1]]
+    point_s = cl.closest(pts)[1]
     for lo, hi in segment_windows(float(cl.arclength[-1]), rng):
         margin = float(rng.uniform(*CONTEXT_MM))
         a, b = lo - margin, hi + margin
@@ -140,7 +139,7 @@ def _true_line_samples(pts: np.ndarray, colon: dict, rng: np.random.Generator):
         yield pts[(point_s >= a) & (point_s <= b)], Slab(cl.points[on], cl.arclength[on], lo, hi), (lo, hi), (a, b)
 
 
-def _map_line_samples(pts: np.ndarray, colon: dict, positions, rng: np.random.Generator, skipped: dict):
+def _map_line_samples(pts: np.ndarray, colon: dict, positions, rng: np.random.Generator, skipped: Counter):
     """Windows cut along the centerline ``colonbench map`` finds in the noisy cloud, as the map cuts them.
 
     Each window's truth is the stretch of the true centerline between the true points nearest to its ends
@@ -148,8 +147,6 @@ def _map_line_samples(pts: np.ndarray, colon: dict, positions, rng: np.random.Ge
     whose true stretch differs from its own length by more than :data:`MAX_STRETCH` of it (the map's line
     jumped between limbs, or ran back on itself) is skipped and counted in ``skipped``.
     """
-    from scipy.spatial import cKDTree
-
     from colonbench.errors import ColonbenchError
     from colonbench.mapping.colonmap import join_pieces, map_centerline
     from colonbench.slab import point_at, stretch
@@ -157,10 +154,9 @@ def _map_line_samples(pts: np.ndarray, colon: dict, positions, rng: np.random.Ge
     try:
         joined = join_pieces(map_centerline(pts, positions)[0])
     except ColonbenchError:
-        skipped["no centerline"] = skipped.get("no centerline", 0) + 1
+        skipped["no centerline"] += 1
         return
     cl = colon["centerline"]
-    tree = cKDTree(cl.points)
     point_s, point_piece = joined.assign(pts)
     for k, (start, stop) in enumerate(joined.spans):
         line, arc = joined.lines[k], joined.arcs[k]
@@ -168,16 +164,16 @@ def _map_line_samples(pts: np.ndarray, colon: dict, positions, rng: np.random.Ge
             lo, hi = start + lo, start + hi
             margin = float(rng.uniform(*CONTEXT_MM))
             ends = [point_at(line, arc, x) for x in (lo, hi, max(lo - margin, start), min(hi + margin, stop))]
-            t = cl.arclength[tree.query(np.array(ends))[1]]
+            t = cl.closest(np.array(ends))[1]
             window, context = tuple(sorted(t[:2])), tuple(sorted(t[2:]))
             if abs((window[1] - window[0]) - (hi - lo)) > MAX_STRETCH * (hi - lo):
-                skipped["stretch"] = skipped.get("stretch", 0) + 1
+                skipped["stretch"] += 1
                 continue
             sel = (point_piece == k) & (point_s >= lo - margin) & (point_s <= hi + margin)
             yield pts[sel], stretch(line, arc, lo, hi, margin), window, context
 
 
-def _pack_colon_shard(job) -> tuple[dict, list, dict]:
+def _pack_colon_shard(job) -> tuple[dict, list, Counter]:
     """Packed context samples of one whole-colon shard: rows (grid -> (k, S^3 / 8) uint8), coverages, and the
     count of map windows skipped (by reason)."""
     from colonbench.shards.colonshard import ColonShard
@@ -186,7 +182,7 @@ def _pack_colon_shard(job) -> tuple[dict, list, dict]:
     shard = ColonShard(path)
     colon = shard.colon()
     rows = {g: [] for g in CONTEXT_GRIDS}
-    coverages, skipped = [], {}
+    coverages, skipped = [], Counter()
     for i in range(len(shard)):
         smp = shard.sample(i)
         for p in range(PASSES):
@@ -268,11 +264,7 @@ def write_context_pack(data_dir, out_dir, splits=("train", "validation"), worker
         info["splits"][split] = write_split(out, split, grid_options["size"], n, CONTEXT_GRIDS,
                                             (rows for rows, _, _ in made), progress)
         if line == "map":
-            skipped = {}
-            for _, _, counts in made:
-                for reason, count in counts.items():
-                    skipped[reason] = skipped.get(reason, 0) + count
-            info["splits"][split]["skipped"] = skipped
+            info["splits"][split]["skipped"] = dict(sum((counts for _, _, counts in made), Counter()))
         if split == "train":
             info["train_coverage_mean"] = float(np.nanmean(np.concatenate([c for _, c, _ in made])))
     tmp = out / (PACK_NAME + ".tmp")
