@@ -197,6 +197,18 @@ def cmd_train(args):
           f"{result['seconds'] / 60:.1f} min in all: {how}. Model: {Path(args.out) / 'best.safetensors'}")
 
 
+def cmd_average(args):
+    """Average saved models' weights and recompute their batch-norm statistics (a model soup)."""
+    from colonbench.completion.average import average_models, describe
+    from colonbench.completion.method import model_path
+    from colonbench.completion.network import load_model
+
+    command = "colonbench average " + " ".join(sys.argv[2:]) if len(sys.argv) > 2 else ""
+    out = average_models([model_path(m) for m in args.models], args.out, args.bn_data, tuple(args.repeat or ()),
+                         args.bn_samples, args.seed, command=command)
+    print(f"{out}: {describe(load_model(out)[2])}")
+
+
 def _repeats(text: str) -> tuple:
     """--repeat's comma-separated whole numbers >= 1."""
     try:
@@ -644,6 +656,21 @@ def build_parser() -> argparse.ArgumentParser:
                         "the validation split's coverage error (colonbench evaluate DATA --split validation)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_train)
+
+    p = sub.add_parser("average", help="average the weights of saved models of one network (a model soup), "
+                                       "batch norm recomputed on training packs")
+    p.add_argument("models", nargs="+", help="two or more .safetensors models (or shipped models by name), one "
+                                             "network and grid, e.g. the epochs a run kept with --keep-epochs")
+    p.add_argument("--out", required=True, help="the averaged model's .safetensors file")
+    p.add_argument("--bn-data", nargs="+", required=True, metavar="PACK",
+                   help="packs (colonbench pack) whose training samples recompute the batch-norm statistics: those "
+                        "the models trained on")
+    p.add_argument("--repeat", type=_repeats, default=None, metavar="N,N,...",
+                   help="weights of the packs' samples, as colonbench train --repeat (default 1 each)")
+    p.add_argument("--bn-samples", type=_positive(int), default=1000,
+                   help="training samples for the batch-norm statistics (default 1000)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the samples drawn (default 0)")
+    p.set_defaults(func=cmd_average)
 
     p = sub.add_parser("estimate", help="estimate coverage, holes and centerline of partial segments (mm)")
     p.add_argument("files", nargs="+", help="partial segments, mm, one each: point clouds (.ply, .npy, .xyz, .txt) "

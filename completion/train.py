@@ -249,7 +249,7 @@ def _data_lock(data_dir: Path) -> dict:
             "train_samples": samples}
 
 
-def _data_locks(data_dirs: list[Path], repeat=()) -> dict:
+def data_locks(data_dirs: list[Path], repeat=()) -> dict:
     """:func:`_data_lock` of one or more dataset folders trained on together.
 
     Several folders must all be shard datasets or all packs, with the same grid; their
@@ -316,7 +316,7 @@ def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "a
     data_dirs = [Path(d) for d in ([data_dir] if isinstance(data_dir, (str, os.PathLike)) else data_dir)]
     data_dir, out = data_dirs[0], Path(out_dir)
     per_dataset(cfg.repeat, len(data_dirs))  # before any data is read
-    lock = _data_locks(data_dirs, cfg.repeat)
+    lock = data_locks(data_dirs, cfg.repeat)
     data_hash = lock["manifest_sha256"]
     train_coverage = lock["train_coverage_mean"]
     rank, world = _dist()

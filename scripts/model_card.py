@@ -38,7 +38,7 @@ def _data(manifests: list[str], meta: dict) -> str:
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("model")
-    ap.add_argument("--log", required=True)
+    ap.add_argument("--log", help="the run's log.csv (a trained model; an averaged model has none)")
     ap.add_argument("--eval", nargs="*", default=[], help="JSON files of scripts/bench_completion.py --json")
     ap.add_argument("--leaderboard", nargs="*", default=[],
                     help="leaderboard.json files of colonbench leaderboard over runs of this model (one per suite)")
@@ -51,14 +51,59 @@ def main(argv=None):
     ap.add_argument("--note", default="")
     args = ap.parse_args(argv)
     _, config, meta = load_model(args.model)
-    rows = list(csv.DictReader(open(args.log)))
-    tc = meta.get("train_config", {})
     out = [f"# Model card: the shipped completion network (`{Path(args.model).name}`)", ""]
     if args.note:
         out += [args.note, ""]
-    out += ["| | |", "|---|---|",
-            f"| network | MONAI 3D UNet, channels {list(config.channels)}, strides {list(config.strides)}, "
-            f"{config.num_res_units} residual unit(s), {config.norm} norm; 64^3 input heatmap -> 64^3 target heatmap |",
+    if meta.get("average"):
+        out += _average_rows(args, config, meta)
+    else:
+        if not args.log:
+            raise SystemExit("--log: the run's log.csv is needed for a trained model")
+        out += _trained_rows(args, config, meta)
+    out += _figures(args, meta)
+    print("\n".join(out))
+    return 0
+
+
+def _network(config) -> str:
+    return (f"| network | MONAI 3D UNet, channels {list(config.channels)}, strides {list(config.strides)}, "
+            f"{config.num_res_units} residual unit(s), {config.norm} norm; 64^3 input heatmap -> 64^3 target heatmap |")
+
+
+def _average_rows(args, config, meta) -> list[str]:
+    """The table of an averaged model (colonbench average): its models, each with the run that wrote it."""
+    avg = meta["average"]
+    bn = avg["batchnorm"]
+    out = ["| | |", "|---|---|", _network(config),
+           f"| training data | {_data(args.data_manifest, meta)}, the data of every averaged model; their "
+           "validation splits for model selection |",
+           f"| command | {_commands(args.data_manifest, {**meta, 'command': avg.get('command')})} |",
+           f"| batch norm | statistics recomputed after averaging: {bn['samples']} training samples of "
+           f"{' + '.join(bn['packs'])}" + (f" (repeat {','.join(map(str, bn['repeat']))})" if bn["repeat"] else "")
+           + f", seed {bn['seed']}, {bn['batches']} batches |",
+           f"| hardware | {args.hardware} |",
+           f"| software | colonbench {meta.get('colonbench')}, torch {meta.get('torch')} |",
+           f"| grid | {meta.get('grid_options')} |", "",
+           "## Averaged models", "",
+           "Uniform weights, in this order. Each was written by the run command beside it (`--keep-epochs`).", "",
+           "| model | sha256 | epoch | steps | validation L2 | run command |", "|---|---|---|---|---|---|"]
+    for m in avg["models"]:
+        path = Path(m["path"])
+        if path.is_file() and sha256_file(path) == m["sha256"]:
+            mm = load_model(path)[2]
+            row = (f"{mm.get('epoch')} | {mm.get('steps')} | {mm.get('val_l2', float('nan')):.6f} | "
+                   f"`{mm.get('command')}`")
+        else:
+            row = "? | ? | ? | (file not here)"
+        out.append(f"| {m['path']} | `{m['sha256'][:16]}...` | {row} |")
+    return out
+
+
+def _trained_rows(args, config, meta) -> list[str]:
+    """The table and training log of a model from colonbench train."""
+    rows = list(csv.DictReader(open(args.log)))
+    tc = meta.get("train_config", {})
+    out = ["| | |", "|---|---|", _network(config),
             f"| training data | {_data(args.data_manifest, meta)}, "
             + ("its train split; validation split" if len(args.data_manifest) == 1 else
                "their train splits as one; their validation splits as one") + " for model selection |",
@@ -76,6 +121,12 @@ def main(argv=None):
             "## Training log", "", "| epoch | steps | train L2 | validation L2 | lr | minutes |", "|---|---|---|---|---|---|"]
     out += [f"| {r['epoch']} | {r['steps']} | {r['train_l2']} | {r['val_l2']} | {r['lr']} | "
             f"{float(r['seconds']) / 60:.0f} |" for r in rows]
+    return out
+
+
+def _figures(args, meta) -> list[str]:
+    """The bench_completion figures and the leaderboards' rows of this model."""
+    out = []
     if args.eval:
         out += ["", "## Figures", "",
                 "Measured with `python scripts/bench_completion.py DATA --split test --limit N [--noise S] "
@@ -100,8 +151,7 @@ def main(argv=None):
         name = Path(args.evaluated_as).stem
     for path in args.leaderboard:
         out += leaderboard_rows(path, f"{name}@{meta.get('steps')}")
-    print("\n".join(out))
-    return 0
+    return out
 
 
 def leaderboard_rows(path, version: str) -> list[str]:

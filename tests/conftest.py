@@ -41,3 +41,14 @@ def smoke_dataset(tmp_path_factory):
     out = tmp_path_factory.mktemp("smoke") / "data"
     lock = generate(MANIFESTS / "smoke.yaml", out, workers=1, progress=False)
     return out, lock
+
+
+@pytest.fixture(scope="session")
+def smoke_pack(smoke_dataset, tmp_path_factory):
+    """The smoke dataset packed (``colonbench pack``): (data folder, lock, pack folder, pack.json)."""
+    from colonbench.shards.pack import write_pack
+
+    data, lock = smoke_dataset
+    out = tmp_path_factory.mktemp("pack") / "pack"
+    info = write_pack(data, out, workers=1, progress=False)
+    return data, lock, out, info

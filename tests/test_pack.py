@@ -15,16 +15,8 @@ from colonbench.completion.network import build_network, load_model, network_con
 from colonbench.completion.train import TrainConfig, epoch_slots, evaluate_l2, train  # noqa: E402
 from colonbench.errors import InputError  # noqa: E402
 from colonbench.heatmaps import distance_to as distance_np  # noqa: E402
-from colonbench.shards.pack import read_pack, write_pack  # noqa: E402
+from colonbench.shards.pack import read_pack  # noqa: E402
 from colonbench.shards.reader import ShardDataset  # noqa: E402
-
-
-@pytest.fixture(scope="module")
-def smoke_pack(smoke_dataset, tmp_path_factory):
-    data, lock = smoke_dataset
-    out = tmp_path_factory.mktemp("pack") / "pack"
-    info = write_pack(data, out, workers=1, progress=False)
-    return data, lock, out, info
 
 
 def test_a_pack_remakes_every_stored_heatmap(smoke_pack):
