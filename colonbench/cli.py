@@ -678,6 +678,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out-dir", required=True, help="folder for <name>.json per input")
     p.add_argument("--method", default="completion", help="method (default completion: the paper's)")
     _add_model_args(p, "model .safetensors from colonbench train, or a shipped model by name: small (the default), "
+                       "small-0.5 (the 0.5 model, before averaging its lineage's checkpoints), "
                        "small-0.4 (the 0.4 model, before a fourth epoch and real colons weighted 12x), "
                        "small-0.3 (the 0.3 model, before wide.yaml's 18,000 training segments), "
                        "small-0.2 (the 0.2 model, before more real-colon training), small-0.1 (the 0.1 model, "
