@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import shlex
 import sys
 import time
 from pathlib import Path
@@ -203,7 +204,9 @@ def cmd_average(args):
     from colonbench.completion.method import model_path
     from colonbench.completion.network import load_model
 
-    command = "colonbench average " + " ".join(sys.argv[2:]) if len(sys.argv) > 2 else ""
+    command = shlex.join(["colonbench", "average", *args.models, "--out", str(args.out), "--bn-data", *args.bn_data,
+                          *(["--repeat", ",".join(map(str, args.repeat))] if args.repeat else []),
+                          "--bn-samples", str(args.bn_samples), "--seed", str(args.seed)])  # whoever calls main()
     out = average_models([model_path(m) for m in args.models], args.out, args.bn_data, tuple(args.repeat or ()),
                          args.bn_samples, args.seed, command=command)
     print(f"{out}: {describe(load_model(out)[2])}")
