@@ -11,10 +11,11 @@ each layer's running mean and variance the plain mean over those batches
 (``momentum=None``, as ``torch.optim.swa_utils.update_bn``). No weight is
 trained; the models must share the network and the grid options.
 
-The result is an ordinary model file; its metadata keeps the last model's
-description of the training data and adds ``average``: each model's path and
-sha256, and how the statistics were made, so a model card can say exactly how
-it was made (docs/method.md, The shipped model).
+The result is an ordinary model file; its metadata is the last model's, with
+the data description (manifests, mean training coverage) of the packs the
+statistics were made on, and ``average``: each model's path and sha256, and
+how the statistics were made, so a model card can say exactly how it was made
+(docs/method.md, The shipped model).
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from colonbench.completion.network import NetworkConfig, load_model, save_model
+from colonbench.completion.network import NetworkConfig, build_network, load_model, save_model
 from colonbench.errors import InputError
 from colonbench.shards.schema import sha256_file
 
@@ -51,8 +52,6 @@ def average_states(paths) -> tuple[dict, NetworkConfig, dict]:
     meta : dict
         The last model's metadata.
     """
-    from safetensors.torch import load_file
-
     paths = [Path(p) for p in paths]
     if len(paths) < 2:
         raise InputError("averaging needs at least two models")
@@ -64,7 +63,7 @@ def average_states(paths) -> tuple[dict, NetworkConfig, dict]:
         if m.get("grid_options") != meta.get("grid_options"):
             raise InputError(f"{p}: grid options {m.get('grid_options')}, {paths[-1]} {meta.get('grid_options')}; "
                              "models made for other grids do not average")
-    states = [load_file(str(p)) for p in paths]
+    states = [net.state_dict() for net, _, _ in nets]
     w = 1.0 / len(states)
     state = {}
     for key, v in states[-1].items():
@@ -113,15 +112,14 @@ def pack_batches(packs, repeat=(), samples: int = BN_SAMPLES, seed: int = 0, bat
     network's: segment packs give 1 channel, context packs 2 (the in-context model's).
     """
     from colonbench.completion.packdata import PackSplit
-    from colonbench.completion.train import epoch_slots
+    from colonbench.completion.train import epoch_slots, per_dataset
 
+    per_dataset(repeat, len(packs))  # before any pack is read
     split = PackSplit(list(packs), "train", "cpu", cache=False)
     if in_channels is not None and split.in_channels != in_channels:
         kind = {1: "segment", 2: "context"}
         raise InputError(f"{packs[0]}: {kind.get(split.in_channels)} packs, for a network of {split.in_channels} input "
                          f"channel(s); these models take {in_channels} ({kind.get(in_channels)} packs)")
-    if repeat and len(repeat) != len(split.sizes):
-        raise InputError(f"--repeat {','.join(map(str, repeat))}: one number per pack ({len(split.sizes)} given)")
     slots = epoch_slots(split.sizes, tuple(repeat))
     if samples > len(slots):
         raise InputError(f"--bn-samples {samples}: the packs hold {len(slots)} training slots")
@@ -142,11 +140,12 @@ def average_models(paths, out, packs, repeat=(), samples: int = BN_SAMPLES, seed
     Path
         ``out``, a model file like those ``colonbench train`` writes.
     """
-    from colonbench.completion.train import data_locks
+    from colonbench.completion.train import data_locks, per_dataset
 
+    per_dataset(repeat, len(packs))  # before any model or pack is read
     state, config, meta = average_states(paths)
     data = data_locks([Path(p) for p in packs], repeat)  # the constant guess's coverage, as training records it
-    net, _, _ = load_model(paths[-1])
+    net = build_network(config)
     net.load_state_dict(state)
     batches = recompute_batchnorm(net, pack_batches(packs, repeat, samples, seed, in_channels=config.in_channels))
     meta = {**meta, "data_manifest_sha256": data["manifest_sha256"], "data_manifests": data["manifests"],
@@ -161,14 +160,18 @@ def average_models(paths, out, packs, repeat=(), samples: int = BN_SAMPLES, seed
     return save_model(out, net, config, meta)
 
 
+def describe_batchnorm(bn: dict) -> str:
+    """The samples an averaged model's batch-norm statistics were made on, from its ``average["batchnorm"]``."""
+    return (f"{bn['samples']} training samples of {' + '.join(bn['packs'])}"
+            + (f" (repeat {','.join(map(str, bn['repeat']))})" if bn["repeat"] else "") + f", seed {bn['seed']}")
+
+
 def describe(meta: dict) -> str:
     """One line on how an averaged model was made (empty for a trained one)."""
     avg = meta.get("average")
     if not avg:
         return ""
-    bn = avg["batchnorm"]
     return (f"the uniform mean of {len(avg['models'])} models ({', '.join(m['path'] for m in avg['models'])}), "
-            f"batch norm recomputed on {bn['samples']} samples of {' + '.join(bn['packs'])}"
-            + (f" (repeat {','.join(map(str, bn['repeat']))})" if bn["repeat"] else "") + f", seed {bn['seed']}")
+            f"batch norm recomputed on {describe_batchnorm(avg['batchnorm'])}")
 
 

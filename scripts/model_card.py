@@ -12,6 +12,7 @@ import json
 import sys
 from pathlib import Path
 
+from colonbench.completion.average import describe_batchnorm
 from colonbench.completion.network import load_model
 from colonbench.shards.schema import sha256_file
 
@@ -78,9 +79,7 @@ def _average_rows(args, config, meta) -> list[str]:
            f"| training data | {_data(args.data_manifest, meta)}, the data of every averaged model; their "
            "validation splits for model selection |",
            f"| command | {_commands(args.data_manifest, {**meta, 'command': avg.get('command')})} |",
-           f"| batch norm | statistics recomputed after averaging: {bn['samples']} training samples of "
-           f"{' + '.join(bn['packs'])}" + (f" (repeat {','.join(map(str, bn['repeat']))})" if bn["repeat"] else "")
-           + f", seed {bn['seed']}, {bn['batches']} batches |",
+           f"| batch norm | statistics recomputed after averaging: {describe_batchnorm(bn)}, {bn['batches']} batches |",
            f"| hardware | {args.hardware} |",
            f"| software | colonbench {meta.get('colonbench')}, torch {meta.get('torch')} |",
            f"| grid | {meta.get('grid_options')} |", "",

@@ -116,6 +116,9 @@ def test_colonbench_average_refuses_bad_input_with_a_message(smoke_pack, tmp_pat
     assert main(["average", str(paths[0]), str(paths[1]), "--out", str(out), "--bn-data", str(pack),
                  "--bn-samples", "100000"]) == 2
     assert "training slots" in capsys.readouterr().err
+    assert main(["average", str(paths[0]), str(paths[1]), "--out", str(out), "--bn-data", str(pack),
+                 "--repeat", "1,2"]) == 2
+    assert "one per dataset" in capsys.readouterr().err
     assert main(["average", str(paths[0]), str(tmp_path / "none.safetensors"), "--out", str(out), "--bn-data",
                  str(pack)]) == 2
     assert "no such model file" in capsys.readouterr().err
