@@ -298,7 +298,8 @@ def cmd_estimate(args):
             _note_dropped(f, dropped)
             est = as_estimate(method.estimate(points), method.name)
         except ColonbenchError as exc:
-            print(f"colonbench: error: {f}: {exc}", file=sys.stderr)
+            msg = str(exc)    # read_surface's messages start with the path already
+            print(f"colonbench: error: {msg if msg.startswith(f'{f}:') else f'{f}: {msg}'}", file=sys.stderr)
             failed += 1
             continue
         write_estimate(out, name, est, method.version, input=str(f))

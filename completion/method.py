@@ -40,6 +40,9 @@ MIN_POINTS = 200
 METRES_BELOW_MM = 2.0
 #: A cloud whose largest side is above this is not one segment, mm.
 MAX_SEGMENT_MM = 250.0
+#: A cloud narrower than this across its second or third principal axis lies on a line or in a plane, mm
+#: (a degenerate input, not a surface: refused rather than completed into a tube).
+FLAT_BELOW_MM = 0.01
 #: Spacing of the centerline returned, mm.
 CENTERLINE_SPACING_MM = 0.5
 
@@ -71,17 +74,27 @@ def model_path(model=None) -> Path:
 
 def check_cloud(points, what: str = "point cloud") -> np.ndarray:
     """A partial segment cloud in mm, or an :class:`InputError` saying what is wrong with it."""
-    pts = check_points(points, what, min_points=1)
+    pts = check_points(points, what, min_points=0)
     if len(pts) < MIN_POINTS:
         raise InputError(f"{what}: only {len(pts)} point(s); a partial colon segment needs at least {MIN_POINTS} "
                          "(colonbench's clouds have about 2 points per mm^2)")
-    extent = float(np.ptp((pts - pts.mean(axis=0)) @ principal_axes(pts).T, axis=0).max())
+    spans = np.ptp((pts - pts.mean(axis=0)) @ principal_axes(pts).T, axis=0)   # largest first
+    extent = float(spans.max())
+    if extent == 0:
+        raise InputError(f"{what}: all {len(pts)} points coincide; a partial colon segment is a surface")
     if extent < METRES_BELOW_MM:
         raise InputError(f"{what}: spans only {extent:.3g} units; colonbench works in millimetres, and this looks "
                          "like metres (multiply by 1000)")
     if extent > MAX_SEGMENT_MM:
         raise InputError(f"{what}: spans {extent:.0f} mm, far more than one colon segment (5-7 cm); cut the "
                          "reconstruction into segments along its centerline first")
+    # a wall seen from inside a lumen of 10 mm radius or more is never a line, nor exactly flat
+    if spans[1] < FLAT_BELOW_MM:
+        raise InputError(f"{what}: its points lie on a line ({spans[1]:.2g} mm across it); a partial colon segment "
+                         "is a surface")
+    if spans[2] < FLAT_BELOW_MM:
+        raise InputError(f"{what}: its points lie in one plane ({spans[2]:.2g} mm out of it); a partial colon "
+                         "segment is a surface around a lumen")
     return pts
 
 

@@ -481,10 +481,20 @@ def test_training_needs_train_and_validation_splits(tmp_path):
     (np.full((500, 3), np.nan), "NaN"),
     (np.random.default_rng(0).normal(size=(5000, 3)) * 0.02, "metres"),
     (np.random.default_rng(0).normal(size=(5000, 3)) * 300, "far more than one colon segment"),
+    (np.ones((500, 3)), "all 500 points coincide"),
+    (np.linspace(0, 60, 500)[:, None] * [[1.0, 0.5, 0.0]], "lie on a line"),
+    (np.c_[np.random.default_rng(0).uniform(0, 50, (500, 2)), np.full(500, 7.0)], "lie in one plane"),
 ])
 def test_bad_clouds_get_clear_messages(cloud, message):
     with pytest.raises(InputError, match=message):
         check_cloud(cloud)
+
+
+def test_a_nearly_flat_wall_is_a_cloud():
+    # a 40 mm-wide strip of a 40 mm-radius wall bulges 5.4 mm: curved, not refused as flat
+    theta, z = np.meshgrid(np.linspace(-0.5, 0.5, 40), np.linspace(0, 50, 50))
+    wall = np.c_[40 * np.sin(theta).ravel(), 40 * np.cos(theta).ravel(), z.ravel()]
+    assert len(check_cloud(wall)) == 2000
 
 
 def test_estimate_command_writes_one_json_per_input(tiny_run, tmp_path, capsys):
@@ -511,6 +521,12 @@ def test_estimate_command_writes_one_json_per_input(tiny_run, tmp_path, capsys):
                  str(run / "best.safetensors"), "--out-dir", str(tmp_path / "res2")]) == 2
     err = capsys.readouterr().err
     assert "bad.xyz" in err and "only 1 point" in err
+    # a reader's message names the file once, not twice
+    np.save(tmp_path / "six.npy", np.zeros((300, 6)))
+    assert main(["estimate", str(tmp_path / "six.npy"), "--model", str(run / "best.safetensors"),
+                 "--out-dir", str(tmp_path / "res3")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("six.npy") == 1 and "got an array of shape (300, 6)" in err
     assert (tmp_path / "res2" / "other.json").exists()
 
 
