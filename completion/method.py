@@ -78,7 +78,8 @@ def check_cloud(points, what: str = "point cloud") -> np.ndarray:
     if len(pts) < MIN_POINTS:
         raise InputError(f"{what}: only {len(pts)} point(s); a partial colon segment needs at least {MIN_POINTS} "
                          "(colonbench's clouds have about 2 points per mm^2)")
-    spans = np.ptp((pts - pts.mean(axis=0)) @ principal_axes(pts).T, axis=0)   # largest first
+    # extents along the principal axes (by variance, largest first): on a line the 2nd is 0, in a plane the 3rd
+    spans = np.ptp((pts - pts.mean(axis=0)) @ principal_axes(pts).T, axis=0)
     extent = float(spans.max())
     if extent == 0:
         raise InputError(f"{what}: all {len(pts)} points coincide; a partial colon segment is a surface")
