@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import shlex
 import sys
 import time
@@ -48,14 +49,25 @@ def _add_colon_source(p):
     p.add_argument("--config", help="generator config YAML (sections colon, camera, spheres, segments)")
 
 
+def _finite(text: str) -> float:
+    """A float argument that is a finite number (``nan`` and ``inf`` parse as floats and are refused here)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be a finite number, got {text}")
+    return value
+
+
 def _positive(kind):
     def parse(text):
         try:
             value = kind(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-        if value <= 0:
-            raise argparse.ArgumentTypeError(f"must be positive, got {text}")
+        if not math.isfinite(value) or value <= 0:
+            raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
         return value
     return parse
 
@@ -318,9 +330,9 @@ def cmd_estimate(args):
 
 def _floats(text: str) -> list[float]:
     try:
-        return [float(x) for x in text.split(",") if x.strip()]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a comma-separated list of numbers") from None
+        return [_finite(x) for x in text.split(",") if x.strip()]
+    except argparse.ArgumentTypeError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a comma-separated list of finite numbers") from None
 
 
 def _method_list(text: str) -> list[str]:
@@ -577,7 +589,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="output folder")
     _add_segment_args(p, "only this segment index")
     p.add_argument("--permutations", type=_positive(int), default=1, help="hole permutations per segment (default 1)")
-    p.add_argument("--noise", type=float, help="Gaussian noise sigma on the partial points, mm "
+    p.add_argument("--noise", type=_finite, help="Gaussian noise sigma on the partial points, mm "
                    "(0.5 = the paper's noisy condition; default from the config, 0)")
     p.add_argument("--picture", action="store_true", help="also write a PNG per sample")
     p.set_defaults(func=cmd_segments)
@@ -629,12 +641,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--epochs", type=_positive(int), default=100, help="epochs in all (default 100)")
     p.add_argument("--batch-size", type=_positive(int), default=4, help="samples per step per process (default 4)")
     p.add_argument("--lr", type=_positive(float), default=1e-3, help="Adam learning rate (default 1e-3)")
-    p.add_argument("--augment-prob", type=float, default=0.3,
+    p.add_argument("--augment-prob", type=_finite, default=0.3,
                    help="share of samples augmented on the fly (default 0.3)")
     p.add_argument("--flips", action="store_true",
                    help="flip each sample's grid axes at random (exact augmentation; the only geometric one "
                         "for a pack)")
-    p.add_argument("--erase", type=float, default=0.0, metavar="P",
+    p.add_argument("--erase", type=_finite, default=0.0, metavar="P",
                    help="share of a pack's training samples whose partial surface loses 1-3 ball-shaped patches "
                         "before its input heatmap is made: larger holes to complete (default 0)")
     p.add_argument("--repeat", type=_repeats, default=None, metavar="N,N,...",
@@ -702,7 +714,7 @@ def build_parser() -> argparse.ArgumentParser:
                                         "trajectory (timestamp tx ty tz qx qy qz qw) or (k, 3) positions (.npy, "
                                         ".txt); the map is then numbered from the rectum (where it ends)")
     p.add_argument("--method", default="completion", help="method (default completion: the paper's)")
-    p.add_argument("--context-mm", type=float, default=CONTEXT_MM,
+    p.add_argument("--context-mm", type=_finite, default=CONTEXT_MM,
                    help="give the method the neighbours' points up to this far beyond each plane and count "
                         f"coverage on its completed surface between the planes only (default {CONTEXT_MM:g}; 0: "
                         "each segment alone, the paper's segment-only protocol)")
@@ -722,13 +734,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--colon", help="with a manifest: a procedural colon id or the name of one of its meshes")
     _add_colon_source(p)
     p.add_argument("--out", required=True, help="dataset folder (docs/video.md: layout and conventions)")
-    p.add_argument("--start-mm", type=float, help="withdraw from this arc length (mm from the caecum; default 0)")
-    p.add_argument("--end-mm", type=float, help="to this arc length (default the colon's end)")
+    p.add_argument("--start-mm", type=_finite, help="withdraw from this arc length (mm from the caecum; default 0)")
+    p.add_argument("--end-mm", type=_finite, help="to this arc length (default the colon's end)")
     p.add_argument("--fps", type=_positive(float), default=15.0, help="frames per second of examination (default 15)")
     p.add_argument("--size", type=_positive(int), default=256, help="frame side, px (default 256)")
     p.add_argument("--face-ids", action="store_true", help="also write the face under every pixel (faces/*.npz)")
     p.add_argument("--max-frames", type=_positive(int), help="stop after this many frames")
-    p.add_argument("--gif-seconds", type=float, default=10.0, help="length of preview.gif, s (0: none; default 10)")
+    p.add_argument("--gif-seconds", type=_finite, default=10.0, help="length of preview.gif, s (0: none; default 10)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_video)
 
@@ -753,7 +765,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--contexts", type=_floats, default=[0.0, CONTEXT_MM],
                    help=f"--task colon: context margins, one track each, mm (0 = segment-only; default 0,"
                         f"{CONTEXT_MM:g})")
-    p.add_argument("--segment-length", type=float, default=SEGMENT_MM,
+    p.add_argument("--segment-length", type=_finite, default=SEGMENT_MM,
                    help=f"--task colon: segment arc length of the maps, mm (default {SEGMENT_MM:g})")
     p.add_argument("--context-model", help="--task colon: an in-context model for the tracks with context (the "
                                            "segment-only track keeps --model; docs/mapping.md)")

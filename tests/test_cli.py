@@ -61,7 +61,14 @@ def test_bad_input_gives_a_message_not_a_traceback(tmp_path):
     r = run("colon", "--mesh", tmp_path / "none.ply", "--out", tmp_path)
     assert r.returncode == 2 and "no such file" in r.stderr and "Traceback" not in r.stderr
     r = run("segments", "--length", "-5", "--out", tmp_path)
-    assert r.returncode == 2 and "must be positive" in r.stderr
+    assert r.returncode == 2 and "must be a positive number, got -5" in r.stderr
+    # nan and inf parse as floats: refused by the argument types, not by a traceback further on
+    r = run("map", tmp_path / "none.npy", "--segment-length", "nan", "--out", tmp_path)
+    assert r.returncode == 2 and "must be a positive number, got nan" in r.stderr
+    r = run("map", tmp_path / "none.npy", "--context-mm", "inf", "--out", tmp_path)
+    assert r.returncode == 2 and "must be a finite number, got inf" in r.stderr
+    r = run("evaluate", tmp_path, "--noise", "0,nan", "--out", tmp_path)
+    assert r.returncode == 2 and "not a comma-separated list of finite numbers" in r.stderr
     r = run("segments", "--segment", "999", "--out", tmp_path)
     assert r.returncode == 2 and "segment 999 does not exist" in r.stderr
 
