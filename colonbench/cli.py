@@ -206,8 +206,11 @@ def cmd_train(args):
     result = train(args.data, args.out, cfg, device=args.device, progress=not args.quiet, command=command)
     how = {"time": "time budget reached; run the same command to resume",
            "signal": "stopped on request; run the same command to resume"}.get(result["stopped"], "done")
-    print(f"{result['epochs']} epochs, {result['steps']} steps, best validation L2 {result['best_val_l2']:.5f}, "
-          f"{result['seconds'] / 60:.1f} min in all: {how}. Model: {Path(args.out) / 'best.safetensors'}")
+    best = Path(args.out) / "best.safetensors"
+    model = f"Model: {best}" if best.exists() else "No model yet: none is written before the first epoch ends"
+    l2 = f"best validation L2 {result['best_val_l2']:.5f}" if math.isfinite(result["best_val_l2"]) else "not validated yet"
+    print(f"{result['epochs']} epochs, {result['steps']} steps, {l2}, {result['seconds'] / 60:.1f} min in all: {how}. "
+          f"{model}")
 
 
 def cmd_average(args):

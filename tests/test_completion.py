@@ -594,6 +594,9 @@ def test_sigterm_stops_training_cleanly_and_it_resumes(smoke_dataset, tmp_path):
     stdout, stderr = proc.communicate(timeout=120)
     assert proc.returncode == 0, stderr[-2000:]
     assert "stopped on request" in stdout
+    # the closing line names the model only when one was written (not before the first epoch ends)
+    assert ("Model: " in stdout) == (run / "best.safetensors").exists()
+    assert ("No model yet" in stdout) != (run / "best.safetensors").exists()
     saved = torch.load(run / "last.pt", weights_only=False)
     assert saved["state"]["steps"] > 0 and saved["state"]["epoch"] < 50
     # and it goes on from there
