@@ -268,3 +268,26 @@ def test_cpu_training_makes_a_packs_batches_in_workers_and_steps_in_bf16(smoke_p
         train(out, tmp_path / "bf16", dataclasses.replace(cfg, epochs=2), device="cpu", progress=False)
     with pytest.raises(InputError, match="precision 'fp16'"):
         TrainConfig(precision="fp16").check()
+
+
+def test_training_on_a_pack_needs_no_geometry_stack(smoke_pack, tmp_path):
+    # the README's promise for a GPU machine with PyTorch and no package registry: a pack trains with
+    # trimesh, open3d, manifold3d, pyrender and scikit-fmm absent (None in sys.modules: importing them fails)
+    import subprocess
+    import sys
+
+    _, _, out, _ = smoke_pack
+    run = tmp_path / "run"
+    code = ("import sys\n"
+            "for n in ('trimesh', 'open3d', 'manifold3d', 'pyrender', 'skfmm', 'embreex', 'rtree', 'OpenGL'):\n"
+            "    sys.modules[n] = None\n"
+            "from colonbench.cli import main\n"
+            f"sys.argv = ['colonbench', 'train', {str(out)!r}, '--out', {str(run)!r}, '--epochs', '1',\n"
+            "            '--batch-size', '2', '--augment-prob', '0', '--flips', '--erase', '0.5', '--device', 'cpu',\n"
+            "            '--quiet']\n"
+            "main()\n"
+            "bad = sorted(n for n in ('trimesh', 'open3d', 'manifold3d', 'pyrender', 'skfmm') if sys.modules.get(n))\n"
+            "assert not bad, bad\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert "1 epochs" in r.stdout and (run / "best.safetensors").exists()
