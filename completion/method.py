@@ -38,6 +38,9 @@ from colonbench.heatmaps import input_from_points
 MIN_POINTS = 200
 #: A cloud whose largest side is below this is taken to be in metres, mm.
 METRES_BELOW_MM = 2.0
+#: A cloud whose largest side is below this (and above :data:`METRES_BELOW_MM`) is smaller than any colon
+#: segment: a lumen is 20-80 mm across, and the partial clouds of every suite span 30 mm or more. Centimetres, mm.
+TINY_BELOW_MM = 10.0
 #: A cloud whose largest side is above this is not one segment, mm.
 MAX_SEGMENT_MM = 250.0
 #: A cloud narrower than this across its second or third principal axis lies on a line or in a plane, mm
@@ -86,6 +89,10 @@ def check_cloud(points, what: str = "point cloud") -> np.ndarray:
     if extent < METRES_BELOW_MM:
         raise InputError(f"{what}: spans only {extent:.3g} units; colonbench works in millimetres, and this looks "
                          "like metres (multiply by 1000)")
+    if extent < TINY_BELOW_MM:
+        raise InputError(f"{what}: spans only {extent:.3g} mm, smaller than any colon segment (a lumen alone is "
+                         "20-80 mm across); colonbench works in millimetres, and this looks like centimetres "
+                         "(multiply by 10)")
     if extent > MAX_SEGMENT_MM:
         raise InputError(f"{what}: spans {extent:.0f} mm, far more than one colon segment (5-7 cm); cut the "
                          "reconstruction into segments along its centerline first")

@@ -480,6 +480,9 @@ def test_training_needs_train_and_validation_splits(tmp_path):
     (np.random.default_rng(0).normal(size=(12, 3)) * 20, "only 12 point"),
     (np.full((500, 3), np.nan), "NaN"),
     (np.random.default_rng(0).normal(size=(5000, 3)) * 0.02, "metres"),
+    # a 60 mm segment of a 15 mm-radius tube written in centimetres: 6.7 units across
+    (np.c_[1.5 * np.cos(np.linspace(0, 60, 3000)), 1.5 * np.sin(np.linspace(0, 60, 3000)),
+           np.linspace(0, 6, 3000)], "looks like centimetres"),
     (np.random.default_rng(0).normal(size=(5000, 3)) * 300, "far more than one colon segment"),
     (np.ones((500, 3)), "all 500 points coincide"),
     (np.linspace(0, 60, 500)[:, None] * [[1.0, 0.5, 0.0]], "lie on a line"),
@@ -488,6 +491,13 @@ def test_training_needs_train_and_validation_splits(tmp_path):
 def test_bad_clouds_get_clear_messages(cloud, message):
     with pytest.raises(InputError, match=message):
         check_cloud(cloud)
+
+
+def test_the_smallest_segment_is_not_taken_for_centimetres():
+    # the widened generator's smallest segment: 10 mm radius, 20 mm long (its diameter), a third of its wall seen
+    theta, z = np.meshgrid(np.linspace(0, 2 * np.pi / 3, 40), np.linspace(0, 20, 30))
+    wall = np.c_[10 * np.cos(theta).ravel(), 10 * np.sin(theta).ravel(), z.ravel()]
+    assert len(check_cloud(wall)) == 1200
 
 
 def test_a_nearly_flat_wall_is_a_cloud():
