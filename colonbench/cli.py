@@ -328,7 +328,8 @@ def cmd_estimate(args):
         print(f"{name}: coverage {est.coverage:.3f}, {len(est.holes)} hole points, "
               f"centerline {len(est.centerline)} points, {total:.2f} s")
     if failed:
-        raise ColonbenchError(f"{failed} of {len(files)} input(s) failed (see above); the others were written")
+        rest = "nothing was written" if failed == len(files) else "the others were written"
+        raise ColonbenchError(f"{failed} of {len(files)} input(s) failed (see above); {rest}")
 
 
 def _floats(text: str) -> list[float]:

@@ -530,13 +530,15 @@ def test_estimate_command_writes_one_json_per_input(tiny_run, tmp_path, capsys):
     assert main(["estimate", str(tmp_path / "bad.xyz"), str(tmp_path / "other.npy"), "--model",
                  str(run / "best.safetensors"), "--out-dir", str(tmp_path / "res2")]) == 2
     err = capsys.readouterr().err
-    assert "bad.xyz" in err and "only 1 point" in err
+    assert "bad.xyz" in err and "only 1 point" in err and "1 of 2 input(s) failed" in err
+    assert "the others were written" in err
     # a reader's message names the file once, not twice
     np.save(tmp_path / "six.npy", np.zeros((300, 6)))
     assert main(["estimate", str(tmp_path / "six.npy"), "--model", str(run / "best.safetensors"),
                  "--out-dir", str(tmp_path / "res3")]) == 2
     err = capsys.readouterr().err
     assert err.count("six.npy") == 1 and "got an array of shape (300, 6)" in err
+    assert "1 of 1 input(s) failed (see above); nothing was written" in err
     assert (tmp_path / "res2" / "other.json").exists()
 
 
