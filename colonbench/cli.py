@@ -208,7 +208,8 @@ def cmd_train(args):
            "signal": "stopped on request; run the same command to resume"}.get(result["stopped"], "done")
     best = Path(args.out) / "best.safetensors"
     model = f"Model: {best}" if best.exists() else "No model yet: none is written before the first epoch ends"
-    l2 = f"best validation L2 {result['best_val_l2']:.5f}" if math.isfinite(result["best_val_l2"]) else "not validated yet"
+    l2 = (f"best validation L2 {result['best_val_l2']:.5f}" if math.isfinite(result["best_val_l2"])
+          else "not validated yet")
     print(f"{result['epochs']} epochs, {result['steps']} steps, {l2}, {result['seconds'] / 60:.1f} min in all: {how}. "
           f"{model}")
 
@@ -693,7 +694,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_average)
 
     p = sub.add_parser("estimate", help="estimate coverage, holes and centerline of partial segments (mm)")
-    p.add_argument("files", nargs="+", help="partial segments, mm, one each: point clouds (.ply, .npy, .xyz, .txt) "
+    p.add_argument("files", nargs="+", help="partial segments, mm, one each: point clouds (.ply, .npy, .xyz, .txt, "
+                   ".csv) "
                    f"or meshes (.ply, .obj; sampled on their faces at {MESH_DENSITY:g} points/mm^2)")
     p.add_argument("--out-dir", required=True, help="folder for <name>.json per input")
     p.add_argument("--method", default="completion", help="method (default completion: the paper's)")
@@ -709,7 +711,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("map", help="coverage map of a whole colon reconstruction: segments, their coverage, a "
                                    "coloured mesh and picture")
-    p.add_argument("reconstruction", help="the reconstruction, mm: points or a mesh (.ply, .obj, .npy, .xyz)")
+    p.add_argument("reconstruction",
+                   help="the reconstruction, mm: points or a mesh (.ply, .obj, .npy, .xyz, .txt, .csv)")
     p.add_argument("--out", required=True, help="output folder: segments.json/.csv, centerline.npy, summary.json, "
                                                 "map.ply, map.glb, map.png")
     p.add_argument("--segment-length", type=_positive(float), default=SEGMENT_MM,

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import warnings
 from pathlib import Path
 
@@ -9,9 +10,12 @@ import numpy as np
 
 from colonbench.errors import InputError
 
-#: File types ``read_surface`` understands: point clouds (``.npy``, ``.xyz``, ``.txt``, a ``.ply`` without
-#: faces) and meshes (``.ply`` or ``.obj`` with faces).
-SURFACE_SUFFIXES = (".ply", ".obj", ".npy", ".xyz", ".txt")
+#: File types ``read_surface`` understands: point clouds (``.npy``, text: ``.xyz``, ``.txt``, ``.csv``, a
+#: ``.ply`` without faces) and meshes (``.ply`` or ``.obj`` with faces).
+SURFACE_SUFFIXES = (".ply", ".obj", ".npy", ".xyz", ".txt", ".csv")
+#: Text lines that start with these are comments (CloudCompare writes its header as ``//X Y Z``); ``//``
+#: only before the first row of numbers.
+TEXT_COMMENTS = ("#", "//")
 #: A mesh is sampled at this density (points/mm^2), the paper's and the shipped model's.
 MESH_DENSITY = 2.0
 
@@ -45,10 +49,8 @@ def read_surface(path, seed: int = 0) -> tuple[np.ndarray, int]:
     try:
         if suffix == ".npy":
             pts = np.load(path, allow_pickle=False)
-        elif suffix in (".xyz", ".txt"):
-            with warnings.catch_warnings():  # an empty file: reported below as 0 points
-                warnings.simplefilter("ignore", UserWarning)
-                pts = np.loadtxt(path, ndmin=2, usecols=(0, 1, 2))
+        elif suffix in (".xyz", ".txt", ".csv"):
+            pts = _read_text(path)
         else:
             pts = _mesh_or_cloud(path, suffix, seed)
     except InputError:
@@ -61,6 +63,51 @@ def read_surface(path, seed: int = 0) -> tuple[np.ndarray, int]:
     pts = pts.astype(np.float64)
     finite = np.isfinite(pts).all(axis=1)
     return pts[finite], int(np.count_nonzero(~finite))
+
+
+def _read_text(path: Path) -> np.ndarray:
+    """x, y, z from the first three columns of a text table, mm; (n, 3) float.
+
+    Columns are separated by spaces, tabs, commas or semicolons; one header line of names (``x,y,z``,
+    CloudCompare's ``//X Y Z``) may come first, and lines starting with ``#`` are comments (``//`` too before
+    the first row of numbers). Further columns (colours, normals) are ignored.
+    """
+    def rows():
+        with open(path, encoding="utf-8", errors="replace") as fh:
+            for n, raw in enumerate(fh, start=1):
+                line = raw.strip()
+                if line and not line.startswith(TEXT_COMMENTS):
+                    yield n, line
+
+    head = list(itertools.islice(rows(), 2))
+    if not head:
+        return np.zeros((0, 3))
+    delimiter = next((d for d in (",", ";") if any(d in line for _, line in head)), None)
+
+    def numbers(fields):
+        try:
+            [float(x) for x in fields]   # "nan" and "inf" parse: such rows are dropped and counted later
+            return True
+        except ValueError:
+            return False
+
+    header = not numbers(head[0][1].split(delimiter))   # a first line of column names
+    # everything before the first data line is skipped (comments, a header); after it only "#" comments
+    # (numpy's parser slows down threefold with two comment markers)
+    if header and len(head) < 2:
+        return np.zeros((0, 3))   # only a header: reported by the caller as 0 points
+    first = head[1][0] if header else head[0][0]
+    try:
+        with warnings.catch_warnings():  # nothing but "#" comments after the first row: 0 points, as above
+            warnings.simplefilter("ignore", UserWarning)
+            return np.loadtxt(path, delimiter=delimiter, comments="#", skiprows=first - 1, ndmin=2,
+                              usecols=(0, 1, 2), encoding="utf-8")
+    except ValueError:
+        with open(path, encoding="utf-8", errors="replace") as fh:
+            lines = ((n, raw.strip()) for n, raw in enumerate(fh, start=1) if n >= first)
+            n, line = next(((n, line) for n, line in lines if line and not line.startswith("#")
+                            and not (len(f := line.split(delimiter)) >= 3 and numbers(f[:3]))), (first, "?"))
+        raise InputError(f"{path}: line {n} is not x, y, z numbers: {line[:80]!r}") from None
 
 
 def _mesh_or_cloud(path: Path, suffix: str, seed: int) -> np.ndarray:

@@ -114,3 +114,30 @@ def test_estimate_reads_a_mesh_on_its_faces_and_leaves_out_points_that_are_not_f
     (tmp_path / "empty.xyz").write_text("")
     r = run("estimate", tmp_path / "empty.xyz", "--out-dir", tmp_path / "o")
     assert r.returncode == 2 and "0 point(s)" in r.stderr and "Warning" not in r.stderr
+
+
+def test_text_clouds_are_read_as_spreadsheets_and_cloudcompare_write_them(tmp_path):
+    # the same points as a header-less .xyz, a .csv with a header, CloudCompare's "//X Y Z" .txt,
+    # semicolons, and extra colour columns; a bad row is named by its line in the file
+    import pytest
+
+    from colonbench.errors import InputError
+    from colonbench.pointio import read_surface
+
+    pts = np.random.default_rng(0).normal(size=(50, 3)) * 20
+    np.savetxt(tmp_path / "plain.xyz", pts)
+    np.savetxt(tmp_path / "named.csv", pts, delimiter=",", header="x,y,z", comments="")
+    np.savetxt(tmp_path / "cc.txt", pts, header="X Y Z", comments="//")
+    np.savetxt(tmp_path / "semi.csv", pts, delimiter=";")
+    np.savetxt(tmp_path / "rgb.xyz", np.c_[pts, np.full((50, 3), 200)], header="comment", comments="# ")
+    for name in ("plain.xyz", "named.csv", "cc.txt", "semi.csv", "rgb.xyz"):
+        got, dropped = read_surface(tmp_path / name)
+        assert dropped == 0 and np.allclose(got, pts), name
+    (tmp_path / "only.csv").write_text("x,y,z\n")
+    assert read_surface(tmp_path / "only.csv")[0].shape == (0, 3)
+    (tmp_path / "bad.csv").write_text("x,y,z\n1,2,3\n\n4,five,6\n")
+    with pytest.raises(InputError, match=r"bad.csv: line 4 is not x, y, z numbers: '4,five,6'"):
+        read_surface(tmp_path / "bad.csv")
+    (tmp_path / "two.xyz").write_text("1 2\n3 4\n")
+    with pytest.raises(InputError, match="line 1 is not x, y, z numbers"):
+        read_surface(tmp_path / "two.xyz")
