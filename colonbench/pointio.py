@@ -50,7 +50,7 @@ def read_surface(path, seed: int = 0) -> tuple[np.ndarray, int]:
         if suffix == ".npy":
             pts = np.load(path, allow_pickle=False)
         elif suffix in (".xyz", ".txt", ".csv"):
-            pts = _read_text(path)
+            pts = read_text_table(path)
         else:
             pts = _mesh_or_cloud(path, suffix, seed)
     except InputError:
@@ -65,13 +65,20 @@ def read_surface(path, seed: int = 0) -> tuple[np.ndarray, int]:
     return pts[finite], int(np.count_nonzero(~finite))
 
 
-def _read_text(path: Path) -> np.ndarray:
-    """x, y, z from the first three columns of a text table, mm; (n, 3) float.
+def read_text_table(path, columns: int | None = 3, what: str = "x, y, z numbers") -> np.ndarray:
+    """A table of numbers from a text file; (n, columns) float, or every column when ``columns`` is None.
 
     Columns are separated by spaces, tabs, commas or semicolons; one header line of names (``x,y,z``,
     CloudCompare's ``//X Y Z``) may come first, and lines starting with ``#`` are comments (``//`` too before
-    the first row of numbers). Further columns (colours, normals) are ignored.
+    the first row of numbers). With ``columns``, further columns (colours, normals) are ignored.
+
+    Raises
+    ------
+    InputError
+        Naming the first line (numbered as in the file) that is not ``what``.
     """
+    path = Path(path)
+
     def rows():
         with open(path, encoding="utf-8", errors="replace") as fh:
             for n, raw in enumerate(fh, start=1):
@@ -80,34 +87,42 @@ def _read_text(path: Path) -> np.ndarray:
                     yield n, line
 
     head = list(itertools.islice(rows(), 2))
+    empty = np.zeros((0, columns or 0))
     if not head:
-        return np.zeros((0, 3))
+        return empty
     delimiter = next((d for d in (",", ";") if any(d in line for _, line in head)), None)
 
     def numbers(fields):
         try:
-            [float(x) for x in fields]   # "nan" and "inf" parse: such rows are dropped and counted later
+            [float(x) for x in fields]   # "nan" and "inf" parse: the caller decides what to do with them
             return True
         except ValueError:
             return False
 
     header = not numbers(head[0][1].split(delimiter))   # a first line of column names
-    # everything before the first data line is skipped (comments, a header); after it only "#" comments
-    # (numpy's parser slows down threefold with two comment markers)
     if header and len(head) < 2:
-        return np.zeros((0, 3))   # only a header: reported by the caller as 0 points
+        return empty   # only a header
     first = head[1][0] if header else head[0][0]
+    width = len(head[-1 if header else 0][1].split(delimiter))
+    usecols = tuple(range(columns)) if columns else None
+
+    def good(line):
+        fields = line.split(delimiter)
+        return (len(fields) >= columns if columns else len(fields) == width) and numbers(fields[:columns])
+
+    # everything before the first row of numbers is skipped (comments, a header); after it only "#" comments
+    # (numpy's parser slows down threefold with two comment markers)
     try:
-        with warnings.catch_warnings():  # nothing but "#" comments after the first row: 0 points, as above
+        with warnings.catch_warnings():  # nothing but "#" comments after the first row: 0 rows
             warnings.simplefilter("ignore", UserWarning)
-            return np.loadtxt(path, delimiter=delimiter, comments="#", skiprows=first - 1, ndmin=2,
-                              usecols=(0, 1, 2), encoding="utf-8")
+            return np.loadtxt(path, delimiter=delimiter, comments="#", skiprows=first - 1, ndmin=2, usecols=usecols,
+                              encoding="utf-8")
     except ValueError:
         with open(path, encoding="utf-8", errors="replace") as fh:
             lines = ((n, raw.strip()) for n, raw in enumerate(fh, start=1) if n >= first)
-            n, line = next(((n, line) for n, line in lines if line and not line.startswith("#")
-                            and not (len(f := line.split(delimiter)) >= 3 and numbers(f[:3]))), (first, "?"))
-        raise InputError(f"{path}: line {n} is not x, y, z numbers: {line[:80]!r}") from None
+            n, line = next(((n, line) for n, line in lines if line and not line.startswith("#") and not good(line)),
+                           (first, "?"))
+        raise InputError(f"{path}: line {n} is not {what}: {line[:80]!r}") from None
 
 
 def _mesh_or_cloud(path: Path, suffix: str, seed: int) -> np.ndarray:

@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from colonbench.errors import InputError
+from colonbench.pointio import read_text_table
 
 #: Points within this bounding-box diagonal (in the file's unit) are taken for metres.
 METRES_BELOW = 5.0
@@ -49,7 +50,8 @@ def read_trajectory(path) -> np.ndarray:
     """(k, 3) camera positions in time order, from a TUM trajectory or a plain (k, 3) array.
 
     TUM: one pose per line, ``timestamp tx ty tz qx qy qz qw``, ``#`` comments;
-    lines are sorted by timestamp. Plain: ``.npy`` or text with three columns.
+    lines are sorted by timestamp. Plain: ``.npy`` or text with three columns. Text is read by
+    :func:`colonbench.pointio.read_text_table` (a header line, commas or semicolons allowed).
 
     Raises
     ------
@@ -62,7 +64,9 @@ def read_trajectory(path) -> np.ndarray:
         if path.suffix.lower() == ".npy":
             arr = np.load(path, allow_pickle=False)
         else:
-            arr = np.loadtxt(path, comments="#", ndmin=2)
+            arr = read_text_table(path, columns=None, what="a row of a TUM trajectory or of x, y, z positions")
+    except InputError:
+        raise
     except Exception as exc:  # noqa: BLE001
         raise InputError(f"{path}: could not read a trajectory ({type(exc).__name__}: {exc})") from None
     arr = np.asarray(arr, float)

@@ -390,3 +390,20 @@ def test_the_map_clips_at_its_own_planes_not_at_cut_rims():
     assert not any(seg.error for seg in result["segments"])
     assert spy.seen and set(spy.seen) == {(False, None)}
     assert spy.cut_rims is True and spy.end_level == END_LEVEL
+
+
+def test_trajectories_are_read_with_headers_commas_and_in_time_order(tmp_path):
+    # TUM with its "# timestamp ..." header and lines out of time order, and (k, 3) positions as a .csv
+    # with a header; a ragged row is named by its line in the file
+    from colonbench.errors import InputError
+    from colonbench.mapping.inputs import read_trajectory
+
+    pos = np.c_[np.zeros(20), np.linspace(0, 10, 20), np.linspace(0, 200, 20)]
+    tum = np.c_[np.arange(20) * 0.1, pos, np.zeros((20, 3)), np.ones(20)]
+    np.savetxt(tmp_path / "poses.txt", tum[::-1], header="timestamp tx ty tz qx qy qz qw")
+    np.savetxt(tmp_path / "poses.csv", pos, delimiter=",", header="x,y,z", comments="")
+    assert np.allclose(read_trajectory(tmp_path / "poses.txt"), pos)
+    assert np.allclose(read_trajectory(tmp_path / "poses.csv"), pos)
+    (tmp_path / "ragged.txt").write_text("0 0 0\n0 0 1\n0 0 2 3\n")
+    with pytest.raises(InputError, match="ragged.txt: line 3 is not a row of a TUM trajectory"):
+        read_trajectory(tmp_path / "ragged.txt")
