@@ -447,3 +447,30 @@ def test_lumen_centerline_of_a_flattened_colon_sits_where_its_sections_core_is()
     assert np.percentile(ratio, 95) < 0.26
     # every point of the new line is inside the tube: nearer the axis than the ring's flat side (0.5 r)
     assert ratio.max() < 0.5
+
+
+def test_the_probe_generator_makes_tubes_of_its_ranges_and_scores_a_method_by_its_seen_area():
+    # scripts/probe_tubes.py: the segment's faces lie 15 mm to 15 mm + its length along the axis, the wall
+    # within the drawn radius bounds; a method that always says 1.0 errs by exactly the unseen share
+    import importlib.util
+
+    from colonbench.benchmark.references import ConstantMethod
+    from colonbench.seeding import rng
+
+    spec = importlib.util.spec_from_file_location("probe_tubes", MANIFESTS.parent / "scripts" / "probe_tubes.py")
+    probe = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(probe)
+    mesh, axis, in_segment, info = probe.tube(rng(3, "t"), 60.0, "deep")
+    length = np.linalg.norm(np.diff(axis, axis=0), axis=1).sum()
+    assert abs(length - 90.0) < 0.6
+    s_face = probe.STEP_MM * (mesh.faces // (len(mesh.vertices) // len(axis))).mean(axis=1)
+    assert s_face[in_segment].min() >= 15.0 - 1e-9 and s_face[in_segment].max() <= 75.0 + 1e-9
+    # each ring of vertices around its axis point: within radius * ratio * (1 - depth)(1 - lobes) .. radius (1 + lobes)
+    ring = np.repeat(axis, len(mesh.vertices) // len(axis), axis=0)
+    r = np.linalg.norm(mesh.vertices - ring, axis=1)
+    lo = info["radius"] * info["ratio"] * (1 - info["fold_depth"]) * (1 - info["lobes"])
+    assert r.min() >= lo - 1e-6 and r.max() <= info["radius"] * (1 + info["lobes"]) + 1e-6
+    table = probe.probe(3, 7, "smooth", ["spheres", "camera", "band"], {"one": ConstantMethod(coverage=1.0)},
+                        noise=(0.0,))
+    assert len(table) == 3 and ((table.truth > 0.3) & (table.truth < 1.0)).all()
+    assert np.allclose(table.error, 100.0 * (1.0 - table.truth))
