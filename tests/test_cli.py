@@ -69,6 +69,8 @@ def test_bad_input_gives_a_message_not_a_traceback(tmp_path):
     assert r.returncode == 2 and "must be a finite number, got inf" in r.stderr
     r = run("evaluate", tmp_path, "--noise", "0,nan", "--out", tmp_path)
     assert r.returncode == 2 and "not a comma-separated list of finite numbers" in r.stderr
+    r = run("video", "--out", tmp_path, "--gif-seconds", "-1")
+    assert r.returncode == 2 and "--gif-seconds: must be 0 or more, got -1" in r.stderr
     r = run("segments", "--segment", "999", "--out", tmp_path)
     assert r.returncode == 2 and "segment 999 does not exist" in r.stderr
 
