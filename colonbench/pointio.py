@@ -79,18 +79,14 @@ def read_text_table(path, columns: int | None = 3, what: str = "x, y, z numbers"
     """
     path = Path(path)
 
-    def rows():
-        with open(path, encoding="utf-8", errors="replace") as fh:
-            for n, raw in enumerate(fh, start=1):
-                line = raw.strip()
-                if line and not line.startswith(TEXT_COMMENTS):
-                    yield n, line
-
-    head = list(itertools.islice(rows(), 2))
+    with open(path, encoding="utf-8", errors="replace") as fh:   # the first two lines that are not comments
+        head = list(itertools.islice(((n, line) for n, raw in enumerate(fh, start=1)
+                                      if (line := raw.strip()) and not line.startswith(TEXT_COMMENTS)), 2))
     empty = np.zeros((0, columns or 0))
     if not head:
         return empty
-    delimiter = next((d for d in (",", ";") if any(d in line for _, line in head)), None)
+    # semicolons first: a table written with decimal commas separates its columns with them
+    delimiter = next((d for d in (";", ",") if any(d in line for _, line in head)), None)
 
     def numbers(fields):
         try:
