@@ -1,0 +1,38 @@
+#!/usr/bin/env bash
+# Issue 11's training run on a machine that has PyTorch but no package registry (a GPU box reached by
+# copying files): install colonbench from this clone, put split packs back together, train, and keep what
+# a later `colonbench average` and the validation rule need.
+#
+#   scripts/train_offline.sh PARTS_DIR RUN_DIR MINUTES [DEVICE]
+#
+# PARTS_DIR holds the packs to train on, as made here by
+#   colonbench pack data/wide --out packs/wide; colonbench pack data/train-real --out packs/train-real
+#   mkdir -p PARTS/wide PARTS/train-real; cp packs/wide/{pack.json,validation.h5} PARTS/wide/
+#   split -b 30M packs/wide/train.h5 PARTS/wide/train.h5.part-; cp packs/train-real/* PARTS/train-real/
+# and, when monai or edt is missing there, their wheels in PARTS_DIR/wheels (README.md, Train).
+# Each pack's train.h5.part-* pieces are joined into train.h5; pack.json's sha256 refuses a wrong join.
+# Rerun with the same RUN_DIR to resume (colonbench train resumes from RUN_DIR/last.pt); it stops cleanly
+# after MINUTES. The run's settings are those of docs/method.md (Training): the shipped small network's
+# weights as the start, the real colons 4 times per epoch, flips and erasure, every epoch kept.
+set -euo pipefail
+parts=${1:?PARTS_DIR}; run=${2:?RUN_DIR}; minutes=${3:?MINUTES}; device=${4:-cuda}
+site=${SITE:-/tmp/colonbench-site}
+here=$(cd "$(dirname "$0")/.." && pwd)
+
+if ! python3 -c "import colonbench" 2>/dev/null; then
+    wheels=()
+    [ -d "$parts/wheels" ] && wheels=("$parts"/wheels/*.whl)
+    python3 -m pip install -q --no-index --no-deps --no-build-isolation --no-compile --target "$site" \
+        "$here" "${wheels[@]}"
+    export PYTHONPATH="$site${PYTHONPATH:+:$PYTHONPATH}"
+fi
+
+for pack in "$parts"/*/; do
+    if [ ! -f "$pack/train.h5" ] && compgen -G "$pack/train.h5.part-*" > /dev/null; then
+        cat "$pack"/train.h5.part-* > "$pack/train.h5.tmp" && mv "$pack/train.h5.tmp" "$pack/train.h5"
+    fi
+done
+
+python3 -m colonbench.cli train "$parts/wide" "$parts/train-real" --out "$run" --network small --init small \
+    --repeat 1,4 --lr 5e-4 --batch-size 32 --augment-prob 0 --flips --erase 0.3 --epochs 60 \
+    --max-minutes "$minutes" --checkpoint-minutes 2 --keep-epochs --device "$device" --quiet
