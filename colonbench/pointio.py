@@ -42,6 +42,8 @@ def read_surface(path, seed: int = 0) -> tuple[np.ndarray, int]:
     """
     path = Path(path)
     suffix = path.suffix.lower()
+    if path.is_dir():
+        raise InputError(f"{path}: a folder, not a file; give the point cloud or mesh file(s) in it")
     if suffix not in SURFACE_SUFFIXES:
         raise InputError(f"{path}: unknown file type {suffix!r}; use one of {', '.join(SURFACE_SUFFIXES)}")
     if not path.is_file():

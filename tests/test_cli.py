@@ -140,6 +140,8 @@ def test_text_clouds_are_read_as_spreadsheets_and_cloudcompare_write_them(tmp_pa
     (tmp_path / "bad.csv").write_text("x,y,z\n1,2,3\n\n4,five,6\n")
     with pytest.raises(InputError, match=r"bad.csv: line 4 is not x, y, z numbers: '4,five,6'"):
         read_surface(tmp_path / "bad.csv")
+    with pytest.raises(InputError, match="a folder, not a file"):
+        read_surface(tmp_path)
     (tmp_path / "two.xyz").write_text("1 2\n3 4\n")
     with pytest.raises(InputError, match="line 1 is not x, y, z numbers"):
         read_surface(tmp_path / "two.xyz")
