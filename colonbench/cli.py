@@ -755,7 +755,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--size", type=_positive(int), default=256, help="frame side, px (default 256)")
     p.add_argument("--face-ids", action="store_true", help="also write the face under every pixel (faces/*.npz)")
     p.add_argument("--max-frames", type=_positive(int), help="stop after this many frames")
-    p.add_argument("--gif-seconds", type=_non_negative, default=10.0, help="length of preview.gif, s (0: none; default 10)")
+    p.add_argument("--gif-seconds", type=_non_negative, default=10.0,
+                   help="length of preview.gif, s (0: none; default 10)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_video)
 

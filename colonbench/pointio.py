@@ -100,8 +100,8 @@ def read_text_table(path, columns: int | None = 3, what: str = "x, y, z numbers"
     header = not numbers(head[0][1].split(delimiter))   # a first line of column names
     if header and len(head) < 2:
         return empty   # only a header
-    first = head[1][0] if header else head[0][0]
-    width = len(head[-1 if header else 0][1].split(delimiter))
+    first, row = head[1] if header else head[0]   # the first row of numbers: its line number, and its width
+    width = len(row.split(delimiter))
     usecols = tuple(range(columns)) if columns else None
 
     def good(line):
