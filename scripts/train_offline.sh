@@ -7,8 +7,8 @@
 #
 # PARTS_DIR holds the packs to train on, as made here by
 #   colonbench pack data/wide --out packs/wide; colonbench pack data/train-real --out packs/train-real
-#   mkdir -p PARTS/wide PARTS/train-real; cp packs/wide/{pack.json,validation.h5} PARTS/wide/
-#   split -b 30M packs/wide/train.h5 PARTS/wide/train.h5.part-; cp packs/train-real/* PARTS/train-real/
+#   mkdir -p PARTS_DIR/wide PARTS_DIR/train-real; cp packs/wide/{pack.json,validation.h5} PARTS_DIR/wide/
+#   split -b 30M packs/wide/train.h5 PARTS_DIR/wide/train.h5.part-; cp packs/train-real/* PARTS_DIR/train-real/
 # and, when monai or edt is missing there, their wheels in PARTS_DIR/wheels (README.md, Train).
 # Each pack's train.h5.part-* pieces are joined into train.h5; pack.json's sha256 refuses a wrong join.
 # Rerun with the same RUN_DIR to resume (colonbench train resumes from RUN_DIR/last.pt); it stops cleanly
