@@ -46,6 +46,7 @@ def segment_truth(vertices: np.ndarray, faces: np.ndarray, observed: np.ndarray,
     -------
     dict of (s,) arrays
         ``truth`` (coverage of the region, fraction; NaN where it holds no face),
+        ``true_area_mm2`` (the region's true surface area, mm^2),
         ``true_start_mm``, ``true_end_mm`` (the region on the true centerline),
         ``end_seen`` (the smaller observed share of the two :data:`END_BAND_MM` end bands;
         below :data:`END_SEEN` the segment has an unobserved end).
@@ -58,7 +59,7 @@ def segment_truth(vertices: np.ndarray, faces: np.ndarray, observed: np.ndarray,
         _, near = tree.query(np.asarray(vertices)[faces].mean(axis=1))
         face_s = centerline.arclength[near]
     n = len(segments)
-    out = {k: np.full(n, np.nan) for k in ("truth", "true_start_mm", "true_end_mm", "end_seen")}
+    out = {k: np.full(n, np.nan) for k in ("truth", "true_area_mm2", "true_start_mm", "true_end_mm", "end_seen")}
     seen_area = area * observed
     for k, seg in enumerate(segments):
         _, (a, b) = tree.query([seg["plane_start"]["point"], seg["plane_end"]["point"]])
@@ -66,6 +67,7 @@ def segment_truth(vertices: np.ndarray, faces: np.ndarray, observed: np.ndarray,
         out["true_start_mm"][k], out["true_end_mm"][k] = lo, hi
         inside = (face_s >= lo) & (face_s < hi)
         total = area[inside].sum()
+        out["true_area_mm2"][k] = float(total)
         if total > 0:
             out["truth"][k] = float(seen_area[inside].sum() / total)
         shares = []
@@ -101,7 +103,8 @@ def map_metrics(segments, coverage: float | None, map_centerline, vertices, face
     -------
     dict
         ``segment_truth`` and ``segment_errors`` ((s,) estimated - true, fraction; NaN where either is
-        missing), ``end_seen``, ``true_start_mm``, ``true_end_mm`` ((s,), see :func:`segment_truth`),
+        missing), ``end_seen``, ``true_area_mm2``, ``true_start_mm``, ``true_end_mm`` ((s,), see
+        :func:`segment_truth`),
         ``segment_mae`` (points), ``whole_truth``, ``whole_error`` (points, estimated - true),
         ``centerline_precision``, ``centerline_recall`` (at ``threshold_mm``).
     """
@@ -115,6 +118,7 @@ def map_metrics(segments, coverage: float | None, map_centerline, vertices, face
     whole = float(area[observed].sum() / area.sum())
     p, r = precision_recall(resample(np.asarray(map_centerline, float), 0.5), centerline.points, threshold_mm)
     return {"segment_truth": truth["truth"], "segment_errors": errors, "end_seen": truth["end_seen"],
+            "true_area_mm2": truth["true_area_mm2"],
             "true_start_mm": truth["true_start_mm"], "true_end_mm": truth["true_end_mm"],
             "segment_mae": float(np.nanmean(np.abs(errors)) * 100) if np.isfinite(errors).any() else float("nan"),
             "whole_truth": whole,

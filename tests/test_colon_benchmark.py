@@ -35,6 +35,8 @@ def test_segment_truth_and_unobserved_ends_on_a_tube_with_known_cuts():
     assert t["truth"] == pytest.approx([1.0, 1 - 0.25 * 30 / 60, 1 - 20 / 60, 1.0, 1.0], abs=0.01)
     assert t["true_start_mm"] == pytest.approx([0, 60, 120, 180, 240], abs=0.6)
     assert t["end_seen"] == pytest.approx([1, 1, 0, 1, 1], abs=0.05)  # the planes land within 0.5 mm
+    # each region holds 60 mm of a 15 mm tube (the 256-gon's perimeter 0.01 % short of the circle's)
+    assert t["true_area_mm2"] == pytest.approx(np.full(5, 2 * np.pi * RADIUS * 60), rel=0.01)
 
 
 @pytest.fixture(scope="module")
@@ -123,6 +125,13 @@ def test_evaluate_colon_task_and_its_leaderboard(colon_dataset, tmp_path):
     guess = const["coverage"].iloc[0]
     assert np.allclose(const["coverage_error"], guess - const["true_coverage"], equal_nan=True)
     assert segments["true_coverage"].between(0, 1).all()
+    # the segments' true regions do not overlap: per map they hold at most the colon's area, and most of it
+    from colonbench.completion.surface import triangle_areas
+
+    truth = shard.colon()
+    colon_area = triangle_areas(truth["vertices"], truth["faces"]).sum()
+    mapped = segments.groupby(["method", "track", "index"])["true_area_mm2"].sum()
+    assert (mapped <= colon_area * (1 + 1e-9)).all() and (mapped > 0.5 * colon_area).all()
     # a rerun finds everything done
     assert main(["evaluate", str(data), "--task", "colon", "--methods", "constant,thresholding", "--noise", "0",
                  "--contexts", "0,15", "--out", str(run), "--quiet"]) == 0
