@@ -704,7 +704,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("estimate", help="estimate coverage, holes and centerline of partial segments (mm)")
     p.add_argument("files", nargs="+", help="partial segments, mm, one each: point clouds (.ply, .npy, .xyz, .txt, "
                    ".csv) "
-                   f"or meshes (.ply, .obj; sampled on their faces at {MESH_DENSITY:g} points/mm^2)")
+                   f"or meshes (.ply, .obj, .stl, .off; sampled on their faces at {MESH_DENSITY:g} points/mm^2)")
     p.add_argument("--out-dir", required=True, help="folder for <name>.json per input")
     p.add_argument("--method", default="completion", help="method (default completion: the paper's)")
     _add_model_args(p, "model .safetensors from colonbench train, or a shipped model by name: small (the default), "
@@ -720,7 +720,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("map", help="coverage map of a whole colon reconstruction: segments, their coverage, a "
                                    "coloured mesh and picture")
     p.add_argument("reconstruction",
-                   help="the reconstruction, mm: points or a mesh (.ply, .obj, .npy, .xyz, .txt, .csv)")
+                   help="the reconstruction, mm: points or a mesh (.ply, .obj, .stl, .off, .npy, .xyz, .txt, .csv)")
     p.add_argument("--out", required=True, help="output folder: segments.json/.csv, centerline.npy, summary.json, "
                                                 "map.ply, map.glb, map.png")
     p.add_argument("--segment-length", type=_positive(float), default=SEGMENT_MM,

@@ -1,4 +1,4 @@
-"""Reading and writing point clouds and meshes a user hands us: PLY, OBJ, NPY, XYZ, in mm."""
+"""Reading and writing point clouds and meshes a user hands us: PLY, OBJ, STL, OFF, NPY, XYZ, in mm."""
 
 from __future__ import annotations
 
@@ -11,8 +11,9 @@ import numpy as np
 from colonbench.errors import InputError
 
 #: File types ``read_surface`` understands: point clouds (``.npy``, text: ``.xyz``, ``.txt``, ``.csv``, a
-#: ``.ply`` without faces) and meshes (``.ply`` or ``.obj`` with faces).
-SURFACE_SUFFIXES = (".ply", ".obj", ".npy", ".xyz", ".txt", ".csv")
+#: ``.ply`` without faces) and meshes (``.ply`` or ``.obj`` with faces, ``.stl`` and ``.off``: what CT
+#: segmentation tools such as 3D Slicer export).
+SURFACE_SUFFIXES = (".ply", ".obj", ".stl", ".off", ".npy", ".xyz", ".txt", ".csv")
 #: Text lines that start with these are comments (CloudCompare writes its header as ``//X Y Z``); ``//``
 #: only before the first row of numbers.
 TEXT_COMMENTS = ("#", "//")
@@ -124,8 +125,8 @@ def read_text_table(path, columns: int | None = 3, what: str = "x, y, z numbers"
 
 
 def _mesh_or_cloud(path: Path, suffix: str, seed: int) -> np.ndarray:
-    """A ``.ply`` or ``.obj``: its faces sampled at :data:`MESH_DENSITY`, or its vertices if it has no faces
-    (or too little area to sample)."""
+    """A ``.ply``, ``.obj``, ``.stl`` or ``.off``: its faces sampled at :data:`MESH_DENSITY`, or its vertices
+    if it has no faces (or too little area to sample)."""
     import trimesh
 
     geom = trimesh.load(path, process=False, force="mesh") if suffix == ".obj" else trimesh.load(path, process=False)

@@ -64,7 +64,10 @@ def load_mesh(path) -> trimesh.Trimesh:
 
 
 def load_centerline(path) -> Centerline:
-    """Read a centerline, an (n, 3) array in mm (``.npy``, or text with three columns)."""
+    """Read a centerline, an (n, 3) array in mm (``.npy``, or text with three columns as
+    :func:`colonbench.pointio.read_text_table` reads them: a header line, any of its delimiters)."""
+    from colonbench.pointio import read_text_table
+
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: no such file")
@@ -72,7 +75,12 @@ def load_centerline(path) -> Centerline:
     if suffix not in CENTERLINE_SUFFIXES:
         raise InputError(f"{path}: unsupported centerline format {suffix!r}; use one of {list(CENTERLINE_SUFFIXES)}")
     try:
-        pts = np.load(path) if suffix == ".npy" else np.loadtxt(path, delimiter="," if suffix == ".csv" else None)
+        if suffix == ".npy":
+            pts = np.load(path, allow_pickle=False)
+        else:
+            pts = read_text_table(path, columns=None, what="x, y, z numbers of a centerline point")
+    except InputError:
+        raise
     except Exception as exc:
         raise InputError(f"{path}: could not be read as an (n, 3) array ({type(exc).__name__}: {exc})") from None
     pts = np.asarray(pts, dtype=np.float64)

@@ -104,6 +104,11 @@ def test_estimate_reads_a_mesh_on_its_faces_and_leaves_out_points_that_are_not_f
     pts, dropped = read_surface(tmp_path / "tube.obj")
     assert dropped == 0 and len(pts) == round(MESH_DENSITY * mesh.area)
     assert np.abs(np.linalg.norm(pts[:, :2], axis=1) - 15.0).max() < 0.2   # on the faces, not only the vertices
+    for name in ("tube.stl", "tube.off"):   # what CT segmentation tools export; STL's triangle soup samples alike
+        mesh.export(tmp_path / name)
+        other, dropped = read_surface(tmp_path / name)
+        assert dropped == 0 and len(other) == round(MESH_DENSITY * mesh.area), name
+        assert np.abs(np.linalg.norm(other[:, :2], axis=1) - 15.0).max() < 0.2, name
     cloud = np.concatenate([pts, [[np.nan, 0.0, 0.0], [np.inf, 1.0, 2.0]]])
     np.savetxt(tmp_path / "cloud.xyz", cloud)
     again, dropped = read_surface(tmp_path / "cloud.xyz")

@@ -76,8 +76,20 @@ def test_bad_centerline_files(tmp_path):
     with pytest.raises(InputError, match=r"\(n, 3\)"):
         load_centerline(tmp_path / "flat.npy")
     (tmp_path / "words.txt").write_text("a b c\nd e f\n")
-    with pytest.raises(InputError, match="words.txt"):
+    with pytest.raises(InputError, match="words.txt: line 2 is not"):
         load_centerline(tmp_path / "words.txt")
+
+
+def test_centerline_text_files_read_as_clouds_do(tmp_path):
+    # a header line and semicolons, as a spreadsheet writes them: the same line as the .npy
+    pts = np.stack([np.zeros(40), np.linspace(0, 5, 40), np.linspace(0, 200, 40)], 1)
+    np.save(tmp_path / "line.npy", pts)
+    np.savetxt(tmp_path / "line.csv", pts, delimiter=";", header="x;y;z", comments="")
+    a, b = load_centerline(tmp_path / "line.npy"), load_centerline(tmp_path / "line.csv")
+    assert np.allclose(a.points, b.points) and a.length == pytest.approx(b.length)
+    (tmp_path / "four.csv").write_text("x,y,z,r\n0,0,0,15\n0,0,10,15\n")
+    with pytest.raises(InputError, match=r"\(n, 3\) array of points, got shape \(2, 4\)"):
+        load_centerline(tmp_path / "four.csv")
 
 
 def test_centerline_that_leaves_the_mesh_is_refused(tmp_path):
