@@ -19,7 +19,8 @@ that its neighbours occlude and are seen as in a colon. Holes, in turn:
 - ``band``: the faces whose normal is within 45-72 degrees of a random direction are unseen (a
   camera that never looked one way), plus 0-3 balls.
 
-The partial cloud is sampled on the seen faces at 2 points/mm^2 (the held-out data's density), and
+The partial cloud is sampled on the seen faces at 2 points/mm^2 (the held-out data's density;
+``--density`` picks another, with the same tubes, holes and noise draws), and
 the truth is the seen share of the segment's area. Every draw comes from ``--seed``. Prints the
 coverage MAE and bias (points) per method, hole kind and noise level, and each method's paired
 difference against the first; ``--csv`` keeps the rows.
@@ -159,8 +160,10 @@ def seen_faces(rng, mesh: trimesh.Trimesh, axis: np.ndarray, radius: float, kind
     return ~one_side & balls(rng, mesh, int(rng.integers(0, 4)), (4.0, 12.0))
 
 
-def probe(segments: int, seed: int, folds: str, holes, methods: dict, noise=(0.0, 0.5)) -> pd.DataFrame:
-    """One row per segment, noise level and method: truth, estimate, error (points)."""
+def probe(segments: int, seed: int, folds: str, holes, methods: dict, noise=(0.0, 0.5),
+          density: float = 2.0) -> pd.DataFrame:
+    """One row per segment, noise level and method: truth, estimate, error (points); clouds of ``density``
+    points/mm^2."""
     rows = []
     for k in range(segments):
         rng = seeding.rng(seed, "probe-tubes", k)
@@ -172,7 +175,7 @@ def probe(segments: int, seed: int, folds: str, holes, methods: dict, noise=(0.0
         area = segment.area_faces
         truth = float(area[seen].sum() / area.sum())
         partial = trimesh.Trimesh(segment.vertices, segment.faces[seen], process=False)
-        points, _ = trimesh.sample.sample_surface(partial, int(round(2.0 * partial.area)),
+        points, _ = trimesh.sample.sample_surface(partial, int(round(density * partial.area)),
                                                   seed=int(rng.integers(2**31)))
         for sigma in noise:
             cloud = points + rng.normal(scale=sigma, size=points.shape) if sigma else points
@@ -197,6 +200,8 @@ def main(argv=None):
     ap.add_argument("--holes", default=",".join(HOLES), help=f"hole kinds, in turn ({', '.join(HOLES)})")
     ap.add_argument("--methods", default="completion", help="registered methods or package.module:Class")
     ap.add_argument("--models", default="small", help="models for the methods built on the network")
+    ap.add_argument("--density", type=float, default=2.0, help="points/mm^2 of the partial clouds (default 2)")
+    ap.add_argument("--noise", default="0,0.5", help="Gaussian noise sigmas, mm (default 0,0.5)")
     ap.add_argument("--csv", help="write the rows here")
     args = ap.parse_args(argv)
     from colonbench.benchmark.registry import load_method
@@ -206,11 +211,20 @@ def main(argv=None):
         ap.error(f"--holes: choose from {', '.join(HOLES)}")
     methods = {f"{m}[{model}]": load_method(m, model=model) for m in args.methods.split(",")
                for model in args.models.split(",")}
-    table = probe(args.segments, args.seed, args.folds, holes, methods)
+    if not (np.isfinite(args.density) and args.density > 0):
+        ap.error("--density: a positive number of points/mm^2")
+    try:
+        noise = [float(x) for x in args.noise.split(",") if x.strip()]
+    except ValueError:
+        ap.error("--noise: comma-separated sigmas in mm")
+    if not noise or not all(np.isfinite(x) and x >= 0 for x in noise):
+        ap.error("--noise: comma-separated sigmas in mm, each finite and >= 0")
+    table = probe(args.segments, args.seed, args.folds, holes, methods, noise, args.density)
     if args.csv:
         table.to_csv(args.csv, index=False)
     truth = table.drop_duplicates(["segment", "noise_mm"]).truth
-    print(f"{args.segments} segments, folds {args.folds}, seed {args.seed}; mean coverage {truth.mean():.3f}")
+    print(f"{args.segments} segments, folds {args.folds}, seed {args.seed}, {args.density:g} points/mm^2; "
+          f"mean coverage {truth.mean():.3f}")
     table["abs"] = table.error.abs()
     summary = table.groupby(["method", "holes", "noise_mm"]).agg(mae=("abs", "mean"), bias=("error", "mean"))
     print(summary.unstack("noise_mm").round(2).to_string())

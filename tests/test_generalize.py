@@ -474,3 +474,12 @@ def test_the_probe_generator_makes_tubes_of_its_ranges_and_scores_a_method_by_it
                         noise=(0.0,))
     assert len(table) == 3 and ((table.truth > 0.3) & (table.truth < 1.0)).all()
     assert np.allclose(table.error, 100.0 * (1.0 - table.truth))
+
+    class Count:   # reports its cloud's size, so that the density can be read back
+        def estimate(self, points):
+            return ConstantMethod(coverage=len(points) / 1e6).estimate(points)
+
+    dense = probe.probe(3, 7, "smooth", ["spheres", "camera", "band"], {"n": Count()}, noise=(0.0,), density=2.0)
+    sparse = probe.probe(3, 7, "smooth", ["spheres", "camera", "band"], {"n": Count()}, noise=(0.0,), density=0.5)
+    assert np.allclose(sparse.truth, table.truth) and np.allclose(dense.truth, table.truth)  # the same tubes
+    assert np.allclose(sparse.estimate / dense.estimate, 0.25, atol=0.002)
