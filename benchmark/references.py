@@ -36,9 +36,10 @@ class GTHeatmapMethod:
         self.version = steps_version()
 
     def estimate(self, points, truth: dict) -> Estimate:
-        from colonbench.completion.method import check_cloud, from_heatmap
+        from colonbench.completion.method import check_cloud, from_heatmap, thin_dense
 
-        return from_heatmap(truth["target"], truth["grid"], check_cloud(points), self.name)
+        # the method's own cloud: a dense one thinned as completion thins it (its holes are counted from it)
+        return from_heatmap(truth["target"], truth["grid"], thin_dense(check_cloud(points)), self.name)
 
 
 class UnwrapGTMethod:

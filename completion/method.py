@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from colonbench.completion.centerline import END_LEVEL, extract_centerline, resample
-from colonbench.completion.surface import SHELL_LEVEL, STEPS_VERSION, complete, line_between
+from colonbench.completion.surface import SHELL_LEVEL, STEPS_VERSION, cloud_density, complete, line_between
 from colonbench.errors import InputError
 from colonbench.estimate import Estimate
 from colonbench.grid import Grid, check_points, fit_grid, principal_axes
@@ -48,6 +48,11 @@ MAX_SEGMENT_MM = 250.0
 FLAT_BELOW_MM = 0.01
 #: Spacing of the centerline returned, mm.
 CENTERLINE_SPACING_MM = 0.5
+#: A cloud denser than this (points/mm^2, :func:`colonbench.completion.surface.cloud_density`) is thinned to
+#: :data:`THIN_TO` before the method runs: dense clouds came out overestimated (docs/method.md, step 0).
+THIN_ABOVE = 3.0
+#: The density a dense cloud is thinned to, points/mm^2: the paper's (and the held-out data's).
+THIN_TO = 2.0
 
 
 #: The default of the shipped models (``colonbench/completion/models/<name>.safetensors``).
@@ -104,6 +109,43 @@ def check_cloud(points, what: str = "point cloud") -> np.ndarray:
         raise InputError(f"{what}: its points lie in one plane ({spans[2]:.2g} mm out of it); a partial colon "
                          "segment is a surface around a lumen")
     return pts
+
+
+def thin_dense(points: np.ndarray, above: float | None = THIN_ABOVE, to: float = THIN_TO) -> np.ndarray:
+    """A cloud denser than ``above`` points/mm^2, thinned at random to ``to``; any other cloud as it is.
+
+    Each point is kept or not at random, so the thinned cloud samples the surface as a sparser scan
+    would (a Poisson sampling stays one). The draw is seeded by the cloud's bytes: the same cloud
+    always gives the same points. At least :data:`MIN_POINTS` points are kept.
+
+    Parameters
+    ----------
+    points : (n, 3) float
+        A checked partial cloud (:func:`check_cloud`), mm.
+    above : float or None
+        Density (points/mm^2, :func:`colonbench.completion.surface.cloud_density`) above which the cloud is
+        thinned; None thins nothing.
+    to : float
+        Density of the thinned cloud, points/mm^2.
+
+    Returns
+    -------
+    (m, 3) float
+        The kept points, in their order.
+    """
+    if above is None:
+        return points
+    rho = cloud_density(points)
+    if not rho > above:
+        return points
+    from colonbench import seeding
+
+    keep = max(MIN_POINTS, int(round(len(points) * to / rho)))
+    if keep >= len(points):
+        return points
+    digest = int.from_bytes(hashlib.sha256(np.ascontiguousarray(points).tobytes()).digest()[:4], "little")
+    chosen = seeding.rng(0, "thin", digest).choice(len(points), keep, replace=False)
+    return points[np.sort(chosen)]
 
 
 @dataclass
@@ -288,6 +330,9 @@ class CompletionMethod:
     end_level : float or None
         The centerline's ends move to the far ends of the predicted heatmap's voxels at or above this
         (docs/method.md step 3, from steps version 6); None keeps the ends of its ridge.
+    thin_above : float or None
+        A cloud denser than this (points/mm^2) is thinned to :data:`THIN_TO` first (:func:`thin_dense`,
+        docs/method.md step 0, from steps version 9); None takes every cloud as it is.
     context_model : path, optional
         An in-context model (``colonbench train`` on a context pack, docs/mapping.md): it estimates the
         segments given with their slab (``colonbench map`` with a context margin); ``model`` estimates the rest.
@@ -301,7 +346,7 @@ class CompletionMethod:
 
     def __init__(self, model=None, device: str = "cpu", hole_distance: float | None = None, cut_rims: bool = True,
                  shell_level: float | None = SHELL_LEVEL, gaps: bool = True, end_level: float | None = END_LEVEL,
-                 context_model=None):
+                 thin_above: float | None = THIN_ABOVE, context_model=None):
         self.predictor = shared_predictor(model, device)
         self.context_predictor = shared_predictor(context_model, device) if context_model is not None else None
         if self.context_predictor is not None and not self.context_predictor.in_context:
@@ -312,13 +357,14 @@ class CompletionMethod:
         self.shell_level = shell_level
         self.gaps = gaps
         self.end_level = end_level
-        self.version = f"{self.predictor.version},{steps_version(shell_level, gaps, end_level)}" + (
+        self.thin_above = thin_above
+        self.version = f"{self.predictor.version},{steps_version(shell_level, gaps, end_level, thin_above)}" + (
             f",context={self.context_predictor.version}" if self.context_predictor is not None else "")
         self.meta = self.predictor.meta
 
     def predict(self, points) -> tuple[Grid, np.ndarray, np.ndarray]:
         """Grid, input heatmap and predicted target heatmap of a partial cloud (mm)."""
-        p = self.predictor(check_cloud(points))
+        p = self.predictor(thin_dense(check_cloud(points), self.thin_above))
         return p.grid, p.input, p.heatmap
 
     @property
@@ -339,7 +385,7 @@ class CompletionMethod:
         ignores it.
         """
         t0 = time.perf_counter()
-        pts = check_cloud(points)
+        pts = thin_dense(check_cloud(points), self.thin_above)
         t1 = time.perf_counter()
         predictor = self.context_predictor if slab is not None and self.context_predictor is not None \
             else self.predictor
@@ -358,12 +404,13 @@ class CompletionMethod:
 
 
 def steps_version(shell_level: float | None = SHELL_LEVEL, gaps: bool = True,
-                  end_level: float | None = END_LEVEL) -> str:
-    """``steps=N`` of the steps after the network (:data:`~colonbench.completion.surface.STEPS_VERSION`),
-    with the shell level, the wall gaps and the centerline's end level where they are not the default:
-    part of the methods' versions in run folders."""
+                  end_level: float | None = END_LEVEL, thin_above: float | None = THIN_ABOVE) -> str:
+    """``steps=N`` of the steps around the network (:data:`~colonbench.completion.surface.STEPS_VERSION`),
+    with the shell level, the wall gaps, the centerline's end level and the thinning density where they are
+    not the default: part of the methods' versions in run folders."""
     return (f"steps={STEPS_VERSION}" + ("" if shell_level == SHELL_LEVEL else f",shell_level={shell_level}")
-            + ("" if gaps else ",gaps=off") + ("" if end_level == END_LEVEL else f",end_level={end_level}"))
+            + ("" if gaps else ",gaps=off") + ("" if end_level == END_LEVEL else f",end_level={end_level}")
+            + ("" if thin_above == THIN_ABOVE else f",thin_above={thin_above}"))
 
 
 def from_heatmap(heatmap: np.ndarray, grid: Grid, points, method: str = "completion",

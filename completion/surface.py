@@ -54,8 +54,9 @@ from colonbench.heatmaps import distance_to, voxelize_polyline
 #: Revision of the steps after the network, part of the methods' versions: 1 the paper's, 2 the sparse
 #: clouds' hole distance, 3 the cut rims, 4 the shell level, 5 the wall gaps, 6 the centerline's ends on the
 #: lumen's far ends and the cut rims held where the line runs past them, 7 an end with no cut rim pushed out to
-#: the cloud's extent, 8 the wall gaps' stations run on from the line's ends to planes beyond them.
-STEPS_VERSION = "8"
+#: the cloud's extent, 8 the wall gaps' stations run on from the line's ends to planes beyond them, 9 clouds
+#: denser than 3 points/mm^2 thinned to 2 before the method runs (:func:`colonbench.completion.method.thin_dense`).
+STEPS_VERSION = "9"
 #: Voxels below this value are surface voxels.
 SURFACE_THRESHOLD = 0.15
 #: Faces with a vertex where the (trilinearly interpolated) heatmap is above this are dropped: off the
@@ -263,24 +264,41 @@ def sparse_reach(partial_vox: np.ndarray, false_hole_rate: float = FALSE_HOLE_RA
                  neighbours: int = DENSITY_NEIGHBOURS, tree=None) -> float:
     """The gap an observed surface sampled like the cloud leaves this rarely between its points, voxels.
 
-    The local density at a point is ``rho = k / (pi r_k^2)`` points per
-    voxel^2, ``r_k`` the distance to its k-th nearest neighbour; the cloud's
-    density is the median over its points (an even subsample of at most
-    :data:`DENSITY_POINTS`, :func:`colonbench.grid.even_subsample`), which outliers, a second layer and hole borders
-    barely move. On a surface sampled as a Poisson process
+    The cloud's density ``rho`` is :func:`cloud_density` (points per
+    voxel^2). On a surface sampled as a Poisson process
     of density ``rho`` a disc of radius ``d`` holds no point with probability
     ``exp(-rho pi d^2)``, so a point of the observed surface is farther than
     ``sqrt(ln(1 / rate) / (pi rho))`` from every sample only with probability
     ``rate``.
     """
-    tree = cKDTree(partial_vox) if tree is None else tree
-    k = int(min(neighbours, len(partial_vox) - 1))
-    if k < 1:
+    rho = cloud_density(partial_vox, neighbours, tree)
+    if rho == 0:
         return float("inf")
-    sub = even_subsample(partial_vox, DENSITY_POINTS)
-    r_k = tree.query(sub, k=k + 1)[0][:, -1]
-    rho = k / (np.pi * max(float(np.median(r_k)), 1e-9) ** 2)
     return float(np.sqrt(np.log(1.0 / false_hole_rate) / (np.pi * rho)))
+
+
+def cloud_density(points: np.ndarray, neighbours: int = DENSITY_NEIGHBOURS, tree=None) -> float:
+    """Points per unit^2 of the surface a cloud samples (points/mm^2 for a cloud in mm).
+
+    The local density at a point is ``k / (pi r_k^2)``, ``r_k`` the distance to its k-th nearest neighbour;
+    the cloud's is the median over an even subsample of at most :data:`DENSITY_POINTS` of its points
+    (:func:`colonbench.grid.even_subsample`), which outliers, a second layer and hole borders barely move.
+    0 for fewer than two points.
+
+    Parameters
+    ----------
+    points : (n, 3) float
+    neighbours : int
+        k.
+    tree : scipy.spatial.cKDTree, optional
+        A tree of ``points``, when the caller has one.
+    """
+    k = int(min(neighbours, len(points) - 1))
+    if k < 1:
+        return 0.0
+    tree = cKDTree(points) if tree is None else tree
+    r_k = tree.query(even_subsample(points, DENSITY_POINTS), k=k + 1)[0][:, -1]
+    return float(k / (np.pi * max(float(np.median(r_k)), 1e-9) ** 2))
 
 
 def hole_vertices(vertices: np.ndarray, partial_vox: np.ndarray, distance: float = HOLE_DISTANCE,

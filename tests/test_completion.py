@@ -338,6 +338,41 @@ def test_a_cut_window_in_a_sparse_or_dense_cloud_is_a_hole_of_its_area(density):
         assert mesh_coverage(paper.vertices, paper.faces, hole) < est.coverage - 0.1
 
 
+def test_dense_clouds_are_thinned_to_the_training_density():
+    # a tube sampled at 2, 10 and 30 points/mm^2: the density is measured as sampled; clouds above 3 points/mm^2
+    # come back at 2, the same points each time, in their order; a 2 points/mm^2 cloud comes back as it is
+    from colonbench.completion.method import MIN_POINTS, THIN_TO, thin_dense
+    from colonbench.completion.surface import cloud_density
+    from colonbench.datagen.holes import sample_surface
+
+    colon, grid, _, hm = tube_heatmaps(straight(63.0), UNIT)
+    mesh = colon.mesh
+    clouds = {d: sample_surface(np.random.default_rng(1), mesh.vertices, mesh.faces, d) for d in (2.0, 10.0, 30.0)}
+    for d, pts in clouds.items():
+        assert cloud_density(pts) == pytest.approx(d, rel=0.1)
+    assert thin_dense(clouds[2.0]) is clouds[2.0]
+    for d in (10.0, 30.0):
+        thin = thin_dense(clouds[d])
+        assert cloud_density(thin) == pytest.approx(THIN_TO, rel=0.1)
+        assert len(thin) == pytest.approx(len(clouds[d]) * THIN_TO / d, rel=0.1)
+        assert np.array_equal(thin, thin_dense(clouds[d].copy()))                    # seeded by the cloud
+        assert (np.diff(np.flatnonzero(np.isin(clouds[d][:, 0], thin[:, 0]))) > 0).all()   # in their order
+        assert thin_dense(clouds[d], above=None) is clouds[d]
+    pts = clouds[30.0]
+    theta = np.arctan2(pts[:, 1], pts[:, 0])
+    scrap = pts[(pts[:, 2] < 3.0) & (np.abs(theta) < 0.5)]   # 60 mm^2, 1800 points: never thinned below the minimum
+    assert len(scrap) * THIN_TO / cloud_density(scrap) < MIN_POINTS < len(scrap)
+    assert len(thin_dense(scrap)) == MIN_POINTS
+    # a window cut into a dense noisy scan: noise carries points into it, so the dense cloud reads the window
+    # smaller than it is; thinned, the estimate (on the exact heatmap) comes closer to its area
+    window = (np.abs(theta) < 0.5) & (pts[:, 2] > 20) & (pts[:, 2] < 40)
+    noisy = pts[~window] + np.random.default_rng(2).normal(scale=0.5, size=pts[~window].shape)
+    raw, thinned = from_heatmap(hm.target, grid, noisy), from_heatmap(hm.target, grid, thin_dense(noisy))
+    wall = 2 * np.pi * R * np.ptp(raw.mesh_vertices[:, 2])
+    truth = 1 - R * 1.0 * 20.0 / wall
+    assert raw.coverage - truth > 0.008 and abs(thinned.coverage - truth) < 0.5 * abs(raw.coverage - truth)
+
+
 def test_gt_heatmap_as_prediction_bounds_the_error_after_the_network(smoke_dataset):
     out, _ = smoke_dataset
     ds = ShardDataset(out, geometry=True)
