@@ -36,10 +36,10 @@ class GTHeatmapMethod:
         self.version = steps_version()
 
     def estimate(self, points, truth: dict) -> Estimate:
-        from colonbench.completion.method import check_cloud, from_heatmap, thin_dense
+        from colonbench.completion.method import from_heatmap, method_cloud
 
         # the method's own cloud: a dense one thinned as completion thins it (its holes are counted from it)
-        return from_heatmap(truth["target"], truth["grid"], thin_dense(check_cloud(points)), self.name)
+        return from_heatmap(truth["target"], truth["grid"], method_cloud(points), self.name)
 
 
 class UnwrapGTMethod:

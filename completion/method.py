@@ -148,6 +148,11 @@ def thin_dense(points: np.ndarray, above: float | None = THIN_ABOVE, to: float =
     return points[np.sort(chosen)]
 
 
+def method_cloud(points, thin_above: float | None = THIN_ABOVE) -> np.ndarray:
+    """The cloud the completion method runs on: :func:`check_cloud`, then :func:`thin_dense`."""
+    return thin_dense(check_cloud(points), thin_above)
+
+
 @dataclass
 class Prediction:
     """The network's view of one partial cloud, shared by every method built on it.
@@ -364,7 +369,7 @@ class CompletionMethod:
 
     def predict(self, points) -> tuple[Grid, np.ndarray, np.ndarray]:
         """Grid, input heatmap and predicted target heatmap of a partial cloud (mm)."""
-        p = self.predictor(thin_dense(check_cloud(points), self.thin_above))
+        p = self.predictor(method_cloud(points, self.thin_above))
         return p.grid, p.input, p.heatmap
 
     @property
@@ -385,7 +390,7 @@ class CompletionMethod:
         ignores it.
         """
         t0 = time.perf_counter()
-        pts = thin_dense(check_cloud(points), self.thin_above)
+        pts = method_cloud(points, self.thin_above)
         t1 = time.perf_counter()
         predictor = self.context_predictor if slab is not None and self.context_predictor is not None \
             else self.predictor
