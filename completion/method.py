@@ -114,9 +114,11 @@ def check_cloud(points, what: str = "point cloud") -> np.ndarray:
 def thin_dense(points: np.ndarray, above: float | None = THIN_ABOVE, to: float = THIN_TO) -> np.ndarray:
     """A cloud denser than ``above`` points/mm^2, thinned at random to ``to``; any other cloud as it is.
 
-    Each point is kept or not at random, so the thinned cloud samples the surface as a sparser scan
-    would (a Poisson sampling stays one). The draw is seeded by the cloud's bytes: the same cloud
-    always gives the same points. At least :data:`MIN_POINTS` points are kept.
+    The kept points are a uniform draw without replacement of ``n * to / rho`` of the ``n`` points
+    (``rho`` the measured density), so every point is kept with the same probability and the thinned
+    cloud samples the surface as a sparser scan would (a Poisson sampling stays one). The draw is
+    seeded by the cloud's bytes: the same cloud always gives the same points. At least
+    :data:`MIN_POINTS` points are kept.
 
     Parameters
     ----------

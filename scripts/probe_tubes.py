@@ -209,8 +209,6 @@ def main(argv=None):
     holes = [h for h in args.holes.split(",") if h]
     if not holes or set(holes) - set(HOLES):
         ap.error(f"--holes: choose from {', '.join(HOLES)}")
-    methods = {f"{m}[{model}]": load_method(m, model=model) for m in args.methods.split(",")
-               for model in args.models.split(",")}
     if not (np.isfinite(args.density) and args.density > 0):
         ap.error("--density: a positive number of points/mm^2")
     try:
@@ -219,6 +217,9 @@ def main(argv=None):
         ap.error("--noise: comma-separated sigmas in mm")
     if not noise or not all(np.isfinite(x) and x >= 0 for x in noise):
         ap.error("--noise: comma-separated sigmas in mm, each finite and >= 0")
+    # the arguments are checked before the models load (seconds each)
+    methods = {f"{m}[{model}]": load_method(m, model=model) for m in args.methods.split(",")
+               for model in args.models.split(",")}
     table = probe(args.segments, args.seed, args.folds, holes, methods, noise, args.density)
     if args.csv:
         table.to_csv(args.csv, index=False)
