@@ -73,12 +73,12 @@ class ThresholdMethod:
     name = "thresholding"
 
     def __init__(self, model=None, device: str = "cpu", threshold: float = THRESHOLD, cut_rims: bool = True):
-        from colonbench.completion.method import shared_predictor
+        from colonbench.completion.method import prediction_version, shared_predictor
 
         self.predictor = shared_predictor(model, device)
         self.threshold = float(threshold)
         self.cut_rims = cut_rims
-        self.version = f"{self.predictor.version},threshold={self.threshold:g}"
+        self.version = f"{prediction_version(self.predictor)},threshold={self.threshold:g}"
 
     def estimate(self, points) -> Estimate:
         """Coverage, holes and centerline of one partial segment (mm)."""

@@ -137,10 +137,10 @@ class UnwrapMethod:
     name = "unwrap"
 
     def __init__(self, model=None, device: str = "cpu"):
-        from colonbench.completion.method import shared_predictor
+        from colonbench.completion.method import prediction_version, shared_predictor
 
         self.predictor = shared_predictor(model, device)
-        self.version = f"{self.predictor.version},cell={CELL_MM:g}mm"
+        self.version = f"{prediction_version(self.predictor)},cell={CELL_MM:g}mm"
 
     def estimate(self, points) -> Estimate:
         """Coverage, holes and centerline of one partial segment (mm)."""

@@ -292,7 +292,10 @@ def on_prediction(predictor: Predictor, points, step: str, fn) -> Estimate:
 
     The cloud is checked, the (cached) prediction and its centerline are
     taken from ``predictor``, and the result's ``seconds`` count those shared
-    steps in full, then ``step``.
+    steps in full, then ``step``. The prediction is made on the completion
+    method's own cloud (:func:`method_cloud`: a dense cloud thinned), so that
+    the methods built on the network share its prediction and its line on
+    every cloud, and ``fn`` gets the checked cloud as it was given.
 
     Parameters
     ----------
@@ -305,7 +308,7 @@ def on_prediction(predictor: Predictor, points, step: str, fn) -> Estimate:
         ``fn(points, prediction) -> Estimate``; ``prediction.centerline_vox`` is ready.
     """
     pts = check_cloud(points)
-    p = predictor(pts)
+    p = predictor(thin_dense(pts))
     p.centerline_vox  # noqa: B018 - extracted (and timed) before the method's own step
     t = time.perf_counter()
     est = fn(pts, p)
@@ -408,6 +411,12 @@ class CompletionMethod:
                            cut_rims=self.cut_rims, shell_level=self.shell_level, gaps=self.gaps)
         est.seconds = {"check": t1 - t0, **shared, **{k: v for k, v in est.seconds.items() if k != "centerline"}}
         return est
+
+
+def prediction_version(predictor: Predictor) -> str:
+    """Version of the prediction the methods built on the network share: the model, and the density above
+    which a cloud is thinned before it (:func:`on_prediction`)."""
+    return f"{predictor.version},thin_above={THIN_ABOVE:g}"
 
 
 def steps_version(shell_level: float | None = SHELL_LEVEL, gaps: bool = True,

@@ -707,3 +707,30 @@ def test_the_estimate_is_the_same_whatever_the_order_of_the_points():
     assert one.centerline.shape == other.centerline.shape and one.holes.shape == other.holes.shape
     np.testing.assert_allclose(one.centerline, other.centerline, atol=1e-3)   # mm: float32 rounding
     np.testing.assert_allclose(one.holes, other.holes, atol=1e-3)
+
+
+def test_the_methods_built_on_the_network_share_its_prediction_of_a_dense_cloud():
+    # a tube scanned at 10 points/mm^2: completion thins it before the network; thresholding and unwrapping
+    # take the same prediction (one network run) and report its line, while counting on every point
+    from colonbench.baselines.threshold import ThresholdMethod
+    from colonbench.baselines.unwrap import UnwrapMethod
+    from colonbench.completion.method import method_cloud, shared_predictor
+    from colonbench.completion.surface import cloud_density
+    from colonbench.datagen.holes import sample_surface
+
+    colon = tube_colon(straight(63.0), R, ring_spacing_mm=0.5, n_around=256)
+    pts = sample_surface(np.random.default_rng(4), colon.mesh.vertices, colon.mesh.faces, 10.0)
+    theta = np.arctan2(pts[:, 1], pts[:, 0])
+    pts = pts[~((np.abs(theta) < 0.5) & (pts[:, 2] > 20) & (pts[:, 2] < 40))]
+    assert cloud_density(pts) > 8 and len(method_cloud(pts)) < len(pts) / 4
+    predictor = shared_predictor()
+    predictor._cache.clear()
+    full = CompletionMethod().estimate(pts)
+    unwrap, thresholding = UnwrapMethod().estimate(pts), ThresholdMethod().estimate(pts)
+    assert len(predictor._cache) == 1                                  # the network ran once
+    np.testing.assert_allclose(unwrap.centerline, full.centerline, atol=0.05)   # the line completion reports
+    window = R * 1.0 * 20.0 / (2 * np.pi * R * 63.0)
+    for est in (full, unwrap):                                         # (thresholding errs on its own)
+        assert 1 - est.coverage == pytest.approx(window, abs=0.04)
+    assert np.isfinite(thresholding.coverage)
+    assert "thin_above=3" in UnwrapMethod().version and "thin_above=3" in ThresholdMethod().version
