@@ -318,12 +318,16 @@ def cmd_estimate(args):
     failed = 0
     for f, name in zip(files, names):
         try:
-            points, dropped = read_surface(f)
-            _note_dropped(f, dropped)
-            est = as_estimate(method.estimate(points), method.name)
+            points, dropped = read_surface(f)          # its messages name the file
         except ColonbenchError as exc:
-            msg = str(exc)    # read_surface's messages start with the path already
-            print(f"colonbench: error: {msg if msg.startswith(f'{f}:') else f'{f}: {msg}'}", file=sys.stderr)
+            print(f"colonbench: error: {exc}", file=sys.stderr)
+            failed += 1
+            continue
+        _note_dropped(f, dropped)
+        try:
+            est = as_estimate(method.estimate(points), method.name)
+        except ColonbenchError as exc:                  # the method's do not
+            print(f"colonbench: error: {f}: {exc}", file=sys.stderr)
             failed += 1
             continue
         write_estimate(out, name, est, method.version, input=str(f))
