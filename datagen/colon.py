@@ -10,7 +10,9 @@ Algorithm (all random draws from one seeded generator):
 
 1. jitter a template of anatomical control points, bend the transverse colon
    down by the drawn sag and lift the sigmoid loop;
-2. interpolate a cubic spline and scale it to the drawn length;
+2. interpolate a cubic spline and scale it to the drawn length; where
+   ``tortuosity_mm`` is set, bend it by a smooth random displacement across
+   itself (:func:`bend_randomly`);
 3. limit the curvature where a bend would be tighter than the local radius
    (local Gaussian smoothing, repeated), rescale to the drawn length;
 4. check, exactly, that no two cross-sections of the tube intersect (with the
@@ -166,6 +168,10 @@ def _centerline(config: ColonConfig, rng: np.random.Generator) -> tuple[Centerli
 
     target = params["length_mm"]
     points = raw.points * (target / raw.length)
+    if config.tortuosity_mm[1] > 0:  # drawn only when set (0.2's colons stay as they were)
+        params["tortuosity_mm"] = draw(rng, config.tortuosity_mm)
+        params["tortuosity_scale_mm"] = draw(rng, config.tortuosity_scale_mm)
+        points = bend_randomly(points, rng, params["tortuosity_mm"], params["tortuosity_scale_mm"])
     for _ in range(4):
         cl = Centerline.from_points(points)
         r = _base_radius(config, params, cl.arclength, length=cl.length)
@@ -175,6 +181,38 @@ def _centerline(config: ColonConfig, rng: np.random.Generator) -> tuple[Centerli
         points = cl.points * (target / cl.length)
     centerline = Centerline.from_points(points).resample(0.5)
     return centerline, params
+
+
+def bend_randomly(points: np.ndarray, rng: np.random.Generator, amplitude_mm: float, scale_mm: float) -> np.ndarray:
+    """A polyline bent by a smooth random displacement across itself (tortuosity).
+
+    Each coordinate of white noise along the line is Gaussian-filtered with sigma ``scale_mm`` of arc length,
+    scaled to a standard deviation of ``amplitude_mm``, and the part along the local tangent is removed, so
+    the line turns where the displacement changes and keeps its course on average. Bends tighter than the
+    tube allows are smoothed afterwards (:func:`_limit_curvature`), and the self-intersection check applies
+    as to any layout.
+
+    Parameters
+    ----------
+    points : (n, 3) float
+        Evenly spaced polyline, mm.
+    rng : numpy.random.Generator
+    amplitude_mm, scale_mm : float
+        Standard deviation of the displacement and its correlation length along the line, mm.
+
+    Returns
+    -------
+    (n, 3) float
+        The bent polyline, mm (its length grows; the caller rescales it).
+    """
+    seg = np.linalg.norm(np.diff(points, axis=0), axis=1)
+    spacing = float(seg.mean())
+    noise = gaussian_filter1d(rng.normal(size=points.shape), scale_mm / spacing, axis=0, mode="reflect")
+    noise *= amplitude_mm / np.maximum(noise.std(axis=0), 1e-12)
+    tangent = np.gradient(points, axis=0)
+    tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-12)
+    noise -= (noise * tangent).sum(axis=1, keepdims=True) * tangent
+    return points + noise
 
 
 def _limit_curvature(cl: Centerline, radius: np.ndarray, safety: float = 1.25, max_iter: int = 60):

@@ -37,6 +37,11 @@ class ColonConfig:
     transverse_sag_mm: tuple = _p((20.0, 90.0), 0.0, 200.0, "mm", "how far the transverse colon hangs down")
     sigmoid_loop_mm: tuple = _p((30.0, 80.0), 0.0, 150.0, "mm", "how far the sigmoid loop reaches up and forward")
     layout_jitter_mm: float = _p(10.0, 0.0, 40.0, "mm", "random displacement of each anatomical control point")
+    tortuosity_mm: tuple = _p((0.0, 0.0), 0.0, 60.0, "mm",
+                              "standard deviation of a smooth random bending of the centerline across itself "
+                              "(0 = the anatomical layout alone; real colons' segments turn 2-3 times as much)")
+    tortuosity_scale_mm: tuple = _p((15.0, 30.0), 5.0, 200.0, "mm",
+                                    "arc length over which that bending changes (Gaussian sigma; small = sharp turns)")
     fold_spacing_mm: tuple = _p((10.0, 40.0), 2.0, 200.0, "mm", "distance between successive haustral folds")
     fold_depth: tuple = _p((0.08, 0.35), 0.0, 0.6, "fraction of radius", "how far a fold reaches into the lumen")
     fold_width_mm: tuple = _p((1.5, 5.0), 0.5, 20.0, "mm", "half-width of a fold (small = sharp)")

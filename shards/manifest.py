@@ -327,18 +327,35 @@ def dumps(manifest: dict) -> str:
     return yaml.dump(manifest, Dumper=_NoAliases, sort_keys=False, default_flow_style=None, width=110)
 
 
+#: Colon fields added after 0.2.0. While ``tortuosity_mm`` is [0, 0] (no bending, the default) neither changes
+#: the data, so both are left out of the hashes: the hashes recorded for datasets and model cards before they
+#: came still name the same data. Set, they enter the hashes.
+TORTUOSITY_FIELDS = ("tortuosity_mm", "tortuosity_scale_mm")
+
+
+def _hashed(resolved: dict) -> dict:
+    """The resolved manifest as hashed: :data:`TORTUOSITY_FIELDS` left out while they change nothing."""
+    config = resolved.get("config", {})
+    colon = config.get("colon", {})
+    if max(colon.get("tortuosity_mm", [0.0]), default=0.0) > 0:
+        return resolved
+    kept = {k: v for k, v in colon.items() if k not in TORTUOSITY_FIELDS}
+    return {**resolved, "config": {**config, "colon": kept}}
+
+
 def _canonical(obj) -> bytes:
     return json.dumps(obj, sort_keys=True, separators=(",", ":")).encode()
 
 
 def manifest_hash(resolved: dict) -> str:
     """SHA-256 (hex) of a resolved manifest; equal for manifests that generate the same data."""
-    return hashlib.sha256(_canonical(resolved)).hexdigest()
+    return hashlib.sha256(_canonical(_hashed(resolved))).hexdigest()
 
 
 def config_hash(resolved: dict) -> str:
     """SHA-256 (hex) of the generator config and grid of a resolved manifest."""
-    return hashlib.sha256(_canonical({"config": resolved["config"], "grid": resolved["grid"]})).hexdigest()
+    hashed = _hashed(resolved)
+    return hashlib.sha256(_canonical({"config": hashed["config"], "grid": hashed["grid"]})).hexdigest()
 
 
 def units(resolved: dict, splits=None, base=".") -> list[Unit]:
