@@ -117,6 +117,21 @@ dump("train-real", "Every segment of the real training colons gca00090 and gca00
       "validation": split(212, 4, 2, 1, WIDE_NOISE, WIDE_HOLES)}, WIDE, axes="tube",
      mesh_names=["gca00090", "gca00080"])
 
+#: Tortuous colons (after 0.3): real colons' 40-70 mm segments turn 2-3 times as much as the widened generator's
+#: (end to end, median 52 against 24 degrees; docs/datagen.md, Tortuosity), and the network errs more on bent
+#: segments. Narrower lumens (the real training colons' wall lies 11-14 mm from their line) and no diverticula
+#: (whose reach widens every bend the curvature limit allows) let the random bending through.
+BENDS = {"colon": {**WIDE["colon"], "radius_caecum_mm": [15.0, 35.0], "radius_transverse_mm": [10.0, 30.0],
+                   "radius_sigmoid_mm": [8.0, 20.0], "radius_rectum_mm": [12.0, 30.0], "diverticula": [0, 0],
+                   "tortuosity_mm": [10.0, 30.0], "tortuosity_scale_mm": [12.0, 25.0]},
+         "segments": WIDE["segments"]}
+dump("bends", "Tortuous colons for training: the widened generator with the centerline bent at random (tortuosity "
+     "10-30 mm over 12-25 mm of arc), narrower lumens (8-35 mm) and no diverticula, so that its 40-70 mm segments "
+     "turn as much as the real colons' do (end to end, median 45 degrees; real 52, wide.yaml 24). Train and "
+     "validation splits only; trained together with wide.yaml and train-real.yaml.", 20261126,
+     {"train": split(0, 100, 6, 2, WIDE_NOISE, WIDE_HOLES), "validation": split(100, 10, 4, 1, WIDE_NOISE, WIDE_HOLES)},
+     BENDS, axes="tube")
+
 # ------------------------------------------------------------------ 0.3: reconstruction-like partials (issue 13)
 #: The same segments of paper.yaml's test colons, as ideal visibility (camera) and as a fused, degraded video.
 for name, mix, what in (("video", {"video": 1.0}, "reconstruction-like partials: a rendered withdrawal per segment, "

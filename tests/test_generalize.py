@@ -298,7 +298,7 @@ def test_colons_with_diverticula_and_stalked_polyps(small_config):
 
 
 @pytest.mark.parametrize("name", ["paper", "demo", "smoke", "train-cpu", "train-gpu", "wide", "real-test",
-                                  "train-wide", "train-real"])
+                                  "train-wide", "train-real", "bends"])
 def test_resolving_a_resolved_manifest_keeps_its_hash(name):
     # a dataset folder keeps the resolved manifest; a resumed run compares their hashes
     from colonbench.shards.manifest import dumps, load, manifest_hash
@@ -483,3 +483,65 @@ def test_the_probe_generator_makes_tubes_of_its_ranges_and_scores_a_method_by_it
     sparse = probe.probe(3, 7, "smooth", ["spheres", "camera", "band"], {"n": Count()}, noise=(0.0,), density=0.5)
     assert np.allclose(sparse.truth, table.truth) and np.allclose(dense.truth, table.truth)  # the same tubes
     assert np.allclose(sparse.estimate / dense.estimate, 0.25, atol=0.002)
+
+
+def _end_angles(centerline, length_mm=55.0, step_mm=5.0):
+    """Angle between the first and last 5 mm chords of windows of ``length_mm`` every 20 mm along a line, degrees."""
+    s = centerline.arclength
+    out = []
+    for a in np.arange(20.0, s[-1] - length_mm - 20.0, 20.0):
+        p = centerline.point_at(np.arange(a, a + length_mm + 1e-9, step_mm))
+        t = np.diff(p, axis=0)
+        t /= np.linalg.norm(t, axis=1, keepdims=True)
+        out.append(np.degrees(np.arccos(np.clip(t[0] @ t[-1], -1.0, 1.0))))
+    return np.array(out)
+
+
+def test_random_bending_moves_a_straight_line_across_itself_by_its_amplitude():
+    from colonbench.datagen.colon import bend_randomly
+
+    line = straight(2000.0, spacing=1.0).points
+    bent = bend_randomly(line, np.random.default_rng(0), 12.0, 20.0)
+    d = bent - line
+    assert np.abs(d[:, 2]).max() < 1e-9                        # across the line only
+    np.testing.assert_allclose(d[:, :2].std(axis=0), 12.0, rtol=1e-6)
+    # smooth over its scale: neighbouring points 1 mm apart move alike, points 200 mm apart do not
+    step = np.linalg.norm(np.diff(d, axis=0), axis=1)
+    assert np.median(step) < 0.1 * 12.0
+    far = np.corrcoef(d[:-200, 0], d[200:, 0])[0, 1]
+    assert abs(far) < 0.3
+
+
+def test_tortuous_colons_turn_like_real_ones_and_keep_the_self_intersection_check():
+    # bends.yaml's ranges: its segments turn more than the same colons drawn without bending, no bend is
+    # tighter than the curvature limit allows, and the exact self-intersection check holds
+    from colonbench.datagen.centerline import Centerline
+
+    raw = yaml.safe_load((MANIFESTS / "bends.yaml").read_text())["config"]["colon"]
+    cfg = ColonConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in raw.items()})
+    cfg = ColonConfig(**{**cfg.__dict__, "ring_spacing_mm": 3.0, "edge_mm": 4.0})
+    flat = ColonConfig(**{**cfg.__dict__, "tortuosity_mm": (0.0, 0.0)})
+    bent_angles, flat_angles = [], []
+    for colon_id in range(2):
+        colon = generate_colon(cfg, seed=20261126, colon_id=colon_id)
+        assert colon.info["tortuosity_mm"] >= 10.0
+        assert len(self_intersections(colon.centerline, colon.radius, cfg.clearance_mm)) == 0
+        line = Centerline.from_points(colon.centerline.points)
+        assert (line.curvature() * colon.radius).max() < 1.0    # every bend wider than the lumen
+        bent_angles.append(_end_angles(colon.centerline))
+        flat_angles.append(_end_angles(generate_colon(flat, seed=20261126, colon_id=colon_id).centerline))
+    bent, unbent = np.median(np.concatenate(bent_angles)), np.median(np.concatenate(flat_angles))
+    assert bent > 1.3 * unbent and bent > 40.0      # real colons' segments: 52 degrees; wide.yaml's: 24-28
+
+
+def test_colons_without_bending_hash_as_before_the_field_came():
+    # the dataset hash the shipped model's card records for wide.yaml still names its data; bending enters it
+    import copy
+
+    from colonbench.shards.manifest import load, manifest_hash
+
+    wide = load(WIDE)
+    assert manifest_hash(wide) == "9687e5fd0bb9eedde8e888008693290ce8b958816c3ef28d1b34700f1ee2247d"
+    bent = copy.deepcopy(wide)
+    bent["config"]["colon"]["tortuosity_mm"] = [5.0, 10.0]
+    assert manifest_hash(bent) != manifest_hash(wide)
