@@ -5,15 +5,19 @@
 #
 #   scripts/train_offline.sh PARTS_DIR RUN_DIR MINUTES [DEVICE]
 #
-# PARTS_DIR holds the packs to train on, as made here by
+# PARTS_DIR holds the packs to train on (wide, train-real and bends: the tortuous colons of data_manifests/bends.yaml,
+# docs/datagen.md, Tortuosity), as made here by
 #   colonbench pack data/wide --out packs/wide; colonbench pack data/train-real --out packs/train-real
-#   mkdir -p PARTS_DIR/wide PARTS_DIR/train-real; cp packs/wide/{pack.json,validation.h5} PARTS_DIR/wide/
+#   colonbench pack data/bends --out packs/bends
+#   mkdir -p PARTS_DIR/wide PARTS_DIR/train-real PARTS_DIR/bends; cp packs/wide/{pack.json,validation.h5} PARTS_DIR/wide/
 #   split -b 30M packs/wide/train.h5 PARTS_DIR/wide/train.h5.part-; cp packs/train-real/* PARTS_DIR/train-real/
+#   cp packs/bends/* PARTS_DIR/bends/
 # and, when monai or edt is missing there, their wheels in PARTS_DIR/wheels (README.md, Train).
 # Each pack's train.h5.part-* pieces are joined into train.h5; pack.json's sha256 refuses a wrong join.
 # Rerun with the same RUN_DIR to resume (colonbench train resumes from RUN_DIR/last.pt); it stops cleanly
 # after MINUTES. The run's settings are those of docs/method.md (Training): the shipped small network's
 # weights as the start, the real colons 4 times per epoch, flips and erasure, every epoch kept.
+# A PARTS_DIR without bends/ trains on wide and train-real alone, as planned before bends.yaml.
 set -euo pipefail
 parts=${1:?PARTS_DIR}; run=${2:?RUN_DIR}; minutes=${3:?MINUTES}; device=${4:-cuda}
 site=${SITE:-/tmp/colonbench-site}
@@ -33,6 +37,8 @@ for pack in "$parts"/*/; do
     fi
 done
 
-python3 -m colonbench.cli train "$parts/wide" "$parts/train-real" --out "$run" --network small --init small \
-    --repeat 1,4 --lr 5e-4 --batch-size 32 --augment-prob 0 --flips --erase 0.3 --epochs 60 \
+packs=("$parts/wide" "$parts/train-real"); repeat=1,4
+if [ -d "$parts/bends" ]; then packs+=("$parts/bends"); repeat=1,4,1; fi
+python3 -m colonbench.cli train "${packs[@]}" --out "$run" --network small --init small \
+    --repeat "$repeat" --lr 5e-4 --batch-size 32 --augment-prob 0 --flips --erase 0.3 --epochs 60 \
     --max-minutes "$minutes" --checkpoint-minutes 2 --keep-epochs --device "$device" --quiet
