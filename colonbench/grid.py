@@ -147,6 +147,33 @@ def even_subsample(points, max_points: int) -> np.ndarray:
     return pts[np.lexsort(pts.T[::-1])[::step]]
 
 
+def distinct_points(points) -> np.ndarray:
+    """The distinct rows of the (n, 3) ``points``, in lexicographic (x, y, z) order.
+
+    A cloud is taken as the set of its points: the same points in another
+    order, or with some of them repeated (fragments merged, a mesh's shared
+    vertices written once per face), give the same array, so that everything
+    drawn from it (the thinning of a dense cloud) depends on the cloud alone.
+
+    Parameters
+    ----------
+    points : (n, 3) float
+        mm.
+
+    Returns
+    -------
+    (m, 3) float
+        m <= n.
+    """
+    pts = np.asarray(points, dtype=float)
+    if len(pts) < 2:
+        return pts
+    pts = pts[np.lexsort(pts.T[::-1])]
+    keep = np.ones(len(pts), bool)
+    keep[1:] = np.any(pts[1:] != pts[:-1], axis=1)
+    return pts[keep]
+
+
 def tube_axes(points, neighbours: int = NORMAL_NEIGHBOURS, max_points: int = NORMAL_POINTS) -> np.ndarray:
     """(3, 3) rotation whose first row is the axis of the tube a partial surface cloud lies on.
 

@@ -31,7 +31,7 @@ from colonbench.completion.centerline import END_LEVEL, extract_centerline, resa
 from colonbench.completion.surface import SHELL_LEVEL, STEPS_VERSION, cloud_density, complete, line_between
 from colonbench.errors import InputError
 from colonbench.estimate import Estimate
-from colonbench.grid import Grid, check_points, fit_grid, principal_axes
+from colonbench.grid import Grid, check_points, distinct_points, fit_grid, principal_axes
 from colonbench.heatmaps import input_from_points
 
 #: Fewest points accepted: below this there is no segment to complete.
@@ -81,16 +81,26 @@ def model_path(model=None) -> Path:
 
 
 def check_cloud(points, what: str = "point cloud") -> np.ndarray:
-    """A partial segment cloud in mm, or an :class:`InputError` saying what is wrong with it."""
+    """A partial segment cloud in mm, or an :class:`InputError` saying what is wrong with it.
+
+    Returns
+    -------
+    (m, 3) float
+        The cloud's distinct points in lexicographic order (:func:`colonbench.grid.distinct_points`): every
+        method sees the set of points, whatever their order and however often a point was repeated.
+    """
     pts = check_points(points, what, min_points=0)
+    given = len(pts)
+    pts = distinct_points(pts)
+    if given > 1 and len(pts) == 1:
+        raise InputError(f"{what}: all {given} points coincide; a partial colon segment is a surface")
     if len(pts) < MIN_POINTS:
-        raise InputError(f"{what}: only {len(pts)} point(s); a partial colon segment needs at least {MIN_POINTS} "
-                         "(colonbench's clouds have about 2 points per mm^2)")
+        repeats = f" once repeated points are dropped ({given} given)" if given > len(pts) else ""
+        raise InputError(f"{what}: only {len(pts)} point(s){repeats}; a partial colon segment needs at least "
+                         f"{MIN_POINTS} (colonbench's clouds have about 2 points per mm^2)")
     # extents along the principal axes (by variance, largest first): on a line the 2nd is 0, in a plane the 3rd
     spans = np.ptp((pts - pts.mean(axis=0)) @ principal_axes(pts).T, axis=0)
     extent = float(spans.max())
-    if extent == 0:
-        raise InputError(f"{what}: all {len(pts)} points coincide; a partial colon segment is a surface")
     if extent < METRES_BELOW_MM:
         raise InputError(f"{what}: spans only {extent:.3g} units; colonbench works in millimetres, and this looks "
                          "like metres (multiply by 1000)")
@@ -123,7 +133,8 @@ def thin_dense(points: np.ndarray, above: float | None = THIN_ABOVE, to: float =
     Parameters
     ----------
     points : (n, 3) float
-        A checked partial cloud (:func:`check_cloud`), mm.
+        A checked partial cloud (:func:`check_cloud`: its distinct points in lexicographic order, so that the
+        draw does not depend on the order the points came in, nor on repeated points), mm.
     above : float or None
         Density (points/mm^2, :func:`colonbench.completion.surface.cloud_density`) above which the cloud is
         thinned; None thins nothing.
@@ -295,7 +306,7 @@ def on_prediction(predictor: Predictor, points, step: str, fn) -> Estimate:
     steps in full, then ``step``. The prediction is made on the completion
     method's own cloud (:func:`method_cloud`: a dense cloud thinned), so that
     the methods built on the network share its prediction and its line on
-    every cloud, and ``fn`` gets the checked cloud as it was given.
+    every cloud, and ``fn`` gets the checked cloud (its distinct points, not thinned).
 
     Parameters
     ----------
@@ -414,9 +425,10 @@ class CompletionMethod:
 
 
 def prediction_version(predictor: Predictor) -> str:
-    """Version of the prediction the methods built on the network share: the model, and the density above
-    which a cloud is thinned before it (:func:`on_prediction`)."""
-    return f"{predictor.version},thin_above={THIN_ABOVE:g}"
+    """Version of the prediction the methods built on the network share: the model, the steps around it (the
+    cloud it is made from, the planes the baselines clip at) and the density above which a cloud is thinned
+    before it (:func:`on_prediction`)."""
+    return f"{predictor.version},steps={STEPS_VERSION},thin_above={THIN_ABOVE:g}"
 
 
 def steps_version(shell_level: float | None = SHELL_LEVEL, gaps: bool = True,

@@ -55,8 +55,10 @@ from colonbench.heatmaps import distance_to, voxelize_polyline
 #: clouds' hole distance, 3 the cut rims, 4 the shell level, 5 the wall gaps, 6 the centerline's ends on the
 #: lumen's far ends and the cut rims held where the line runs past them, 7 an end with no cut rim pushed out to
 #: the cloud's extent, 8 the wall gaps' stations run on from the line's ends to planes beyond them, 9 clouds
-#: denser than 3 points/mm^2 thinned to 2 before the method runs (:func:`colonbench.completion.method.thin_dense`).
-STEPS_VERSION = "9"
+#: denser than 3 points/mm^2 thinned to 2 before the method runs (:func:`colonbench.completion.method.thin_dense`),
+#: 10 a cloud taken as its distinct points in lexicographic order before it is thinned (the thinning's draw
+#: depended on the order of the points, and repeated points counted in the cloud's density).
+STEPS_VERSION = "10"
 #: Voxels below this value are surface voxels.
 SURFACE_THRESHOLD = 0.15
 #: Faces with a vertex where the (trilinearly interpolated) heatmap is above this are dropped: off the
