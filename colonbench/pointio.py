@@ -59,6 +59,9 @@ def read_surface(path, seed: int = 0) -> tuple[np.ndarray, int]:
     except InputError:
         raise
     except Exception as exc:  # noqa: BLE001 - numpy/trimesh raise many types for a bad file
+        if suffix == ".ply" and isinstance(exc, KeyError):   # trimesh looks a PLY's vertex properties up by name
+            raise InputError(f"{path}: could not read points: no vertex property {exc} (a PLY's vertices need "
+                             "x, y and z)") from None
         raise InputError(f"{path}: could not read points ({type(exc).__name__}: {exc})") from None
     pts = np.asarray(pts)
     if pts.ndim != 2 or pts.shape[1] != 3 or not np.issubdtype(pts.dtype, np.number):

@@ -75,6 +75,18 @@ def test_bad_input_gives_a_message_not_a_traceback(tmp_path):
     assert r.returncode == 2 and "segment 999 does not exist" in r.stderr
 
 
+
+def test_a_ply_without_a_coordinate_is_refused_by_name(tmp_path):
+    # a PLY whose vertices have x but no y or z: the message names the missing property, not trimesh's KeyError
+    import pytest
+
+    from colonbench.errors import InputError
+    from colonbench.pointio import read_surface
+
+    (tmp_path / "x_only.ply").write_text("ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nend_header\n1\n2\n")
+    with pytest.raises(InputError, match="x_only.ply: could not read points: no vertex property 'y'"):
+        read_surface(tmp_path / "x_only.ply")
+
 def test_picture(tmp_path):
     from colonbench.datagen.colon import tube_colon
     from shapes import straight
