@@ -5,6 +5,7 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 import trimesh
 import yaml
 
@@ -75,17 +76,15 @@ def test_bad_input_gives_a_message_not_a_traceback(tmp_path):
     assert r.returncode == 2 and "segment 999 does not exist" in r.stderr
 
 
-
 def test_a_ply_without_a_coordinate_is_refused_by_name(tmp_path):
     # a PLY whose vertices have x but no y or z: the message names the missing property, not trimesh's KeyError
-    import pytest
-
     from colonbench.errors import InputError
     from colonbench.pointio import read_surface
 
     (tmp_path / "x_only.ply").write_text("ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nend_header\n1\n2\n")
     with pytest.raises(InputError, match="x_only.ply: could not read points: no vertex property 'y'"):
         read_surface(tmp_path / "x_only.ply")
+
 
 def test_picture(tmp_path):
     from colonbench.datagen.colon import tube_colon
@@ -138,8 +137,6 @@ def test_estimate_reads_a_mesh_on_its_faces_and_leaves_out_points_that_are_not_f
 def test_text_clouds_are_read_as_spreadsheets_and_cloudcompare_write_them(tmp_path):
     # the same points as a header-less .xyz, a .csv with a header, CloudCompare's "//X Y Z" .txt,
     # semicolons, and extra colour columns; a bad row is named by its line in the file
-    import pytest
-
     from colonbench.errors import InputError
     from colonbench.pointio import read_surface
 

@@ -701,7 +701,8 @@ def test_the_estimate_is_the_same_whatever_the_order_of_the_points(density):
     theta = np.arctan2(pts[:, 1], pts[:, 0])
     pts = pts[~((np.abs(theta) < 0.5) & (pts[:, 2] > 20) & (pts[:, 2] < 40))]
     rng = np.random.default_rng(3)
-    shuffled = np.concatenate([pts, pts[rng.choice(len(pts), len(pts) // 5)]])[rng.permutation(len(pts) * 6 // 5)]
+    repeated = np.concatenate([pts, pts[rng.choice(len(pts), len(pts) // 5)]])
+    shuffled = repeated[rng.permutation(len(repeated))]
     assert len(pts) > 3000
     a = np.sort(even_subsample(pts, 1000).view("f8,f8,f8"), axis=0)
     b = np.sort(even_subsample(pts[rng.permutation(len(pts))], 1000).view("f8,f8,f8"), axis=0)
