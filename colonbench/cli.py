@@ -207,7 +207,7 @@ def cmd_train(args):
 
     cfg = TrainConfig(network=args.network, batch_size=args.batch_size, lr=args.lr, epochs=args.epochs,
                       augment_prob=args.augment_prob, seed=args.seed, workers=args.workers, flips=args.flips,
-                      erase=args.erase, repeat=tuple(args.repeat or ()), precision=args.precision,
+                      transposes=args.transposes, erase=args.erase, repeat=tuple(args.repeat or ()), precision=args.precision,
                       checkpoint_minutes=args.checkpoint_minutes, max_minutes=args.max_minutes,
                       keep_epochs=args.keep_epochs, init=args.init, init_sha256=_model_sha256(args.init))
     command = "colonbench train " + " ".join(sys.argv[2:]) if len(sys.argv) > 2 else ""
@@ -663,6 +663,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--flips", action="store_true",
                    help="flip each sample's grid axes at random (exact augmentation; the only geometric one "
                         "for a pack)")
+    p.add_argument("--transposes", type=_finite, default=0.0, metavar="P",
+                   help="share of the training samples whose grid axes are exchanged (one of the five other orders, "
+                        "each as likely; exact, like --flips): the tube then runs along another axis than the "
+                        "first, which the grid always gives it (default 0)")
     p.add_argument("--erase", type=_finite, default=0.0, metavar="P",
                    help="share of a pack's training samples whose partial surface loses 1-3 ball-shaped patches "
                         "before its input heatmap is made: larger holes to complete (default 0)")

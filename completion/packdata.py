@@ -20,7 +20,15 @@ Augmentation
 ------------
 Flipping a grid axis maps the occupancies, and with them both heatmaps, onto
 another valid sample (the grid's principal axes have no preferred sign), so
-flips are exact augmentations. They are the only geometric ones a pack allows.
+flips are exact augmentations. So are transposes, which exchange grid axes
+(``colonbench train --transposes P``; with the flips, every symmetry of the
+cube): the grid is cubic and its voxels isotropic, so a distance transform of
+transposed occupancies is the transposed distance transform. These are the
+only geometric augmentations a pack allows. Transposes answer a bias of the
+networks trained without them: the grid's first axis is always the tube's
+(:func:`colonbench.grid.tube_axes`), and they learn to draw the tube along it
+whatever the cloud says; where a bent segment's tube runs along another axis
+they draw it across the colon (docs/method.md, Training).
 
 Erasing (``colonbench train --erase P``) takes 1-3 ball-shaped patches out of a
 share of the samples' partial surfaces before their input heatmaps are made
@@ -101,6 +109,23 @@ def flips(seed: int, epoch: int, index: int) -> tuple[int, ...]:
     return tuple(int(a) for a in np.flatnonzero(draw))
 
 
+#: The orders of the grid axes a transposed sample takes (every one but the identity), in a fixed order.
+TRANSPOSES = ((0, 2, 1), (1, 0, 2), (1, 2, 0), (2, 0, 1), (2, 1, 0))
+
+
+def transpose(seed: int, epoch: int, index: int, share: float) -> tuple[int, ...]:
+    """The order of the grid axes for sample ``index`` in ``epoch``: ``(0, 1, 2)`` (left as it is) with probability
+    ``1 - share``, else one of :data:`TRANSPOSES`, each as likely.
+
+    Drawn from stream ``("transpose", epoch, index)`` under ``seed``, so a resumed run and every worker draw the
+    same ones.
+    """
+    if share <= 0:
+        return (0, 1, 2)
+    rng = seeding.rng(seed, "transpose", epoch, index)
+    return TRANSPOSES[int(rng.integers(len(TRANSPOSES)))] if rng.random() < share else (0, 1, 2)
+
+
 #: Patches erased from a sample (count drawn uniformly between the two, inclusive).
 ERASE_PATCHES = (1, 3)
 #: Radius of an erased patch, voxels (uniform); at 1.1-1.6 mm voxels 5-25 mm, as large as the camera
@@ -173,6 +198,22 @@ def apply_flips(x: torch.Tensor, y: torch.Tensor, axes: list) -> tuple[torch.Ten
             dims = [a + 1 for a in ax]
             x[k] = torch.flip(x[k], dims)
             y[k] = torch.flip(y[k], dims)
+    return x, y
+
+
+def apply_transposes(x: torch.Tensor, y: torch.Tensor, orders: list) -> tuple[torch.Tensor, torch.Tensor]:
+    """Reorder the grid axes of item ``k`` of (n, C, S, S, S) input and target batches as ``orders[k]``.
+
+    ``orders[k]`` is a permutation of (0, 1, 2) (:func:`transpose`): new axis ``a`` is old axis ``orders[k][a]``.
+    """
+    if all(tuple(o) == (0, 1, 2) for o in orders):
+        return x, y
+    x, y = x.clone(), y.clone()
+    for k, order in enumerate(orders):
+        if tuple(order) != (0, 1, 2):
+            dims = (0, *(a + 1 for a in order))
+            x[k] = x[k].permute(dims).contiguous()
+            y[k] = y[k].permute(dims).contiguous()
     return x, y
 
 

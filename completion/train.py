@@ -52,7 +52,7 @@ import torch
 from colonbench import seeding
 from colonbench._version import __version__
 from colonbench.augment import AugmentConfig
-from colonbench.completion.packdata import PackBatches, apply_flips, flips
+from colonbench.completion.packdata import PackBatches, apply_flips, apply_transposes, flips, transpose
 from colonbench.completion.network import (NETWORKS, build_network, network_config, resolve_device,
                                            save_model)
 from colonbench.errors import InputError
@@ -86,6 +86,7 @@ class TrainConfig:
     keep_epochs: bool = False
     augment: dict = field(default_factory=dict)
     flips: bool = False
+    transposes: float = 0.0
     erase: float = 0.0
     init: str | None = None
     init_sha256: str | None = None
@@ -102,6 +103,8 @@ class TrainConfig:
             raise InputError("augment_prob must be in [0, 1]")
         if not 0 <= self.erase <= 1:
             raise InputError("erase must be in [0, 1]")
+        if not 0 <= self.transposes <= 1:
+            raise InputError("transposes must be in [0, 1]")
         if self.lr <= 0:
             raise InputError("lr must be positive")
         if self.seed < 0 or self.workers < 0:
@@ -292,7 +295,7 @@ def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "a
     data_dir : path or list of paths
         Dataset folder with ``train`` and ``validation`` splits, or a pack of
         one (:mod:`colonbench.shards.pack`; heatmaps are then made on the
-        training device, and only flips augment). Several dataset folders, or
+        training device, and only flips and transposes augment). Several dataset folders, or
         several packs (same grid), train together: their train splits are one
         training set, their validation splits one validation set; the
         config's ``repeat`` weighs their training samples (:func:`epoch_slots`).
@@ -330,7 +333,7 @@ def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "a
     if lock["pack"]:
         if cfg.augment_prob > 0:
             raise InputError(f"{data_dir} is a pack: it holds voxel occupancies, not the geometry the augmentations "
-                             "deform, so train on it with --augment-prob 0 (and --flips, its exact augmentation), "
+                             "deform, so train on it with --augment-prob 0 (and --flips, --transposes: its exact augmentations), "
                              "or on the dataset's shards")
         from colonbench.completion.packdata import PackSplit
         train_ds, val_ds = PackSplit(data_dirs, "train", dev), PackSplit(data_dirs, "validation", dev)
@@ -454,6 +457,9 @@ def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "a
                    disable=None if (progress and rank == 0) else True, dynamic_ncols=True)
         for k, (x, y) in enumerate(batches):
             x, y = x.to(dev, non_blocking=True), y.to(dev, non_blocking=True)
+            if cfg.transposes > 0:
+                x, y = apply_transposes(x, y, [transpose(cfg.seed, epoch, int(i), cfg.transposes)
+                                               for i in todo[k * bs:(k + 1) * bs]])
             if cfg.flips:
                 x, y = apply_flips(x, y, [flips(cfg.seed, epoch, int(i)) for i in todo[k * bs:(k + 1) * bs]])
             loss = train_step(net, opt, x, y, cfg.precision)

@@ -92,6 +92,45 @@ def test_flips_are_exact_and_reproducible(smoke_pack):
     assert len(set(draws)) > 4 and () in draws and (0, 1, 2) in draws
 
 
+def test_transposes_are_exact_reproducible_and_move_the_tube_off_the_first_axis(smoke_pack):
+    *_, out, _ = smoke_pack
+    grids = packdata.PackSplit(out, "train", "cpu").grids([0])
+    x, y = packdata.heatmaps(grids[:, 0], grids[:, 1], grids[:, 2])
+    for order in packdata.TRANSPOSES:
+        # exchanging the occupancies' axes and remaking the heatmaps = exchanging the heatmaps' axes
+        g = grids.permute(0, 1, *(a + 2 for a in order))
+        tx, ty = packdata.heatmaps(g[:, 0], g[:, 1], g[:, 2])
+        ax, ay = packdata.apply_transposes(x.unsqueeze(1), y.unsqueeze(1), [order])
+        assert torch.allclose(ax[0, 0], tx[0], atol=1e-6) and torch.allclose(ay[0, 0], ty[0], atol=1e-6)
+    # a straight line along the first axis: after the order (2, 0, 1) it runs along the second
+    line = torch.zeros((1, 1, 16, 16, 16))
+    line[0, 0, :, 3, 7] = 1.0
+    moved, _ = packdata.apply_transposes(line, line, [(2, 0, 1)])
+    assert torch.equal(torch.nonzero(moved[0, 0])[:, 1], torch.arange(16)) and \
+        set(torch.nonzero(moved[0, 0])[:, 0].tolist()) == {7} and set(torch.nonzero(moved[0, 0])[:, 2].tolist()) == {3}
+    same, _ = packdata.apply_transposes(line, line, [(0, 1, 2)])
+    assert same is line
+    draws = [packdata.transpose(0, e, i, 0.5) for e in range(4) for i in range(40)]
+    assert draws == [packdata.transpose(0, e, i, 0.5) for e in range(4) for i in range(40)]
+    assert set(draws) == {(0, 1, 2), *packdata.TRANSPOSES}
+    assert 0.3 < np.mean([d == (0, 1, 2) for d in draws]) < 0.7
+    assert all(packdata.transpose(0, 0, i, 0.0) == (0, 1, 2) for i in range(40))
+    assert all(packdata.transpose(0, 0, i, 1.0) != (0, 1, 2) for i in range(40))
+
+
+def test_training_with_transposes_records_them_and_refuses_a_bad_share(smoke_pack, tmp_path):
+    *_, out, _ = smoke_pack
+    cfg = TrainConfig(epochs=1, batch_size=2, workers=0, augment_prob=0.0, flips=True, transposes=1.0)
+    assert train(out, tmp_path / "run", cfg, device="cpu", progress=False)["steps"] == 2
+    _, _, meta = load_model(tmp_path / "run" / "best.safetensors")
+    assert meta["train_config"]["transposes"] == 1.0
+    with pytest.raises(InputError, match="other settings"):
+        train(out, tmp_path / "run", dataclasses.replace(cfg, epochs=2, transposes=0.5), device="cpu",
+              progress=False)
+    with pytest.raises(InputError, match="transposes must be in"):
+        train(out, tmp_path / "bad", dataclasses.replace(cfg, transposes=1.5), device="cpu", progress=False)
+
+
 def test_erased_patches_are_balls_of_the_drawn_radii_and_leave_the_target_alone(smoke_pack, tmp_path):
     # a plane of occupied voxels: one patch of radius 5 takes out exactly the plane's voxels within 5
     # voxels of its centre, an occupied voxel drawn after the patch count
@@ -283,11 +322,12 @@ def test_training_on_a_pack_needs_no_geometry_stack(smoke_pack, tmp_path):
             "    sys.modules[n] = None\n"
             "from colonbench.cli import main\n"
             f"sys.argv = ['colonbench', 'train', {str(out)!r}, '--out', {str(run)!r}, '--epochs', '1',\n"
-            "            '--batch-size', '2', '--augment-prob', '0', '--flips', '--erase', '0.5', '--device', 'cpu',\n"
-            "            '--quiet']\n"
+            "            '--batch-size', '2', '--augment-prob', '0', '--flips', '--transposes', '0.3',\n"
+            "            '--erase', '0.5', '--device', 'cpu', '--quiet']\n"
             "main()\n"
             "bad = sorted(n for n in ('trimesh', 'open3d', 'manifold3d', 'pyrender', 'skfmm') if sys.modules.get(n))\n"
             "assert not bad, bad\n")
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr[-2000:]
     assert "1 epochs" in r.stdout and (run / "best.safetensors").exists()
+    assert load_model(run / "best.safetensors")[2]["train_config"]["transposes"] == 0.3
