@@ -741,3 +741,31 @@ def test_the_methods_built_on_the_network_share_its_prediction_of_a_dense_cloud(
         assert 1 - est.coverage == pytest.approx(window, abs=0.04)
     assert np.isfinite(thresholding.coverage)
     assert "thin_above=3" in UnwrapMethod().version and "thin_above=3" in ThresholdMethod().version
+
+
+def test_the_orientation_probe_cycles_the_grid_axes_and_reproduces_the_method_on_the_fitted_grid():
+    # scripts/probe_orientation.py: a straight tube along z with a window of known area; on the grid as fitted
+    # the probe's estimate is the method's, and the cycled grids put the tube's axis third, then second
+    import importlib.util
+    from pathlib import Path
+
+    from colonbench.completion.method import method_cloud
+    from colonbench.datagen.holes import sample_surface
+
+    spec = importlib.util.spec_from_file_location(
+        "probe_orientation", Path(__file__).resolve().parents[1] / "scripts" / "probe_orientation.py")
+    probe = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(probe)
+    colon = tube_colon(straight(63.0), R, ring_spacing_mm=0.5, n_around=256)
+    pts = sample_surface(np.random.default_rng(2), colon.mesh.vertices, colon.mesh.faces, 2.0)
+    theta = np.arctan2(pts[:, 1], pts[:, 0])
+    pts = method_cloud(pts[~((np.abs(theta) < 0.5) & (pts[:, 2] > 20) & (pts[:, 2] < 40))])
+    method = CompletionMethod()
+    options = method.predictor.grid_options
+    for shift, row in ((0, 0), (1, 2), (2, 1)):
+        rot = probe.cycled_grid(pts, options, shift).rotation
+        assert abs(rot[row] @ [0.0, 0.0, 1.0]) > 0.999 and np.allclose(rot @ rot.T, np.eye(3))
+    fitted = probe.estimate_on_cycled_grid(method, pts, 0)
+    assert fitted.coverage == pytest.approx(method.estimate(pts).coverage, abs=1e-3)
+    assert 1 - fitted.coverage == pytest.approx(R * 1.0 * 20.0 / (2 * np.pi * R * 63.0), abs=0.03)  # the window
+    assert all(0.0 <= probe.estimate_on_cycled_grid(method, pts, k).coverage <= 1.0 for k in (1, 2))
