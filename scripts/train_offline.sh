@@ -16,7 +16,8 @@
 # Each pack's train.h5.part-* pieces are joined into train.h5; pack.json's sha256 refuses a wrong join.
 # Rerun with the same RUN_DIR to resume (colonbench train resumes from RUN_DIR/last.pt); it stops cleanly
 # after MINUTES. The run's settings are those of docs/method.md (Training): the shipped small network's
-# weights as the start, the real colons 4 times per epoch, flips and erasure, every epoch kept.
+# weights as the start, the real colons 4 times per epoch, flips, transposes (a third of the samples with their
+# grid axes exchanged: docs/method.md, Training, "The tube along the first axis") and erasure, every epoch kept.
 # A PARTS_DIR without bends/ trains on wide and train-real alone, as planned before bends.yaml.
 set -euo pipefail
 parts=${1:?PARTS_DIR}; run=${2:?RUN_DIR}; minutes=${3:?MINUTES}; device=${4:-cuda}
@@ -40,5 +41,5 @@ done
 packs=("$parts/wide" "$parts/train-real"); repeat=1,4
 if [ -d "$parts/bends" ]; then packs+=("$parts/bends"); repeat=1,4,1; fi
 python3 -m colonbench.cli train "${packs[@]}" --out "$run" --network small --init small \
-    --repeat "$repeat" --lr 5e-4 --batch-size 32 --augment-prob 0 --flips --erase 0.3 --epochs 60 \
+    --repeat "$repeat" --lr 5e-4 --batch-size 32 --augment-prob 0 --flips --transposes 0.3 --erase 0.3 --epochs 60 \
     --max-minutes "$minutes" --checkpoint-minutes 2 --keep-epochs --device "$device" --quiet
