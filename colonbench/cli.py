@@ -207,7 +207,8 @@ def cmd_train(args):
 
     cfg = TrainConfig(network=args.network, batch_size=args.batch_size, lr=args.lr, epochs=args.epochs,
                       augment_prob=args.augment_prob, seed=args.seed, workers=args.workers, flips=args.flips,
-                      transposes=args.transposes, erase=args.erase, repeat=tuple(args.repeat or ()), precision=args.precision,
+                      transposes=args.transposes, erase=args.erase, repeat=tuple(args.repeat or ()),
+                      precision=args.precision,
                       checkpoint_minutes=args.checkpoint_minutes, max_minutes=args.max_minutes,
                       keep_epochs=args.keep_epochs, init=args.init, init_sha256=_model_sha256(args.init))
     command = "colonbench train " + " ".join(sys.argv[2:]) if len(sys.argv) > 2 else ""

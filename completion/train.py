@@ -333,7 +333,8 @@ def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "a
     if lock["pack"]:
         if cfg.augment_prob > 0:
             raise InputError(f"{data_dir} is a pack: it holds voxel occupancies, not the geometry the augmentations "
-                             "deform, so train on it with --augment-prob 0 (and --flips, --transposes: its exact augmentations), "
+                             "deform, so train on it with --augment-prob 0 (and --flips, --transposes: its exact "
+                             "augmentations), "
                              "or on the dataset's shards")
         from colonbench.completion.packdata import PackSplit
         train_ds, val_ds = PackSplit(data_dirs, "train", dev), PackSplit(data_dirs, "validation", dev)
