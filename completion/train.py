@@ -458,11 +458,11 @@ def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "a
                    disable=None if (progress and rank == 0) else True, dynamic_ncols=True)
         for k, (x, y) in enumerate(batches):
             x, y = x.to(dev, non_blocking=True), y.to(dev, non_blocking=True)
+            batch_slots = todo[k * bs:(k + 1) * bs]    # the slots of this batch (augmentations are drawn per slot)
             if cfg.transposes > 0:
-                x, y = apply_transposes(x, y, [transpose(cfg.seed, epoch, int(i), cfg.transposes)
-                                               for i in todo[k * bs:(k + 1) * bs]])
+                x, y = apply_transposes(x, y, [transpose(cfg.seed, epoch, int(i), cfg.transposes) for i in batch_slots])
             if cfg.flips:
-                x, y = apply_flips(x, y, [flips(cfg.seed, epoch, int(i)) for i in todo[k * bs:(k + 1) * bs]])
+                x, y = apply_flips(x, y, [flips(cfg.seed, epoch, int(i)) for i in batch_slots])
             loss = train_step(net, opt, x, y, cfg.precision)
             state["position"] += 1
             state["steps"] += 1
