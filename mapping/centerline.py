@@ -326,16 +326,167 @@ def trajectory_reach(radius: float, reach: float = TRAJECTORY_REACH) -> float:
     return reach * radius + 5.0
 
 
-def _trajectory_between(positions: np.ndarray, a: np.ndarray, b: np.ndarray, near: float) -> np.ndarray | None:
+def _trajectory_between(positions: np.ndarray, a: np.ndarray, b: np.ndarray, near: float,
+                        places: tuple | None = None) -> np.ndarray | None:
     """The scope's path from near ``a`` to near ``b`` (loop-erased, ends ``a`` and ``b``), or None where the
-    trajectory does not come within ``near`` of both."""
+    trajectory does not come within ``near`` of both.
+
+    ``places`` ((3,), (3,) mm, optional): where on its path the scope passed ``a`` and ``b``
+    (:meth:`ScopeRoute.end_place`); only poses within ``near`` of those are taken, so that an end lying
+    nearer to a touching limb's stretch of the trajectory than to its own is passed where it belongs.
+    """
     da, db = np.linalg.norm(positions - a, axis=1), np.linalg.norm(positions - b, axis=1)
+    if places is not None:
+        da[np.linalg.norm(positions - places[0], axis=1) > near] = np.inf
+        db[np.linalg.norm(positions - places[1], axis=1) > near] = np.inf
     ta, tb = int(np.argmin(da)), int(np.argmin(db))
     if da[ta] > near or db[tb] > near or ta == tb:
         return None
     window = positions[min(ta, tb): max(ta, tb) + 1]
     window = window if ta < tb else window[::-1]
     return np.concatenate([[a], loop_erased(window), [b]])
+
+
+class ScopeRoute:
+    """The scope's path through the colon: its trajectory loop-erased (:func:`loop_erased`), at 1 mm.
+
+    A withdrawal passes each place of the colon in turn, so the arc length along this path orders
+    the colon's stretches by when the scope passed them, and a point's nearest place on it says
+    which stretch the point belongs to.
+
+    Parameters
+    ----------
+    positions : (k, 3) float
+        Camera positions in time order, mm.
+    """
+
+    def __init__(self, positions: np.ndarray):
+        from scipy.spatial import cKDTree
+
+        erased = loop_erased(np.asarray(positions, float))
+        self.points = resample(erased, 1.0) if len(erased) > 1 else erased
+        self.arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(self.points, axis=0), axis=1))])
+        self._tree = cKDTree(self.points)
+
+    def along(self, points: np.ndarray, reach: float = np.inf) -> np.ndarray:
+        """(n,) arc length along the path (mm) of each point's nearest place on it; NaN beyond ``reach`` mm."""
+        d, k = self._tree.query(np.asarray(points, float))
+        return np.where(d <= reach, self.arc[k], np.nan)
+
+    def end_place(self, line: np.ndarray, reach: float, last: bool, window_mm: float = 20.0) -> float | None:
+        """Where the scope passed one end of ``line``: arc length on the path, mm, or None where none of the
+        end's points lies within ``reach`` (mm) of the path.
+
+        Each point within ``window_mm`` of that end and within ``reach`` of the path gives its own place,
+        carried on to the end along ``line`` (the way the places run there); their median is the end's.
+        A single end point can lie nearer to a touching limb's stretch of the path than to its own.
+        """
+        line = np.asarray(line, float)
+        s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(line, axis=0), axis=1))])
+        end = s[-1] if last else 0.0
+        near = np.abs(s - end) <= window_mm
+        u = self.along(line[near], reach)
+        ok = np.isfinite(u)
+        if not ok.any():
+            return None
+        u, s = u[ok], s[near][ok]
+        half = len(u) // 2
+        way = float(np.sign(np.median(u[half:]) - np.median(u[:half]))) if half else 0.0
+        return float(np.clip(np.median(u + way * (end - s)), 0.0, self.arc[-1]))
+
+    def left_out(self, line: np.ndarray, start: float, stop: float, reach: float) -> float:
+        """How much of the path between arc lengths ``start`` and ``stop`` lies farther than ``reach`` from
+        ``line`` ((m, 3)), mm."""
+        from scipy.spatial import cKDTree
+
+        part = self.points[(self.arc > min(start, stop)) & (self.arc < max(start, stop))]
+        if len(part) == 0:
+            return 0.0
+        return float(np.sum(cKDTree(line).query(part)[0] > reach))  # the path is sampled every mm
+
+    def at(self, place: float) -> np.ndarray:
+        """(3,) the path's point at arc length ``place``, mm."""
+        return self.points[int(np.clip(np.searchsorted(self.arc, place), 0, len(self.points) - 1))]
+
+
+def split_at_shortcuts(pieces: list[Piece], positions: np.ndarray | None,
+                       min_mm: float = MIN_PIECE_MM) -> list[Piece]:
+    """The pieces cut where they leave the colon the scope went through, each place of the colon kept once.
+
+    Along a piece that follows the colon, the scope's path (loop-erased, :func:`loop_erased`) passes each
+    point in turn: the arc length along that path of each point's nearest trajectory point grows as the
+    piece's does. Where two limbs of the colon touch and a hole opens both walls, and the colon around is
+    not enclosed (collapsed, or not reconstructed), the lumen's path crosses through the hole, and that arc
+    length jumps by the colon left out: by more than :data:`AROUND_FACTOR` times the step plus
+    :data:`AROUND_MM`, with at least :data:`GUIDE_MISSED_MM` of the scope's path in between farther from
+    the piece than the trajectory's reach (:func:`trajectory_reach`; a loop the erasure left, where the
+    scope was pushed back in a few mm off its first way, stays by the piece). The piece is cut there, and
+    its line out of the trajectory's reach at the cut (through the hole) is dropped; the parts that run
+    over a stretch a longer part already holds (the line back along the other limb) are trimmed to what
+    no longer part holds, and parts left under ``min_mm`` are dropped. :func:`colonbench.mapping.colonmap.orient` then orders the parts by the
+    trajectory and :func:`bridge_by_trajectory` joins them along it: the stretch left out is mapped.
+
+    Parameters
+    ----------
+    pieces : list of Piece
+        The centerline's pieces (:func:`colon_centerline`).
+    positions : (k, 3) float or None
+        Camera positions in time order, mm; without them the pieces are returned as they are.
+    min_mm : float
+        Shortest part kept, mm.
+
+    Returns
+    -------
+    list of Piece
+        The parts, in no particular order (the orientation orders them); the pieces themselves where
+        nothing jumps.
+    """
+    if positions is None or len(positions) < 2:
+        return pieces
+    route = ScopeRoute(positions)
+    parts = []  # (piece, u of each point: NaN where the trajectory is out of reach, or None: kept whole)
+    for p in pieces:
+        if p.unseen or len(p.points) < 2:  # already joined along the trajectory
+            parts.append((p, None))
+            continue
+        u = route.along(p.points, trajectory_reach(p.radius))
+        s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(p.points, axis=0), axis=1))])
+        known = np.flatnonzero(np.isfinite(u))
+        jumps = np.flatnonzero(np.abs(np.diff(u[known])) > AROUND_FACTOR * np.diff(s[known]) + AROUND_MM)
+        # a loop of the scope's path that the erasure left (pushed back in off its first way) stays by the
+        # piece; the colon a shortcut leaves out lies away from it
+        jumps = [j for j in jumps if route.left_out(p.points, u[known[j]], u[known[j + 1]],
+                                                    trajectory_reach(p.radius)) >= GUIDE_MISSED_MM]
+        cuts = [0] + [int(known[j + 1]) for j in jumps] + [len(p.points)]
+        for a, b in zip(cuts[:-1], cuts[1:]):
+            # a part starts at a point within the trajectory's reach; before a cut, the line out of its
+            # reach (through the hole) is no part
+            if b < len(p.points):
+                b = int(known[np.searchsorted(known, b) - 1]) + 1
+            if b - a >= 2:
+                parts.append((Piece(p.points[a:b], p.radius), u[a:b]))
+    if len(parts) == len(pieces) and all(len(q.points) == len(p.points) for (q, _), p in zip(parts, pieces)):
+        return pieces
+    # the longest parts keep their stretch of the scope's path; the others only what none of those holds
+    held: list[tuple[float, float]] = []
+    out = []
+    for part, u in sorted(parts, key=lambda x: -len(x[0].points)):
+        if u is None or not np.isfinite(u).any():
+            out.append(part)
+            continue
+        free = ~np.array([any(lo <= x <= hi for lo, hi in held) if np.isfinite(x) else False for x in u])
+        label, n = ndimage.label(free)
+        if n == 0:
+            continue
+        runs = ndimage.find_objects(label)
+        (run,) = max(runs, key=lambda r: r[0].stop - r[0].start)
+        keep, uk = Piece(part.points[run], part.radius), u[run]
+        if len(keep.points) < 2 or keep.length < min_mm:
+            continue
+        out.append(keep)
+        if np.isfinite(uk).any():
+            held.append((float(np.nanmin(uk)), float(np.nanmax(uk))))
+    return out
 
 
 def _bridge(pieces: list[Piece], cloud: np.ndarray, covered: float = 0.9,
@@ -513,8 +664,9 @@ def bridge_by_trajectory(pieces: list[Piece], positions: np.ndarray | None, clou
     (:func:`colon_centerline`). If the colonoscope went from the end of one
     piece to the start of the next, the colon is continuous there: the pieces
     are joined by the trajectory's path between them (loop-erased,
-    :func:`loop_erased`, so that pushing the scope back in does not fold the
-    line; smoothed by ``smooth_mm``), however far around it goes: where two
+    :class:`ScopeRoute`, so that pushing the scope back in does not fold the
+    line; smoothed by ``smooth_mm``; each end's place on it from the piece's last
+    20 mm, :meth:`ScopeRoute.end_place`), however far around it goes: where two
     limbs touch, the next piece's end can lie a few centimetres away across
     them while the colon between runs for decimetres. Where the path's 2 mm thick
     cross-sections hold no point of the cloud within 1.5 radii for at least
@@ -531,7 +683,7 @@ def bridge_by_trajectory(pieces: list[Piece], positions: np.ndarray | None, clou
     cloud : (n, 3) float, optional
         The reconstruction's points, mm (without them every joined stretch counts as unseen).
     reach : float
-        The trajectory must come within ``reach`` radii (plus 5 mm) of both piece ends.
+        The trajectory must come within ``reach`` radii (plus 5 mm) of both piece ends' last 20 mm.
     max_detour : float
         A path longer than ``max_detour`` times the straight gap plus 50 mm is not used (the two ends
         are then not consecutive along the colon).
@@ -548,13 +700,18 @@ def bridge_by_trajectory(pieces: list[Piece], positions: np.ndarray | None, clou
     from scipy.spatial import cKDTree
 
     pos = np.asarray(positions, float)
+    route = ScopeRoute(pos)
     cloud = None if cloud is None else np.asarray(cloud, float)
     tree = cKDTree(cloud) if cloud is not None and len(cloud) else None
     out = [Piece(pieces[0].points, pieces[0].radius, list(pieces[0].unseen))]
     for p in pieces[1:]:
         prev = out[-1]
         a, b = prev.points[-1], p.points[0]
-        path = _trajectory_between(pos, a, b, trajectory_reach(max(prev.radius, p.radius), reach))
+        near = trajectory_reach(max(prev.radius, p.radius), reach)
+        ua, ub = route.end_place(prev.points, near, last=True), route.end_place(p.points, near, last=False)
+        path = None
+        if ua is not None and ub is not None:
+            path = _trajectory_between(pos, a, b, near, places=(route.at(ua), route.at(ub)))
         if path is not None:
             path = resample(path, 1.0)
             if len(path) > 4:

@@ -150,14 +150,17 @@ def orient(pieces: list, positions: np.ndarray | None) -> tuple[list, str]:
     """The pieces ordered and turned so that the map starts at the rectum, when the trajectory says where.
 
     A withdrawal ends at the rectum. With a trajectory each piece is turned
-    so that the camera passed its first point later than its last one, and
+    so that the camera passed its first half later than its second, and
     the pieces are ordered by when the camera passed them, latest first: the
     trajectory, not the pieces' nearness, says which stretch follows which
-    (limbs of a colon can touch). Without one the chain is kept as found.
+    (limbs of a colon can touch). "When" is the arc length along the scope's
+    loop-erased path (:class:`colonbench.mapping.centerline.ScopeRoute`) of
+    each point's nearest place on it, the median over the piece, and over its
+    points within reach of the path where it has any: where limbs touch, a
+    piece's end can lie nearer to the other limb's stretch of the path than to its own.
+    Without a trajectory the chain is kept as found.
     """
-    from scipy.spatial import cKDTree
-
-    from colonbench.mapping.centerline import Piece
+    from colonbench.mapping.centerline import Piece, ScopeRoute, trajectory_reach
 
     if positions is None:
         return pieces, "unknown (no trajectory): numbered from one end of the centerline"
@@ -171,15 +174,17 @@ def orient(pieces: list, positions: np.ndarray | None) -> tuple[list, str]:
         if np.linalg.norm(p.points[-1] - tip) < np.linalg.norm(p.points[0] - tip):
             p = turn(p)
         return [p], "from the rectum (the end of the trajectory)"
-    tree = cKDTree(np.asarray(positions, float))
+    route = ScopeRoute(positions)
     turned = []
     for p in pieces:
-        _, (t0, t1) = tree.query(p.points[[0, -1]])
-        if t0 < t1:
-            p, t0, t1 = turn(p), t1, t0
-        turned.append((t0, t1, p))
-    turned.sort(key=lambda x: -(x[0] + x[1]))
-    return [p for _, _, p in turned], "from the rectum (the end of the trajectory; pieces ordered by it)"
+        # where the scope passed each point (its own stretch's, not a touching limb's, where it can tell)
+        u = route.along(p.points, trajectory_reach(p.radius))
+        u = u[np.isfinite(u)] if np.isfinite(u).sum() >= 2 else route.along(p.points)
+        if np.median(u[: len(u) // 2]) < np.median(u[len(u) // 2:]):  # passed later at its end: the rectum's
+            p = turn(p)
+        turned.append((float(np.median(u)), p))
+    turned.sort(key=lambda x: -x[0])
+    return [p for _, p in turned], "from the rectum (the end of the trajectory; pieces ordered by it)"
 
 
 def clip_between(vertices: np.ndarray, faces: np.ndarray, line: np.ndarray, arc: np.ndarray, lo: float,
@@ -240,10 +245,10 @@ def map_centerline(points: np.ndarray, positions: np.ndarray | None = None, piec
         In map order (:func:`orient`), bridged where the trajectory passes between them.
     orientation : str
     """
-    from colonbench.mapping.centerline import bridge_by_trajectory, colon_centerline
+    from colonbench.mapping.centerline import bridge_by_trajectory, colon_centerline, split_at_shortcuts
 
     pieces = colon_centerline(points, positions=positions) if pieces is None else pieces
-    pieces, orientation = orient(pieces, positions)
+    pieces, orientation = orient(split_at_shortcuts(pieces, positions), positions)
     return bridge_by_trajectory(pieces, positions, points), orientation
 
 

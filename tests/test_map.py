@@ -256,6 +256,43 @@ def test_pieces_facing_each_other_across_touching_limbs_are_joined_around_the_be
     assert u0 == pytest.approx(170, abs=8) and u1 - u0 == pytest.approx(110, abs=12)
 
 
+def test_a_shortcut_through_a_hole_where_the_bend_is_missing_is_cut_and_mapped_along_the_scope():
+    """The U's limbs touch and a hole through both walls 40 mm from the open ends joins their lumens, and the
+    bend with 30 mm either side is not reconstructed (as on the real colon gca00060, where the colon around
+    a hole between touching limbs is collapsed). The lumen then has no way around: its path runs up one limb,
+    through the hole and up the other, however the trajectory weighs it, and the colon it left out lies past
+    two dead ends. Along such a line the place where the scope passed its nearest point jumps at the hole;
+    the map cuts it there and joins the parts along the scope, around the bend, from the rectum."""
+    from colonbench.mapping.colonmap import join_pieces, map_centerline
+
+    line = u_tube()
+    pts, s, _ = tube_cloud(line)
+    pts = pts[(np.linalg.norm(pts - [16.0, 0.0, 40.0], axis=1) > 12.0) & ((s < 170) | (s > 280))]
+    # a withdrawal from the far end (arc length 450) to the rectum (0), pushed back in 20 mm in the gap,
+    # 2 mm off the axis towards the other limb and 2 mm sideways
+    arc = np.concatenate([np.arange(450.0, 230.0, -2.0), np.arange(230.0, 250.0, 2.0), np.arange(250.0, 0.0, -2.0)])
+    on = line.point_at(arc)
+    inward = np.stack([np.full(len(on), 16.0), np.zeros(len(on)), np.minimum(on[:, 2], 200.0)], 1) - on
+    traj = on + 2.0 * inward / np.linalg.norm(inward, axis=1, keepdims=True) + [0.0, 2.0, 0.0]
+    tree = cKDTree(line.points)
+
+    def true_arc(points):
+        return line.arclength[tree.query(points)[1]]
+
+    (blind,) = colon_centerline(pts, positions=traj)  # the lumen's path: one limb, the hole, the other limb
+    assert blind.length < 0.65 * line.arclength[-1] and np.abs(np.diff(true_arc(blind.points))).max() > 200
+    pieces, _ = map_centerline(pts, traj, pieces=[blind])
+    joined = join_pieces(pieces)
+    assert len(pieces) == 1 and joined.interruptions == []
+    along = true_arc(joined.line[::10])
+    # from the rectum's side of the hole round the bend to the other side, never back
+    assert along[0] == pytest.approx(40, abs=8) and along[-1] == pytest.approx(410, abs=8)
+    assert np.all(np.diff(along) > -5.0)
+    assert joined.arc[-1] == pytest.approx(370, rel=0.05)
+    ((u0, u1),) = joined.unseen  # the bend not reconstructed: arc length 170-280 of the U, 130-240 from the hole
+    assert u0 == pytest.approx(130, abs=15) and u1 - u0 == pytest.approx(110, abs=25)
+
+
 def test_a_segment_without_an_estimate_is_reported_and_left_out_of_the_whole_colon():
     """A method that returns no coverage (NaN: an empty completed surface) for one segment: that segment
     says so, and the whole-colon coverage is the others', not NaN."""
