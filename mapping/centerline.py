@@ -664,9 +664,10 @@ def bridge_by_trajectory(pieces: list[Piece], positions: np.ndarray | None, clou
     (:func:`colon_centerline`). If the colonoscope went from the end of one
     piece to the start of the next, the colon is continuous there: the pieces
     are joined by the trajectory's path between them (loop-erased,
-    :class:`ScopeRoute`, so that pushing the scope back in does not fold the
-    line; smoothed by ``smooth_mm``; each end's place on it from the piece's last
-    20 mm, :meth:`ScopeRoute.end_place`), however far around it goes: where two
+    :func:`loop_erased`, so that pushing the scope back in does not fold the
+    line; smoothed by ``smooth_mm``; each end's pose sought near where the scope
+    passed it, :meth:`ScopeRoute.end_place`, from the piece's last 20 mm),
+    however far around it goes: where two
     limbs touch, the next piece's end can lie a few centimetres away across
     them while the colon between runs for decimetres. Where the path's 2 mm thick
     cross-sections hold no point of the cloud within 1.5 radii for at least
