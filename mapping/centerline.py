@@ -423,8 +423,9 @@ def split_at_shortcuts(pieces: list[Piece], positions: np.ndarray | None,
     scope was pushed back in a few mm off its first way, stays by the piece). The piece is cut there, and
     its line out of the trajectory's reach at the cut (through the hole) is dropped; the parts that run
     over a stretch a longer part already holds (the line back along the other limb) are trimmed to what
-    no longer part holds, and parts left under ``min_mm`` are dropped. :func:`colonbench.mapping.colonmap.orient` then orders the parts by the
-    trajectory and :func:`bridge_by_trajectory` joins them along it: the stretch left out is mapped.
+    no longer part holds, and parts left under ``min_mm`` are dropped.
+    :func:`colonbench.mapping.colonmap.orient` then orders the parts by the trajectory and
+    :func:`bridge_by_trajectory` joins them along it: the stretch left out is mapped.
 
     Parameters
     ----------
