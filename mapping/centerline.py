@@ -183,6 +183,29 @@ def _piece_path(inside: np.ndarray, dist: np.ndarray, voxel_mm: float,
     return paths.middle_path(inside, dist, a, b, voxel_mm, weight=trajectory_weight(guide))
 
 
+def _piece_paths(inside: np.ndarray, dist: np.ndarray, voxel_mm: float, guide: np.ndarray | None = None,
+                 min_mm: float = MIN_PIECE_MM) -> list[np.ndarray]:
+    """Voxel paths of one piece (:func:`_piece_path`): one, or one per stretch of the lumen the scope went through.
+
+    With the trajectory, the piece's voxels within :data:`GUIDE_NEAR_MM` of it can fall apart into
+    several stretches of at least ``min_mm`` across: two limbs joined only through a hole between them,
+    away from where the scope went, with the colon that links them not enclosed (collapsed, or not
+    reconstructed). One path would keep to one limb and leave the other out. Each stretch then gets its
+    own path, in the piece without the other stretches, and the map joins them along the scope
+    (:func:`split_at_shortcuts`, :func:`bridge_by_trajectory`).
+    """
+    if guide is not None:
+        label, n = ndimage.label(inside & (guide <= GUIDE_NEAR_MM))
+        if n > 1:
+            spans = [np.linalg.norm([(s.stop - s.start) * voxel_mm for s in box])
+                     for box in ndimage.find_objects(label)]
+            stretches = [k + 1 for k, span in enumerate(spans) if span >= min_mm]
+            if len(stretches) > 1:
+                return [_piece_path(inside & ((label == k) | (label == 0)), dist, voxel_mm, guide)
+                        for k in stretches]
+    return [_piece_path(inside, dist, voxel_mm, guide)]
+
+
 def misses_trajectory(path: np.ndarray, inside: np.ndarray, dist: np.ndarray, guide: np.ndarray,
                       voxel_mm: float, missed_mm: float = GUIDE_MISSED_MM) -> bool:
     """Whether a voxel path leaves out at least ``missed_mm`` of the trajectory through the lumen.
@@ -620,23 +643,23 @@ def colon_centerline(points, voxel_mm: float = VOXEL_MM, close_mm: float = CLOSE
         # one empty voxel around the piece (the grid's padding holds it): fast marching needs a border
         box = tuple(slice(s.start - 1, s.stop + 1) for s in box)
         part = label[box] == lab
-        vox = _piece_path(part, dist[box], voxel_mm, None if guide is None else guide[box])
-        # geodesic extremities lie at the rim of the enclosed lumen, off its axis: keep the path from where
-        # it is at least 0.7 of its median depth (as for closed meshes, datagen.realmesh.compute_centerline)
-        depth = dist[box][tuple(vox.T)]
-        deep = np.flatnonzero(depth >= 0.7 * np.median(depth))
-        vox, depth = vox[deep[0]: deep[-1] + 1], depth[deep[0]: deep[-1] + 1]
-        if len(vox) < 4:
-            continue
-        line = origin + (paths.smooth_path(vox, smooth_mm / voxel_mm) + [s.start for s in box]) * voxel_mm
-        line = resample(line, 1.0)
-        # smoothing bends the last sigma or two of a path's ends: they are grown again from the points
-        trim = int(round(2 * smooth_mm))
-        if len(line) < 2 * trim + 4:
-            continue
-        line = line[trim: len(line) - trim]
-        depth = float(np.median(depth))
-        pieces.append((Piece(line, depth + close * voxel_mm), depth))
+        for vox in _piece_paths(part, dist[box], voxel_mm, None if guide is None else guide[box], min_piece_mm):
+            # geodesic extremities lie at the rim of the enclosed lumen, off its axis: keep the path from where
+            # it is at least 0.7 of its median depth (as for closed meshes, datagen.realmesh.compute_centerline)
+            depth = dist[box][tuple(vox.T)]
+            deep = np.flatnonzero(depth >= 0.7 * np.median(depth))
+            vox, depth = vox[deep[0]: deep[-1] + 1], depth[deep[0]: deep[-1] + 1]
+            if len(vox) < 4:
+                continue
+            line = origin + (paths.smooth_path(vox, smooth_mm / voxel_mm) + [s.start for s in box]) * voxel_mm
+            line = resample(line, 1.0)
+            # smoothing bends the last sigma or two of a path's ends: they are grown again from the points
+            trim = int(round(2 * smooth_mm))
+            if len(line) < 2 * trim + 4:
+                continue
+            line = line[trim: len(line) - trim]
+            depth = float(np.median(depth))
+            pieces.append((Piece(line, depth + close * voxel_mm), depth))
     if pieces:
         pieces = _drop_channels(pieces)
     if not pieces:

@@ -293,6 +293,27 @@ def test_a_shortcut_through_a_hole_where_the_bend_is_missing_is_cut_and_mapped_a
     assert u0 == pytest.approx(130, abs=15) and u1 - u0 == pytest.approx(110, abs=25)
 
 
+def test_limbs_joined_only_through_a_hole_away_from_the_scope_get_a_path_each():
+    """The same U with a smaller hole (9 mm) and a withdrawal 2 mm sideways: the hole lies farther than
+    15 mm from the trajectory, so the lumen around the scope falls apart into the two limbs, while the
+    enclosed lumen is one piece through the hole. One path kept to one limb and the other was lost (165 of
+    the U's 450 mm mapped). Each limb now gets its own path, and the map joins them round the bend."""
+    from colonbench.mapping.colonmap import join_pieces, map_centerline
+
+    line = u_tube()
+    pts, s, _ = tube_cloud(line)
+    pts = pts[(np.linalg.norm(pts - [16.0, 0.0, 40.0], axis=1) > 9.0) & ((s < 170) | (s > 280))]
+    traj = line.point_at(np.arange(450.0, 0.0, -2.0)) + [0.0, 2.0, 0.0]
+    pieces = colon_centerline(pts, positions=traj)
+    assert len(pieces) == 2 and all(p.length == pytest.approx(165, abs=15) for p in pieces)
+    mapped, _ = map_centerline(pts, traj, pieces=pieces)
+    joined = join_pieces(mapped)
+    assert len(mapped) == 1 and joined.arc[-1] == pytest.approx(line.arclength[-1], rel=0.03)
+    assert np.mean(cKDTree(joined.line).query(line.points)[0] < 3.0) > 0.95
+    ((u0, u1),) = joined.unseen  # from the rectum (arc length 0): the bend, 170-280
+    assert u0 == pytest.approx(170, abs=10) and u1 - u0 == pytest.approx(110, abs=15)
+
+
 def test_a_segment_without_an_estimate_is_reported_and_left_out_of_the_whole_colon():
     """A method that returns no coverage (NaN: an empty completed surface) for one segment: that segment
     says so, and the whole-colon coverage is the others', not NaN."""
