@@ -42,7 +42,7 @@ import numpy as np
 from scipy import ndimage
 
 from colonbench import paths
-from colonbench.completion.centerline import resample
+from colonbench.completion.centerline import arc_length, resample
 from colonbench.errors import InputError
 
 #: Raster of the wall, mm.
@@ -388,7 +388,7 @@ class ScopeRoute:
 
         erased = loop_erased(np.asarray(positions, float))
         self.points = resample(erased, 1.0) if len(erased) > 1 else erased
-        self.arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(self.points, axis=0), axis=1))])
+        self.arc = arc_length(self.points)
         self._tree = cKDTree(self.points)
 
     def along(self, points: np.ndarray, reach: float = np.inf) -> np.ndarray:
@@ -405,7 +405,7 @@ class ScopeRoute:
         A single end point can lie nearer to a touching limb's stretch of the path than to its own.
         """
         line = np.asarray(line, float)
-        s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(line, axis=0), axis=1))])
+        s = arc_length(line)
         end = s[-1] if last else 0.0
         near = np.abs(s - end) <= window_mm
         u = self.along(line[near], reach)
@@ -413,9 +413,14 @@ class ScopeRoute:
         if not ok.any():
             return None
         u, s = u[ok], s[near][ok]
-        half = len(u) // 2
-        way = float(np.sign(np.median(u[half:]) - np.median(u[:half]))) if half else 0.0
-        return float(np.clip(np.median(u + way * (end - s)), 0.0, self.arc[-1]))
+        return float(np.clip(np.median(u + self.way(u) * (end - s)), 0.0, self.arc[-1]))
+
+    @staticmethod
+    def way(places: np.ndarray) -> float:
+        """Which way the scope's places run along a line's points in order: +1 when it passed the line's second
+        half later than its first (the median of each), -1 when earlier, 0 for fewer than two places."""
+        half = len(places) // 2
+        return float(np.sign(np.median(places[half:]) - np.median(places[:half]))) if half else 0.0
 
     def left_out(self, line: np.ndarray, start: float, stop: float, reach: float) -> float:
         """How much of the path between arc lengths ``start`` and ``stop`` lies farther than ``reach`` from
@@ -469,18 +474,20 @@ def split_at_shortcuts(pieces: list[Piece], positions: np.ndarray | None,
         return pieces
     route = ScopeRoute(positions)
     parts = []  # (piece, u of each point: NaN where the trajectory is out of reach, or None: kept whole)
+    cut = False
     for p in pieces:
         if p.unseen or len(p.points) < 2:  # already joined along the trajectory
             parts.append((p, None))
             continue
         u = route.along(p.points, trajectory_reach(p.radius))
-        s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(p.points, axis=0), axis=1))])
+        s = arc_length(p.points)
         known = np.flatnonzero(np.isfinite(u))
         jumps = np.flatnonzero(np.abs(np.diff(u[known])) > AROUND_FACTOR * np.diff(s[known]) + AROUND_MM)
         # a loop of the scope's path that the erasure left (pushed back in off its first way) stays by the
         # piece; the colon a shortcut leaves out lies away from it
         jumps = [j for j in jumps if route.left_out(p.points, u[known[j]], u[known[j + 1]],
                                                     trajectory_reach(p.radius)) >= GUIDE_MISSED_MM]
+        cut = cut or bool(jumps)
         cuts = [0] + [int(known[j + 1]) for j in jumps] + [len(p.points)]
         for a, b in zip(cuts[:-1], cuts[1:]):
             # a part starts at a point within the trajectory's reach; before a cut, the line out of its
@@ -489,16 +496,16 @@ def split_at_shortcuts(pieces: list[Piece], positions: np.ndarray | None,
                 b = int(known[np.searchsorted(known, b) - 1]) + 1
             if b - a >= 2:
                 parts.append((Piece(p.points[a:b], p.radius), u[a:b]))
-    if len(parts) == len(pieces) and all(len(q.points) == len(p.points) for (q, _), p in zip(parts, pieces)):
+    if not cut:
         return pieces
     # the longest parts keep their stretch of the scope's path; the others only what none of those holds
-    held: list[tuple[float, float]] = []
+    held = np.zeros((0, 2))  # (lowest, highest) place of each part kept
     out = []
     for part, u in sorted(parts, key=lambda x: -len(x[0].points)):
         if u is None or not np.isfinite(u).any():
             out.append(part)
             continue
-        free = ~np.array([any(lo <= x <= hi for lo, hi in held) if np.isfinite(x) else False for x in u])
+        free = ~np.any((u[:, None] >= held[:, 0]) & (u[:, None] <= held[:, 1]), axis=1)  # NaN: free
         label, n = ndimage.label(free)
         if n == 0:
             continue
@@ -509,7 +516,7 @@ def split_at_shortcuts(pieces: list[Piece], positions: np.ndarray | None,
             continue
         out.append(keep)
         if np.isfinite(uk).any():
-            held.append((float(np.nanmin(uk)), float(np.nanmax(uk))))
+            held = np.vstack([held, [np.nanmin(uk), np.nanmax(uk)]])
     return out
 
 
@@ -750,7 +757,7 @@ def bridge_by_trajectory(pieces: list[Piece], positions: np.ndarray | None, clou
             out.append(Piece(p.points, p.radius, list(p.unseen)))
             continue
         s0 = prev.length
-        arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(path, axis=0), axis=1))])
+        arc = arc_length(path)
         bridge = float(arc[-1])
         radius = max(prev.radius, p.radius)
         empty = np.ones(len(path), bool)

@@ -180,7 +180,7 @@ def orient(pieces: list, positions: np.ndarray | None) -> tuple[list, str]:
         # where the scope passed each point (its own stretch's, not a touching limb's, where it can tell)
         u = route.along(p.points, trajectory_reach(p.radius))
         u = u[np.isfinite(u)] if np.isfinite(u).sum() >= 2 else route.along(p.points)
-        if np.median(u[: len(u) // 2]) < np.median(u[len(u) // 2:]):  # passed later at its end: the rectum's
+        if ScopeRoute.way(u) > 0:  # passed later at its end: the rectum's
             p = turn(p)
         turned.append((float(np.median(u)), p))
     turned.sort(key=lambda x: -x[0])
