@@ -41,11 +41,13 @@ import numpy as np
 import pandas as pd
 
 from colonbench.benchmark.colon_metrics import END_SEEN, map_metrics
-from colonbench.benchmark.evaluate import (RUN_FILE, _WORKER, _write_csv, _write_json, begin_run, check_run_folder,
-                                           checked_arguments, load_methods, noisy, read_rows, run_units, select)
+from colonbench.benchmark.exchange import sample_id
+from colonbench.benchmark.evaluate import checked_arguments, load_methods, noisy, select, suite_of
+from colonbench.benchmark.parallel import run_units
+from colonbench.benchmark.runfolder import RUN_FILE, begin_run, check_run_folder, read_rows, write_csv, write_json
 from colonbench.errors import ColonbenchError, InputError
 from colonbench.folderlock import folder_lock
-from colonbench.mapping.colonmap import CONTEXT_MM, SEGMENT_MM
+from colonbench.mapping import CONTEXT_MM, SEGMENT_MM
 
 #: Default context margins of the tracks, mm: segment-only and ``colonbench map``'s default.
 CONTEXTS_MM = (0.0, CONTEXT_MM)
@@ -96,7 +98,6 @@ def run_colon_unit(data: str, shard_name: str, index: int, sigma: float, noise_s
     from colonbench.mapping.centerline import colon_centerline
     from colonbench.mapping.colonmap import map_colon, whole_coverage
 
-    methods = methods if methods is not None else _WORKER["methods"]
     shard, truth = _colon(data, shard_name)
     sample = shard.sample(index)
     points = noisy(sample["points"], sigma, noise_seed, shard_name, index)
@@ -109,6 +110,11 @@ def run_colon_unit(data: str, shard_name: str, index: int, sigma: float, noise_s
     except ColonbenchError:
         pieces = None  # map_colon raises it again, per map
     centerline_s = time.perf_counter() - t
+    external = [n for n in names if getattr(methods[n], "by_sample", False)]
+    if external:  # methods answering by sample id: the segments' clouds, each under its id
+        inputs = segment_inputs(points, sample["positions"], pieces, segment_mm, sample_id(shard_name, index, sigma))
+        for n in external:
+            bind_inputs(methods[n], inputs)
     for name in names:
         seg_rows, colon_rows = [], []
         for context in contexts:
@@ -152,6 +158,58 @@ def run_colon_unit(data: str, shard_name: str, index: int, sigma: float, noise_s
     return out
 
 
+class _Recorder:
+    """A stand-in method that keeps the clouds a map gives it."""
+
+    name, version, completes_surface = "recorder", "-", False
+
+    def __init__(self):
+        self.clouds = []
+
+    def estimate(self, points):
+        from colonbench.estimate import Estimate
+
+        self.clouds.append(np.asarray(points))
+        return Estimate(0.5, None, None, self.name)
+
+
+def segment_inputs(points, positions, pieces, segment_mm: float, sample: str) -> list[tuple[str, np.ndarray]]:
+    """The cloud of every segment a whole-colon map estimates, under its id (``<sample>_seg<k>``).
+
+    What a method that does not complete the surface is given in every track of the whole-colon benchmark
+    (the segment's own points); ``colonbench export`` writes these for a whole-colon suite.
+
+    Returns
+    -------
+    list of (str, (n, 3) float)
+        Empty when no map can be made of the reconstruction.
+    """
+    from colonbench.benchmark.exchange import segment_id
+    from colonbench.mapping.colonmap import MIN_POINTS, map_colon
+
+    if pieces is None:
+        return []
+    rec = _Recorder()
+    try:
+        result = map_colon(points, rec, segment_mm=segment_mm, positions=positions, progress=False, context_mm=0.0,
+                           pieces=pieces)
+    except ColonbenchError:
+        return []
+    estimated = [s for s in result["segments"] if s.points >= MIN_POINTS]
+    if len(estimated) != len(rec.clouds):
+        raise ColonbenchError(f"{sample}: {len(rec.clouds)} clouds recorded for {len(estimated)} segments")
+    return [(segment_id(sample, s.index), c) for s, c in zip(estimated, rec.clouds)]
+
+
+def bind_inputs(method, inputs: list[tuple[str, np.ndarray]]) -> None:
+    """Let a method answering by sample id find each segment's cloud; run an ``exec:`` program on those it lacks."""
+    from colonbench.benchmark.external import ExecMethod, content_key
+
+    if isinstance(method, ExecMethod):
+        method.run(inputs)
+    method.lookup = {content_key(p): sid for sid, p in inputs}
+
+
 def _save_example(path: Path, truth: dict, sample: dict, maps: dict):
     """The truth and each map's segment meshes of one sample, for the figure
     (:func:`colonbench.reports.coverage_map.map_truth_error`)."""
@@ -177,7 +235,9 @@ def _unit_key(shard_name: str, index: int, sigma: float) -> str:
 
 def evaluate_colons(data, methods, out, noise=(0.0, 0.5), contexts=CONTEXTS_MM, segment_mm: float = SEGMENT_MM,
                     split: str = "test", limit: int | None = None, workers: int = 1, model=None,
-                    device: str = "cpu", noise_seed: int = 0, progress: bool = True, context_model=None) -> Path:
+                    device: str = "cpu", noise_seed: int = 0, progress: bool = True, context_model=None,
+                    scheduler=None, allow_unverified: bool = False, timeout: float | None = None,
+                    batch: int | None = None) -> Path:
     """Map every whole-colon sample of a split with every method and track; write (or finish) a run folder.
 
     Parameters
@@ -194,8 +254,9 @@ def evaluate_colons(data, methods, out, noise=(0.0, 0.5), contexts=CONTEXTS_MM, 
         Context margins, one track each, mm (0 = segment-only).
     segment_mm : float
         Segment arc length, mm.
-    split, limit, workers, model, device, noise_seed, progress
-        As for :func:`colonbench.benchmark.evaluate.evaluate`.
+    split, limit, workers, model, device, noise_seed, progress, scheduler, allow_unverified, timeout, batch
+        As for :func:`colonbench.benchmark.evaluate.evaluate`; an ``exec:`` program is called once per map
+        with the clouds of the segments it estimates.
     context_model : path or str, optional
         An in-context model for the tracks with context (methods that take one: ``completion``); the
         segment-only track keeps ``model``, the paper's protocol.
@@ -216,22 +277,24 @@ def evaluate_colons(data, methods, out, noise=(0.0, 0.5), contexts=CONTEXTS_MM, 
         raise InputError(f"--segment-length must be positive, got {segment_mm}")
     identity, picks = select(data, split, limit)
     ColonShard(data / picks[0][0])  # a clear error for a segment dataset
+    suite = suite_of(identity, sigmas, noise_seed, "colon", data, allow_unverified)
     options = {"model": str(model) if model is not None else None, "device": device,
-               "context_model": str(context_model) if context_model is not None else None}
+               "context_model": str(context_model) if context_model is not None else None,
+               "predictions": str(out / "predictions"), "timeout": timeout, "batch": batch}
     t0 = time.perf_counter()
     loaded = load_methods(specs, options, refuse_truth="it cannot map a whole reconstruction (the segment "
                                                        "benchmark's reference rows)")
-    settings = {"task": "colon", "data": identity, "noise_mm": sigmas, "noise_seed": int(noise_seed),
+    settings = {"task": "colon", "data": identity, "suite": suite, "noise_mm": sigmas, "noise_seed": int(noise_seed),
                 "contexts_mm": contexts, "segment_mm": float(segment_mm), "thresholds_mm": [2.0]}
     check_run_folder(out)
     with folder_lock(out, "evaluate", "evaluation"):
         run = begin_run(out, settings, loaded, data)
         return _run(out, run, data, picks, sigmas, contexts, segment_mm, loaded, options, workers, noise_seed,
-                    progress, t0)
+                    progress, t0, scheduler)
 
 
 def _run(out, run, data, picks, sigmas, contexts, segment_mm, loaded, options, workers, noise_seed, progress,
-         t0) -> Path:
+         t0, scheduler=None) -> Path:
     from tqdm.auto import tqdm
 
     flat = [(n, i) for n, idx in picks for i in idx]
@@ -248,28 +311,28 @@ def _run(out, run, data, picks, sigmas, contexts, segment_mm, loaded, options, w
                dynamic_ncols=True)
     args = lambda u: (str(data), u[0], u[1], u[2], noise_seed, u[3], contexts, segment_mm, u[4])  # noqa: E731
     try:
-        for u, rows in run_units(run_colon_unit, units, args, loaded, options, workers):
+        for u, rows in run_units(run_colon_unit, units, args, loaded, options, workers, scheduler):
             _store(out, u[5], rows)
             bar.update(1)
     finally:
         bar.close()
     for kind in ("segments", "colons"):
         frames = [read_rows(out / "parts" / m / f"{k}.{kind}.csv") for m in loaded for k in keys]
-        _write_csv(out / "results" / f"{kind}.csv", pd.concat(frames, ignore_index=True))
+        write_csv(out / "results" / f"{kind}.csv", pd.concat(frames, ignore_index=True))
     wall = time.perf_counter() - t0
     peak = max(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss,
                resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss) / 1024
     run["sessions"].append({"maps": len(units) * len(contexts), "wall_seconds": round(wall, 1), "workers": workers,
                             "peak_process_mib": round(peak), "finished": time.strftime("%Y-%m-%dT%H:%M:%S")})
     run["complete"] = True
-    _write_json(out / RUN_FILE, run)
+    write_json(out / RUN_FILE, run)
     return out
 
 
 def _store(out: Path, key: str, rows: dict):
     for name, (seg_rows, colon_rows) in rows.items():
-        _write_csv(out / "parts" / name / f"{key}.segments.csv", pd.DataFrame(seg_rows, columns=SEGMENT_COLUMNS))
-        _write_csv(out / "parts" / name / f"{key}.colons.csv", pd.DataFrame(colon_rows, columns=COLON_COLUMNS))
+        write_csv(out / "parts" / name / f"{key}.segments.csv", pd.DataFrame(seg_rows, columns=SEGMENT_COLUMNS))
+        write_csv(out / "parts" / name / f"{key}.colons.csv", pd.DataFrame(colon_rows, columns=COLON_COLUMNS))
 
 
 def is_colon_run(run_dir) -> bool:

@@ -26,33 +26,28 @@ from __future__ import annotations
 
 import hashlib
 import json
-import multiprocessing
 import os
-import platform
 import resource
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
-from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
 from colonbench import seeding
-from colonbench._version import __version__
+from colonbench.benchmark.exchange import sample_id
 from colonbench.benchmark.metrics import THRESHOLDS_MM, segment_metrics
-from colonbench.benchmark.registry import as_estimate, load_method
+from colonbench.benchmark.parallel import run_units
+from colonbench.benchmark.registry import load_method
+from colonbench.estimate import as_estimate
+from colonbench.benchmark.runfolder import (RUN_FILE, RunMismatch, begin_run, check_run_folder, read_rows, read_run,
+                                            write_csv, write_json)
 from colonbench.benchmark.summary import metric_columns, summarize
 from colonbench.errors import ColonbenchError, InputError
 from colonbench.folderlock import folder_lock
 
-class RunMismatch(InputError):
-    """The run folder holds a run with other data, settings or method versions."""
+__all__ = ["RUN_FILE", "RunMismatch", "evaluate", "load_results", "noisy", "read_rows", "result_columns", "select"]
 
-
-RUN_FILE = "run.json"
-RUN_FORMAT = "colonbench-run"
-RUN_FORMAT_VERSION = 1
 #: Per-segment columns, in order (then the metric columns, ``seconds`` and ``error``).
 ID_COLUMNS = ["method", "shard", "index", "colon_id", "length_mm", "hole_model", "noise_mm", "true_coverage",
               "coverage", "coverage_error"]
@@ -131,19 +126,6 @@ def noisy(points: np.ndarray, sigma: float, seed: int, shard: str, index: int) -
 
 # ---------------------------------------------------------------------------------------------- one unit
 
-_WORKER: dict = {}
-
-
-def _init_worker(specs: list[str], options: dict, threads: int):
-    try:
-        import torch
-
-        torch.set_num_threads(threads)
-    except ImportError:
-        pass
-    _WORKER["methods"] = {m.name: m for m in (load_method(s, **options) for s in specs)}
-
-
 def _truth(shard, i: int, geo: dict, needs_heatmap: bool) -> dict:
     truth = {"coverage": geo["coverage"], "hole_points": geo["hole_points"].astype(float),
              "centerline": geo["centerline"].astype(float), "vertices": geo["vertices"].astype(float),
@@ -154,9 +136,14 @@ def _truth(shard, i: int, geo: dict, needs_heatmap: bool) -> dict:
     return truth
 
 
-def _one(method, pts: np.ndarray, truth: dict):
+def _one(method, pts: np.ndarray, truth: dict, sid: str):
     t = time.perf_counter()
-    result = method.estimate(pts, truth=truth) if getattr(method, "uses_truth", False) else method.estimate(pts)
+    if getattr(method, "by_sample", False):  # predictions made outside (colonbench.benchmark.external)
+        result = method.predicted(sid)
+    elif getattr(method, "uses_truth", False):
+        result = method.estimate(pts, truth=truth)
+    else:
+        result = method.estimate(pts)
     wall = time.perf_counter() - t
     est = as_estimate(result, method.name)
     stages = getattr(est, "seconds", None) or {}
@@ -179,7 +166,7 @@ def _save_example(path: Path, pts, est, truth):
 
 
 def run_unit(data: str, shard_name: str, indices: list[int], sigma: float, noise_seed: int, names: list[str],
-             examples: list[int], run_dir: str, methods: dict | None = None) -> dict[str, list[dict]]:
+             examples: list[int], run_dir: str, methods: dict) -> dict[str, list[dict]]:
     """Every method in ``names`` on the chosen samples of one shard at one noise level.
 
     Returns
@@ -189,7 +176,6 @@ def run_unit(data: str, shard_name: str, indices: list[int], sigma: float, noise
     """
     from colonbench.shards.reader import Shard
 
-    methods = methods if methods is not None else _WORKER["methods"]
     chosen = [methods[n] for n in names]
     needs_heatmap = any(getattr(m, "uses_truth", False) for m in chosen)
     out = {n: [] for n in names}
@@ -204,7 +190,7 @@ def run_unit(data: str, shard_name: str, indices: list[int], sigma: float, noise
             for m in chosen:
                 row = {"method": m.name, **base}
                 try:
-                    est, seconds = _one(m, pts, truth)
+                    est, seconds = _one(m, pts, truth, sample_id(shard_name, i, sigma))
                 except Exception as exc:  # noqa: BLE001 - recorded in the row and counted in the tables
                     msg = str(exc) if isinstance(exc, ColonbenchError) else f"{type(exc).__name__}: {exc}"
                     row.update({"coverage": np.nan, "coverage_error": np.nan, "seconds": np.nan,
@@ -228,109 +214,44 @@ def _unit_key(shard_name: str, sigma: float) -> str:
     return f"{shard_name.replace('/', '_').removesuffix('.h5')}__noise{sigma:g}"
 
 
-def _write_csv(path: Path, rows: list[dict] | pd.DataFrame):
-    path.parent.mkdir(parents=True, exist_ok=True)
-    df = rows if isinstance(rows, pd.DataFrame) else pd.DataFrame(rows, columns=result_columns())
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    df.to_csv(tmp, index=False)
-    tmp.replace(path)
-
-
-def read_rows(path) -> pd.DataFrame:
-    """A per-segment results CSV (columns: :func:`result_columns`; ``error`` is "" where there was none)."""
-    df = pd.read_csv(path, dtype={"error": str, "shard": str, "method": str, "hole_model": str})
-    df["error"] = df["error"].fillna("")
-    return df
-
-
-def _write_json(path: Path, obj: dict):
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    tmp.write_text(json.dumps(obj, indent=1, default=_json_default))
-    tmp.replace(path)
-
-
-def _json_default(o):
-    if isinstance(o, (np.floating, np.integer)):
-        return o.item()
-    raise TypeError(f"not JSON serializable: {type(o).__name__}")
-
-
-def versions() -> dict:
-    """Versions of colonbench, Python and the libraries that shape the numbers."""
-    from importlib.metadata import PackageNotFoundError, version
-
-    out = {"colonbench": __version__, "python": platform.python_version()}
-    for pkg in ("numpy", "scipy", "scikit-image", "scikit-fmm", "edt", "torch", "monai", "h5py"):
-        try:
-            out[pkg] = version(pkg)
-        except PackageNotFoundError:
-            pass
-    return out
-
-
-def _method_record(spec: str, m) -> dict:
-    return {"spec": spec, "version": str(getattr(m, "version", "unversioned")),
-            "uses_truth": bool(getattr(m, "uses_truth", False)),
-            "reference": bool(getattr(m, "reference", getattr(m, "uses_truth", False))),
-            "class": f"{type(m).__module__}.{type(m).__qualname__}"}
-
-
-def _open_run(out: Path, settings: dict, methods: dict[str, dict]) -> dict:
-    """The run record: a new one, or the existing one extended by new methods (after checking it matches)."""
-    path = out / RUN_FILE
-    if path.exists():
-        try:
-            run = json.loads(path.read_text())
-        except json.JSONDecodeError as exc:
-            raise InputError(f"{path}: unreadable ({exc})") from None
-        if run.get("format") != RUN_FORMAT:
-            raise InputError(f"{path}: not a colonbench run")
-        for key, value in settings.items():
-            if json.dumps(run.get(key), sort_keys=True) != json.dumps(value, sort_keys=True, default=_json_default):
-                raise RunMismatch(f"{out} is a run with other {key} ({run.get(key)!r}, now {value!r}); "
-                                 "evaluate into a new run folder")
-        for name, rec in methods.items():
-            old = run["methods"].get(name)
-            if old is not None and old["version"] != rec["version"]:
-                raise RunMismatch(f"{out}: method {name!r} was evaluated as version {old['version']!r}, it is now "
-                                 f"{rec['version']!r}; evaluate into a new run folder")
-            run["methods"].setdefault(name, rec)
-    else:
-        run = {"format": RUN_FORMAT, "format_version": RUN_FORMAT_VERSION, **settings, "methods": dict(methods),
-               "sessions": []}
-    return run
-
-
 def _finalize(out: Path, run: dict, name: str, keys: list[str]) -> Path:
     df = pd.concat([read_rows(out / "parts" / name / f"{k}.csv") for k in keys], ignore_index=True)
-    _write_csv(out / "results" / f"{name}.csv", df)
+    write_csv(out / "results" / f"{name}.csv", df)
     rec = run["methods"][name]
-    summary = {"method": name, **rec, "data": run["data"], "noise_mm": run["noise_mm"],
+    summary = {"method": name, **rec, "data": run["data"], "suite": run.get("suite"), "noise_mm": run["noise_mm"],
                "noise_seed": run["noise_seed"], "thresholds_mm": run["thresholds_mm"], "versions": run["versions"],
                "summary": summarize(df).to_dict("records")}
-    _write_json(out / "results" / f"{name}.json", summary)
+    write_json(out / "results" / f"{name}.json", summary)
     return out / "results" / f"{name}.csv"
 
 
-def checked_arguments(workers: int, noise, methods) -> tuple[list[float], list[str]]:
-    """The sorted noise sigmas and the method specs of a run, or an :class:`InputError` saying what is wrong."""
+def checked_arguments(workers: int, noise, methods) -> tuple[list[float], list]:
+    """The sorted noise sigmas and the methods (specs or objects) of a run, or an :class:`InputError`."""
     if workers < 1:
         raise InputError(f"--workers must be >= 1, got {workers}")
     sigmas = sorted({float(s) for s in noise})
     if not sigmas or any(s < 0 or not np.isfinite(s) for s in sigmas):
         raise InputError(f"noise levels must be non-negative mm, got {list(noise)}")
-    specs = [s.strip() for s in methods if s.strip()]
+    if isinstance(methods, str) or not isinstance(methods, (list, tuple)):
+        methods = [methods]
+    specs = [s.strip() if isinstance(s, str) else s for s in methods if not isinstance(s, str) or s.strip()]
     if not specs:
         raise InputError("no methods given")
     return sigmas, specs
 
 
-def load_methods(specs: list[str], options: dict, refuse_truth: str | None = None) -> dict:
-    """``{name: (spec, method)}``; two methods of one name, or (with ``refuse_truth``, the reason) a method
-    given ground truth, are refused."""
+def load_methods(specs: list, options: dict, refuse_truth: str | None = None) -> dict:
+    """``{name: (spec, method)}`` of specs (names, ``module:Class``, ``exec:...``) or method objects (their spec
+    None); two methods of one name, or (with ``refuse_truth``, the reason) a method given ground truth, are
+    refused."""
+    from colonbench.benchmark.registry import as_method
+
     loaded = {}
     for spec in specs:
-        m = load_method(spec, **options)
+        if isinstance(spec, str):
+            m = load_method(spec, **options)
+        else:
+            m, spec = as_method(spec), None
         if refuse_truth and getattr(m, "uses_truth", False):
             raise InputError(f"method {m.name!r} is given ground truth per segment; {refuse_truth}")
         if m.name in loaded:
@@ -339,36 +260,28 @@ def load_methods(specs: list[str], options: dict, refuse_truth: str | None = Non
     return loaded
 
 
-def check_run_folder(out: Path) -> None:
-    """Create a run folder, refusing a non-empty folder that holds no run."""
-    if out.is_dir() and not (out / RUN_FILE).exists() and any(not p.name.startswith(".") for p in out.iterdir()):
-        raise InputError(f"{out} is not empty and holds no {RUN_FILE}; give a new or empty run folder")
-    out.mkdir(parents=True, exist_ok=True)
+def suite_of(identity: dict, sigmas, noise_seed: int, task: str, data, allow_unverified: bool) -> dict | None:
+    """The record of the suite a run's data and protocol are (checked against its published hash), or None."""
+    from colonbench.benchmark import suites
 
-
-def begin_run(out: Path, settings: dict, loaded: dict, data: Path) -> dict:
-    """Open (or extend) the run record of a locked run folder, write it, and clear leftovers of killed runs."""
-    records = {name: _method_record(spec, m) for name, (spec, m) in loaded.items()}
-    run = _open_run(out, settings, records)
-    run["versions"] = run.get("versions") or versions()
-    run["data_path"] = str(data)
-    _write_json(out / RUN_FILE, run)
-    for tmp in out.rglob(".*.tmp*"):
-        tmp.unlink()
-    return run
+    suite = suites.match(identity, sigmas, noise_seed, task)
+    return suites.verify(suite, data, allow_unverified) if suite is not None else None
 
 
 def evaluate(data, methods, out, noise=(0.0, 0.5), split: str = "test", limit: int | None = None,
              workers: int = 1, model=None, device: str = "cpu", examples: int = 3, noise_seed: int = 0,
-             progress: bool = True) -> Path:
+             progress: bool = True, scheduler=None, allow_unverified: bool = False, timeout: float | None = None,
+             batch: int | None = None) -> Path:
     """Evaluate methods on a dataset split; write (or finish) a run folder.
 
     Parameters
     ----------
     data : path
         Dataset folder (``colonbench generate``).
-    methods : list of str
-        Registered names or ``module:Class`` specs (:mod:`colonbench.benchmark.registry`).
+    methods : list of str or method objects
+        Registered names, ``module:Class``, ``exec:PROGRAM ARGS`` or ``predictions:DIR`` specs
+        (:mod:`colonbench.benchmark.registry`), or objects with ``name`` and ``estimate(points)``
+        (:class:`colonbench.estimate.Method`; they run in this process).
     out : path
         Run folder.
     noise : sequence of float
@@ -377,7 +290,8 @@ def evaluate(data, methods, out, noise=(0.0, 0.5), split: str = "test", limit: i
     limit : int, optional
         Only this many samples, spread evenly over the split.
     workers : int
-        Processes (each loads the methods once and uses one torch thread).
+        Processes (each loads the methods once and uses one torch thread); ``exec:`` programs run this many
+        calls at a time.
     model, device
         Passed to methods that take them (default: the shipped model, CPU).
     examples : int
@@ -385,56 +299,66 @@ def evaluate(data, methods, out, noise=(0.0, 0.5), split: str = "test", limit: i
     noise_seed : int
         Root seed of the input noise.
     progress : bool
+    scheduler : str or distributed.Client, optional
+        Run the units on a Dask cluster (:func:`colonbench.benchmark.parallel.run_units`).
+    allow_unverified : bool
+        Evaluate data that is a suite's by name and protocol but not by its published content hash (the run
+        then records ``verified: false``).
+    timeout, batch
+        ``exec:`` methods: seconds per input, inputs per call.
 
     Returns
     -------
     Path
         The run folder.
+
+    Raises
+    ------
+    InputError
+        Bad arguments, or data that claims to be a suite and is not (see ``allow_unverified``).
     """
     data, out = Path(data), Path(out)
     sigmas, specs = checked_arguments(workers, noise, methods)
     identity, picks = select(data, split, limit)
-    options = {"model": str(model) if model is not None else None, "device": device}
+    suite = suite_of(identity, sigmas, noise_seed, "segments", data, allow_unverified)
+    options = {"model": str(model) if model is not None else None, "device": device,
+               "predictions": str(out / "predictions"), "timeout": timeout, "batch": batch}
     t0 = time.perf_counter()
     loaded = load_methods(specs, options)
-    settings = {"data": identity, "noise_mm": sigmas, "noise_seed": int(noise_seed),
+    settings = {"data": identity, "suite": suite, "noise_mm": sigmas, "noise_seed": int(noise_seed),
                 "thresholds_mm": list(THRESHOLDS_MM)}
     check_run_folder(out)
     with folder_lock(out, "evaluate", "evaluation"):
         run = begin_run(out, settings, loaded, data)
-        return _run(out, run, data, picks, sigmas, loaded, options, workers, examples, noise_seed, progress, t0)
+        return _run(out, run, data, picks, sigmas, loaded, options, workers, examples, noise_seed, progress, t0,
+                    scheduler)
 
 
-def run_units(fn, units: list, args, loaded: dict, options: dict, workers: int):
-    """Yield ``(unit, fn(*args(unit), methods=...))`` for every unit, in this process or in ``workers`` processes.
+def _run_programs(out, data, units, loaded, noise_seed, workers, progress) -> None:
+    """Run every ``exec:`` method's program on the inputs its unfinished units need, in batches across units."""
+    from tqdm.auto import tqdm
 
-    Each worker process loads the methods once (``_init_worker``, one torch
-    thread) and ``fn`` finds them there; results come back as they finish.
+    from colonbench.benchmark.external import ExecMethod
+    from colonbench.shards.reader import Shard
 
-    Raises
-    ------
-    ColonbenchError
-        A worker died; what was finished has been yielded.
-    """
-    if workers == 1 or len(units) <= 1:
-        methods = {n: m for n, (_, m) in loaded.items()}
-        for u in units:
-            yield u, fn(*args(u), methods=methods)
-        return
-    ctx = multiprocessing.get_context("spawn")  # torch and HDF5 are not fork-safe
-    specs = [spec for spec, _ in loaded.values()]
-    with ProcessPoolExecutor(min(workers, len(units)), mp_context=ctx, initializer=_init_worker,
-                             initargs=(specs, options, 1)) as pool:
-        futures = {pool.submit(fn, *args(u)): u for u in units}
-        try:
-            for f in as_completed(futures):
-                yield futures[f], f.result()
-        except BrokenProcessPool:
-            raise ColonbenchError("a worker process died (out of memory?); what was finished is kept, "
-                                  "rerun the same command (with fewer --workers) to resume") from None
+    for name, (_, m) in loaded.items():
+        if not isinstance(m, ExecMethod):
+            continue
+        wanted = [(u, sample_id(u[0], i, u[2]), i) for u in units if name in u[3] for i in u[1]]
+        missing = set(m.missing([sid for _, sid, _ in wanted]))
+        items = []
+        for u, sid, i in wanted:
+            if sid in missing:
+                with Shard(Path(data) / u[0]) as shard:
+                    items.append((sid, noisy(shard.geometry(i)["partial_points"], u[2], noise_seed, u[0], i)))
+        if items:
+            with tqdm(total=len(items), unit="input", desc=f"run {name}", disable=None if progress else True,
+                      dynamic_ncols=True) as bar:
+                m.run(items, workers=workers, progress=bar.update)
 
 
-def _run(out, run, data, picks, sigmas, loaded, options, workers, examples, noise_seed, progress, t0) -> Path:
+def _run(out, run, data, picks, sigmas, loaded, options, workers, examples, noise_seed, progress, t0,
+         scheduler=None) -> Path:
     flat = [(n, i) for n, idx in picks for i in idx]
     ex_keys = {flat[k] for k in np.unique(np.linspace(0, len(flat) - 1, examples).astype(int))} if examples else set()
     units, keys = [], []
@@ -446,13 +370,14 @@ def _run(out, run, data, picks, sigmas, loaded, options, workers, examples, nois
             if todo:
                 ex = [i for i in idx if (shard_name, i) in ex_keys]
                 units.append((shard_name, idx, s, todo, ex, key))
+    _run_programs(out, data, units, loaded, noise_seed, workers, progress)
     from tqdm.auto import tqdm
 
     total = sum(len(u[1]) for u in units)
     bar = tqdm(total=total, unit="segment", desc="evaluate", disable=None if progress else True, dynamic_ncols=True)
     args = lambda u: (str(data), u[0], u[1], u[2], noise_seed, u[3], u[4], str(out))  # noqa: E731
     try:
-        for u, rows in run_units(run_unit, units, args, loaded, options, workers):
+        for u, rows in run_units(run_unit, units, args, loaded, options, workers, scheduler):
             _store(out, u, rows)
             bar.update(len(u[1]))
     finally:
@@ -463,16 +388,17 @@ def _run(out, run, data, picks, sigmas, loaded, options, workers, examples, nois
     peak = max(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss,
                resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss) / 1024
     run["sessions"].append({"segments": total, "wall_seconds": round(wall, 1), "workers": workers,
+                            "scheduler": None if scheduler is None else str(scheduler),
                             "peak_process_mib": round(peak), "finished": time.strftime("%Y-%m-%dT%H:%M:%S")})
     run["complete"] = True
-    _write_json(out / RUN_FILE, run)
+    write_json(out / RUN_FILE, run)
     return out
 
 
 def _store(out: Path, unit, rows: dict):
     key = unit[5]
     for name, r in rows.items():
-        _write_csv(out / "parts" / name / f"{key}.csv", r)
+        write_csv(out / "parts" / name / f"{key}.csv", r, result_columns())
 
 
 def load_results(run_dir) -> tuple[dict, pd.DataFrame]:
@@ -484,15 +410,9 @@ def load_results(run_dir) -> tuple[dict, pd.DataFrame]:
         Not a run, or a run with methods whose results are not all there.
     """
     run_dir = Path(run_dir)
-    path = run_dir / RUN_FILE
-    if not path.is_file():
-        raise InputError(f"{run_dir}: not a colonbench run (no {RUN_FILE}); colonbench evaluate writes one")
-    try:
-        run = json.loads(path.read_text())
-    except json.JSONDecodeError as exc:
-        raise InputError(f"{path}: unreadable ({exc})") from None
-    if run.get("format") != RUN_FORMAT or run.get("format_version") != RUN_FORMAT_VERSION:
-        raise InputError(f"{path}: not a colonbench run of format version {RUN_FORMAT_VERSION}")
+    run = read_run(run_dir)
+    if run.get("task") == "colon":
+        raise InputError(f"{run_dir}: a whole-colon run; read it with colonbench.benchmark.colon_evaluate")
     frames = []
     for name in run["methods"]:
         csv = run_dir / "results" / f"{name}.csv"

@@ -12,12 +12,21 @@ A method is any object with
 * ``uses_truth = True`` (optional, references only): then it is called as
   ``estimate(points, truth=...)`` (:mod:`colonbench.benchmark.references`).
 
-A method is named either by a module path, ``package.module:Class``, or by
-the name of an entry point in the group ``colonbench.methods`` (a package
-declares it in its ``pyproject.toml``; colonbench's own methods are
-registered exactly so). A class is instantiated once per process with the
-options it accepts among ``model`` and ``device``; an instance or a factory
-function may be given instead of a class.
+A method is named by
+
+* the name of an entry point in the group ``colonbench.methods`` (a package
+  declares it in its ``pyproject.toml``; colonbench's own methods are
+  registered exactly so);
+* a module path, ``package.module:Class``;
+* ``exec:PROGRAM ARGS``: any program, called as ``colonbench estimate`` is
+  (:class:`colonbench.benchmark.external.ExecMethod`);
+* ``predictions:DIR``: a folder of prediction files
+  (:class:`colonbench.benchmark.external.PredictionMethod`);
+
+and ``NAME=SPEC`` gives any of them its row name. A class is instantiated once
+per process with the options it accepts among ``model``, ``device`` and
+``context_model``; an instance or a factory function may be given instead of a
+class.
 """
 
 from __future__ import annotations
@@ -25,16 +34,19 @@ from __future__ import annotations
 import importlib
 import inspect
 from importlib.metadata import entry_points
+from pathlib import Path
 
-import numpy as np
 
 from colonbench.errors import InputError
-from colonbench.estimate import Estimate
 
 #: The entry-point group methods are registered in.
 GROUP = "colonbench.methods"
+#: Options a method's class is offered (those it takes): the model file and the torch device.
+CLASS_OPTIONS = ("model", "device", "context_model")
 #: What ``--methods all`` runs: the paper's method, its baselines and the reference rows.
 DEFAULT_METHODS = ("completion", "thresholding", "unwrap", "unwrap-pca", "gt-heatmap", "unwrap-gt", "constant")
+#: The paper's baselines: a leaderboard compares every method with the best of them (paired, per segment).
+BASELINES = ("thresholding", "unwrap", "unwrap-pca")
 
 
 def available() -> dict[str, str]:
@@ -83,6 +95,12 @@ def load_method(spec: str, **options):
         Unknown name, import failure, or an object that is not a method.
     """
     spec = spec.strip()
+    named, given = _split_name(spec)
+    if named is not None:
+        method = load_method(given, **{**options, "name": named})
+        return method
+    if spec.startswith(("exec:", "predictions:")):
+        return _external(spec, options)
     if ":" in spec:
         obj = _import(spec)
         default_name = spec.rpartition(":")[2].rpartition(".")[2]
@@ -93,14 +111,42 @@ def load_method(spec: str, **options):
                              "(or give package.module:Class)")
         obj = _import(registered[spec])
         default_name = spec
-    method = _instantiate(obj, options)
+    method = _instantiate(obj, {k: v for k, v in options.items() if k in CLASS_OPTIONS})
+    if options.get("name"):
+        try:
+            method.name = options["name"]
+        except AttributeError:
+            raise InputError(f"method {spec!r}: it cannot be renamed {options['name']!r}") from None
+    return as_method(method, default_name, spec)
+
+
+def as_method(method, default_name: str | None = None, spec: str | None = None):
+    """A method object checked (it has ``estimate``) and given a ``name`` and a ``version`` if it lacks them.
+
+    Parameters
+    ----------
+    method : object
+        Anything with ``estimate(points)`` (:class:`colonbench.estimate.Method`); a class is instantiated.
+    default_name : str, optional
+        Its name if it has none (default: its class name).
+    spec : str, optional
+        How it was named, for messages.
+
+    Raises
+    ------
+    InputError
+        It has no ``estimate`` method, or no name can be given to it.
+    """
+    if inspect.isclass(method):
+        method = _instantiate(method, {})
+    what = spec or type(method).__name__
     if not callable(getattr(method, "estimate", None)):
-        raise InputError(f"method {spec!r}: {type(method).__name__} has no estimate(points) method")
+        raise InputError(f"method {what!r}: {type(method).__name__} has no estimate(points) method")
     if not isinstance(getattr(method, "name", None), str) or not method.name:
         try:
-            method.name = default_name
+            method.name = default_name or type(method).__name__
         except AttributeError:
-            raise InputError(f"method {spec!r}: it has no name attribute") from None
+            raise InputError(f"method {what!r}: it has no name attribute") from None
     if not isinstance(getattr(method, "version", None), str):
         version = getattr(method, "version", None)
         try:
@@ -110,38 +156,23 @@ def load_method(spec: str, **options):
     return method
 
 
-def _points(value, what: str, name: str) -> np.ndarray:
-    try:
-        a = np.asarray(value if value is not None else np.zeros((0, 3)), dtype=float)
-    except (TypeError, ValueError):
-        raise InputError(f"method {name!r} returned {what} that are not numbers") from None
-    if a.size == 0:
-        return np.zeros((0, 3))
-    if a.ndim != 2 or a.shape[1] != 3:
-        raise InputError(f"method {name!r} returned {what} of shape {a.shape}; expected (n, 3) mm")
-    if not np.isfinite(a).all():
-        raise InputError(f"method {name!r} returned {what} with NaN or infinite values")
-    return a
+def _split_name(spec: str) -> tuple[str | None, str]:
+    """``NAME=SPEC`` gives the method its row name; ``(None, spec)`` without one."""
+    head, eq, rest = spec.partition("=")
+    if eq and head and all(c.isalnum() or c in "._-" for c in head) and ":" not in head and " " not in head:
+        return head, rest.strip()
+    return None, spec
 
 
-def as_estimate(result, name: str) -> Estimate:
-    """A method's return value checked and turned into an :class:`Estimate` (or an :class:`InputError`)."""
-    if isinstance(result, Estimate):
-        est = result
-    elif isinstance(result, dict):
-        if "coverage" not in result:
-            raise InputError(f"method {name!r} returned a dict without 'coverage'")
-        est = Estimate(result["coverage"], result.get("holes"), result.get("centerline"), name)
-    else:
-        raise InputError(f"method {name!r} returned {type(result).__name__}; expected an Estimate or a dict")
-    try:
-        coverage = float(est.coverage)
-    except (TypeError, ValueError):
-        raise InputError(f"method {name!r} returned coverage {est.coverage!r}, not a number") from None
-    if not (np.isnan(coverage) or -1e-9 <= coverage <= 1 + 1e-9):
-        raise InputError(f"method {name!r} returned coverage {coverage}; a fraction in [0, 1] is expected")
-    est.coverage = coverage
-    est.holes = _points(est.holes, "holes", name)
-    est.centerline = _points(est.centerline, "centerline", name)
-    est.method = name
-    return est
+def _external(spec: str, options: dict):
+    """``exec:PROGRAM ARGS`` or ``predictions:DIR`` (:mod:`colonbench.benchmark.external`)."""
+    from colonbench.benchmark.external import ExecMethod, PredictionMethod
+
+    kind, _, rest = spec.partition(":")
+    if kind == "exec":
+        extra = {k: options[k] for k in ("timeout", "batch") if options.get(k) is not None}
+        return ExecMethod(rest, predictions=options.get("predictions"), name=options.get("name"), **extra)
+    folder = Path(rest).expanduser()
+    if not folder.is_dir():
+        raise InputError(f"predictions:{rest}: no such folder")
+    return PredictionMethod(folder, name=options.get("name") or folder.name)

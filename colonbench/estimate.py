@@ -1,10 +1,14 @@
-"""What every coverage-estimation method returns: the result contract shared by methods and the benchmark."""
+"""What a coverage-estimation method is (:class:`Method`) and returns (:class:`Estimate`): the contract shared by
+methods, ``colonbench estimate`` and the benchmark."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Protocol, runtime_checkable
 
 import numpy as np
+
+from colonbench.errors import InputError
 
 
 @dataclass
@@ -43,3 +47,87 @@ class Estimate:
         return {"coverage": float(self.coverage), "holes": np.round(self.holes, 4).tolist(),
                 "centerline": np.round(self.centerline, 4).tolist(), "method": self.method,
                 "seconds": {k: round(v, 4) for k, v in self.seconds.items()}}
+
+
+@runtime_checkable
+class Method(Protocol):
+    """What the benchmark, ``colonbench estimate`` and ``colonbench map`` call: a coverage-estimation method.
+
+    Any object with these attributes is one; nothing needs to be subclassed.
+
+    Attributes
+    ----------
+    name : str
+        Its row in the tables.
+    version : str
+        Recorded with every result; a run refuses to mix two versions of one method.
+
+    Methods
+    -------
+    estimate(points)
+        ``points``: (n, 3) float, one partial segment, mm, in its own frame. Returns an :class:`Estimate`, or
+        a dict with at least ``coverage`` (fraction in [0, 1]) and optionally ``holes`` and ``centerline``
+        ((k, 3) mm), the ``colonbench estimate`` JSON contract.
+    """
+
+    name: str
+    version: str
+
+    def estimate(self, points: np.ndarray) -> "Estimate | dict": ...
+
+
+def points_array(value, what: str, who: str) -> np.ndarray:
+    """``value`` as (n, 3) finite float mm, or an :class:`InputError` naming ``who`` gave what.
+
+    Parameters
+    ----------
+    value : array_like or None
+        None and empty give (0, 3).
+    what : str
+        ``holes`` or ``centerline``.
+    who : str
+        The method or file the points came from, as messages name it.
+    """
+    try:
+        a = np.asarray(value if value is not None else np.zeros((0, 3)), dtype=float)
+    except (TypeError, ValueError):
+        raise InputError(f"{who}: {what!r} are not [x, y, z] numbers") from None
+    if a.size == 0:
+        return np.zeros((0, 3))
+    if a.ndim != 2 or a.shape[1] != 3:
+        raise InputError(f"{who}: {what!r} has shape {a.shape}; expected (n, 3) points, mm")
+    if not np.isfinite(a).all():
+        raise InputError(f"{who}: {what!r} holds NaN or infinite values")
+    return a
+
+
+def as_estimate(result, name: str) -> Estimate:
+    """A method's return value checked and turned into an :class:`Estimate` (or an :class:`InputError`).
+
+    Parameters
+    ----------
+    result : Estimate or dict
+        What ``estimate(points)`` returned: a dict needs ``coverage``; ``holes`` and ``centerline`` are optional.
+    name : str
+        The method's name, given to the estimate and named in messages.
+    """
+    who = f"method {name!r}"
+    if isinstance(result, Estimate):
+        est = result
+    elif isinstance(result, dict):
+        if "coverage" not in result:
+            raise InputError(f"{who} returned a dict without 'coverage'")
+        est = Estimate(result["coverage"], result.get("holes"), result.get("centerline"), name)
+    else:
+        raise InputError(f"{who} returned {type(result).__name__}; expected an Estimate or a dict")
+    try:
+        coverage = float(est.coverage)
+    except (TypeError, ValueError):
+        raise InputError(f"{who} returned coverage {est.coverage!r}, not a number") from None
+    if not (np.isnan(coverage) or -1e-9 <= coverage <= 1 + 1e-9):
+        raise InputError(f"{who} returned coverage {coverage}; a fraction in [0, 1] is expected")
+    est.coverage = coverage
+    est.holes = points_array(est.holes, "holes", who)
+    est.centerline = points_array(est.centerline, "centerline", who)
+    est.method = name
+    return est

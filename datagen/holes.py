@@ -20,10 +20,9 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
+from colonbench.datagen import HOLE_MODELS
 from colonbench.datagen.config import SphereConfig, draw
 from colonbench.errors import InputError
-
-HOLE_MODELS = ("camera", "spheres", "camera+spheres", "camera+end", "spheres+end", "camera+spheres+end", "video")
 
 
 def check_hole_model(name: str) -> tuple[str, ...]:

@@ -22,18 +22,13 @@ from pathlib import Path
 import numpy as np
 
 from colonbench.errors import InputError
+from colonbench.mapping import SEGMENT_MM
 from colonbench.slab import point_at
 
-#: Default segment arc length, mm (the paper's 6 cm).
-SEGMENT_MM = 60.0
 #: A segment with fewer points is reported without an estimate.
 MIN_POINTS = 200
 #: Hole regions smaller than this are not counted in ``holes`` (specks between the cloud's points), mm^2.
 MIN_HOLE_MM2 = 10.0
-#: Context margin of ``colonbench map`` by default, mm: the whole-colon benchmark's in-context track. Chosen on
-#: colon-val.yaml among 0.5-40 mm (the least segment MAE; 5 mm within noise of it, 10 mm and more worse), never on
-#: colon-test.yaml (docs/mapping.md, Segments in context).
-CONTEXT_MM = 2.5
 #: Coverage at or below this is red, 1 green (the paper's supplementary map).
 RED_AT = 0.5
 
@@ -357,7 +352,7 @@ def map_colon(points: np.ndarray, method, segment_mm: float = SEGMENT_MM, positi
     """
     from tqdm import tqdm
 
-    from colonbench.benchmark.registry import as_estimate
+    from colonbench.estimate import as_estimate
     from colonbench.errors import ColonbenchError
     from colonbench.slab import stretch
 
@@ -386,7 +381,9 @@ def map_colon(points: np.ndarray, method, segment_mm: float = SEGMENT_MM, positi
             last = hi >= b - 1e-9
             mine = point_piece == k
             mask = mine & (point_s >= lo) & ((point_s < hi) | (last & (point_s <= hi)))
-            ctx = mine & (point_s >= lo - context_mm) & (point_s <= hi + context_mm) if context_mm > 0 else mask
+            # a method that completes no surface has nothing to clip: it is given the segment alone
+            ctx = (mine & (point_s >= lo - context_mm) & (point_s <= hi + context_mm)
+                   if context_mm > 0 and getattr(method, "completes_surface", True) else mask)
             gap = sum(max(0.0, min(hi, u1) - max(lo, u0)) for u0, u1 in unseen)
             segments.append((Segment(index=len(segments), piece=k, start_mm=lo, end_mm=hi,
                                      plane_start=_frame(pa, ps, lo), plane_end=_frame(pa, ps, hi),

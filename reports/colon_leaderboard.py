@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import json
 import math
+import zlib
 from pathlib import Path
 
 import pandas as pd
@@ -28,21 +29,23 @@ import pandas as pd
 from colonbench.benchmark.colon_evaluate import load_colon_results
 from colonbench.benchmark.summary import error_stats
 from colonbench.errors import InputError
-from colonbench.reports.leaderboard import add_run
+from colonbench.reports.leaderboard import add_run, data_line, interval
 
 #: Settings two whole-colon runs must share to be compared.
 SAME = ("data", "noise_mm", "noise_seed", "contexts_mm", "segment_mm", "thresholds_mm")
 
 
-def merge_colon_runs(run_dirs) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
-    """Per-segment and per-map rows of several whole-colon runs on the same data, and what they were."""
-    run_dirs = [Path(r) for r in run_dirs]
-    if not run_dirs:
+def merge_colon_runs(run_dirs, extra=()) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
+    """Per-segment and per-map rows of several whole-colon runs on the same data, and what they were.
+
+    ``extra``: runs already loaded, ``(run record, segments, colons, label)`` (the shipped reference results).
+    """
+    items = [(*load_colon_results(r), str(r)) for r in run_dirs] + list(extra)
+    if not items:
         raise InputError("no run folders given")
     meta, segs, cols = None, [], []
-    for r in run_dirs:
-        run, s, c = load_colon_results(r)
-        meta = add_run(meta, run, r, run_dirs[0], SAME)
+    for run, s, c, label in items:
+        meta = add_run(meta, run, label, items[0][3], SAME)
         segs.append(s)
         cols.append(c)
     return meta, pd.concat(segs, ignore_index=True), pd.concat(cols, ignore_index=True)
@@ -56,12 +59,15 @@ def colon_table(segments: pd.DataFrame, colons: pd.DataFrame) -> pd.DataFrame:
     """One row per noise level, method and track: segment and whole-colon errors, centerline, speed.
 
     Columns: ``noise_mm``, ``method``, ``track``, ``maps``, ``failed_maps``,
-    ``segments``, ``estimated``, ``segment_mae``, ``segment_median``,
+    ``segments``, ``estimated``, ``segment_mae`` (with its 95 % bootstrap interval over segments,
+    ``segment_mae_lo``, ``segment_mae_hi``), ``segment_median``,
     ``segment_bias``, ``segment_q95`` (points, over estimated segments),
     ``end_unobserved``, ``end_unobserved_mae``, ``whole_mae``, ``whole_bias``
     (points), ``centerline_precision``, ``centerline_recall`` (means),
     ``seconds_per_map``.
     """
+    from colonbench.benchmark import stats
+
     rows = []
     keys = ["noise_mm", "method", "track"]
     for key, c in colons.groupby(keys, sort=True):
@@ -72,6 +78,8 @@ def colon_table(segments: pd.DataFrame, colons: pd.DataFrame) -> pd.DataFrame:
         rows.append({**dict(zip(keys, key)), "maps": len(c), "failed_maps": int((c["error"] != "").sum()),
                      "segments": len(s), "estimated": int(s["coverage_error"].notna().sum()),
                      **{f"segment_{k}": v for k, v in error_stats(s["coverage_error"]).items()},
+                     **{f"segment_{k}": v for k, v in stats.mae_interval(
+                         s["coverage_error"], seed=zlib.crc32(repr(key).encode())).items() if k != "mae"},
                      "end_unobserved": int(ends.sum()),
                      "end_unobserved_mae": error_stats(s[ends]["coverage_error"])["mae"],
                      "whole_mae": whole["mae"], "whole_bias": whole["bias"],
@@ -122,23 +130,24 @@ def _f(x, digits=2) -> str:
 
 def colon_markdown(meta: dict, tab: pd.DataFrame, ctx: pd.DataFrame) -> str:
     """The whole-colon leaderboard as Markdown."""
-    d = meta["data"]
     lines = ["# colonbench whole-colon leaderboard", "",
-             f"Data: manifest `{d['manifest_name']}` (sha256 {str(d['manifest_sha256'])[:12]}), split `{d['split']}`, "
-             f"{d['samples']} whole-colon reconstructions (samples sha256 {d['samples_sha256'][:12]}), mapped at "
-             f"{meta['segment_mm']:g} mm segments. Input noise: Gaussian, sigma in mm, seed {meta['noise_seed']}. "
+             data_line(meta, "whole-colon reconstructions") + f" Mapped at {meta['segment_mm']:g} mm segments; "
+             "segment MAE with its 95 % bootstrap interval over segments. Input noise: Gaussian, sigma in mm, seed {meta['noise_seed']}. "
              "Coverage errors in percentage points (estimated - true): each segment against the true coverage of "
              "the same stretch of the true surface, and the whole colon's; centerline precision / recall at 2 mm "
              "(docs/mapping.md). Tracks: segment-only (each segment on its own points, the paper's protocol) and "
              "context-M mm (the neighbours' points up to M mm beyond each plane too).", ""]
     for noise, g in tab.groupby("noise_mm", sort=True):
         lines += [f"## Noise sigma = {noise:g} mm", "",
-                  "| method | track | maps (failed) | segments (estimated) | segment MAE | median | bias | q95 | "
-                  "unobserved-end segments: n, MAE | whole colon: MAE, bias | centerline P / R | s/map |",
-                  "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+                  "| method | version | track | maps (failed) | segments (estimated) | segment MAE [95 % CI] | median "
+                  "| bias | q95 | unobserved-end segments: n, MAE | whole colon: MAE, bias | centerline P / R | "
+                  "s/map |",
+                  "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
         for _, r in g.iterrows():
-            lines.append(f"| {r['method']} | {r['track']} | {r['maps']} ({r['failed_maps']}) | {r['segments']} "
-                         f"({r['estimated']}) | {_f(r['segment_mae'])} | {_f(r['segment_median'])} | "
+            version = meta["methods"].get(r["method"], {}).get("version", "")
+            lines.append(f"| {r['method']} | {version} | {r['track']} | {r['maps']} ({r['failed_maps']}) | "
+                         f"{r['segments']} ({r['estimated']}) | {_f(r['segment_mae'])} "
+                         f"{interval(r['segment_mae_lo'], r['segment_mae_hi'])} | {_f(r['segment_median'])} | "
                          f"{_f(r['segment_bias'])} | {_f(r['segment_q95'])} | {r['end_unobserved']}, "
                          f"{_f(r['end_unobserved_mae'])} | {_f(r['whole_mae'])}, {_f(r['whole_bias'])} | "
                          f"{_f(r['centerline_precision'])} / {_f(r['centerline_recall'])} | "
@@ -156,12 +165,11 @@ def colon_markdown(meta: dict, tab: pd.DataFrame, ctx: pd.DataFrame) -> str:
                          f"{r['end_unobserved']} | {_f(r['end_segment_only_mae'])} | {_f(r['end_context_mae'])} | "
                          f"{_f(r['end_ratio'])} |")
         lines.append("")
-    lines += ["Runs: " + ", ".join(f"`{r['path']}`" for r in meta["runs"]) + ". Rebuild with "
-              "`colonbench leaderboard RUN... --out DIR`.", ""]
+    lines += ["Runs: " + ", ".join(f"`{r['path']}`" for r in meta["runs"]) + ".", ""]
     return "\n".join(lines)
 
 
-def write_colon_leaderboard(run_dirs, out, figures: bool = True) -> dict:
+def write_colon_leaderboard(run_dirs, out, figures: bool = True, extra=()) -> dict:
     """Write ``leaderboard.md``, ``.csv``, ``.json`` (and ``colon-maps.png``) for whole-colon runs on the same data.
 
     Returns
@@ -169,7 +177,7 @@ def write_colon_leaderboard(run_dirs, out, figures: bool = True) -> dict:
     dict
         ``{"markdown": text, "paths": [written files]}``.
     """
-    meta, segments, colons = merge_colon_runs(run_dirs)
+    meta, segments, colons = merge_colon_runs(run_dirs, extra)
     tab, ctx = colon_table(segments, colons), context_table(segments)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -177,7 +185,8 @@ def write_colon_leaderboard(run_dirs, out, figures: bool = True) -> dict:
     paths = [out / "leaderboard.md", out / "leaderboard.csv", out / "leaderboard.json"]
     paths[0].write_text(text)
     tab.to_csv(paths[1], index=False)
-    paths[2].write_text(json.dumps({"task": "colon", **{k: meta[k] for k in SAME}, "methods": meta["methods"],
+    paths[2].write_text(json.dumps({"task": "colon", **{k: meta[k] for k in SAME}, "suite": meta["suite"],
+                                    "methods": meta["methods"],
                                     "runs": meta["runs"], "rows": json.loads(tab.to_json(orient="records")),
                                     "in_context": json.loads(ctx.to_json(orient="records"))}, indent=1))
     if figures:

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import json
 import math
+import zlib
 from pathlib import Path
 
 import pandas as pd
@@ -32,30 +33,46 @@ from colonbench.errors import InputError
 SAME = ("data", "noise_mm", "noise_seed", "thresholds_mm")
 
 
-def merge_runs(run_dirs) -> tuple[dict, pd.DataFrame]:
+def merge_runs(run_dirs, extra=()) -> tuple[dict, pd.DataFrame]:
     """Per-segment results of several runs on the same data, and what they were.
+
+    Parameters
+    ----------
+    run_dirs : list of path
+        Finished run folders.
+    extra : iterable of (run record, results DataFrame, label)
+        Runs already loaded (the shipped reference results, :mod:`colonbench.benchmark.reference`).
 
     Returns
     -------
     meta : dict
-        ``data``, ``noise_mm``, ``noise_seed``, ``thresholds_mm`` (shared),
+        ``data``, ``suite``, ``noise_mm``, ``noise_seed``, ``thresholds_mm`` (shared),
         ``methods`` (name -> record with its ``run``), ``runs`` (paths and versions).
     results : DataFrame
         Every per-segment row.
     """
-    run_dirs = [Path(r) for r in run_dirs]
-    if not run_dirs:
+    items = [(*load_results(r), str(r)) for r in run_dirs] + list(extra)
+    if not items:
         raise InputError("no run folders given")
     meta, frames = None, []
-    for r in run_dirs:
-        run, df = load_results(r)
-        meta = add_run(meta, run, r, run_dirs[0], SAME)
+    for run, df, label in items:
+        meta = add_run(meta, run, label, items[0][2], SAME)
         frames.append(df)
     return meta, pd.concat(frames, ignore_index=True)
 
 
+def _setting(run: dict, key: str):
+    """A run's setting as compared: a suite run's data is its suite and content hash, whatever machine made it."""
+    if key == "data" and run.get("suite"):
+        return {"suite": run["suite"]["id"], "sha256": run["suite"]["sha256"]}
+    return run.get(key)
+
+
 def add_run(meta: dict | None, run: dict, path, first, same) -> dict:
     """``meta`` (started from ``run`` when None) with ``run``'s methods and record added.
+
+    Two runs of one suite compare by the suite's content hash (their HDF5 files may differ byte for byte
+    across machines); other runs by their data identity.
 
     Raises
     ------
@@ -64,11 +81,12 @@ def add_run(meta: dict | None, run: dict, path, first, same) -> dict:
     """
     if meta is None:
         meta = {k: run[k] for k in same}
-        meta.update(methods={}, runs=[])
+        meta.update(suite=run.get("suite"), methods={}, runs=[], _first=run)
     for k in same:
-        if json.dumps(run[k], sort_keys=True) != json.dumps(meta[k], sort_keys=True):
+        if json.dumps(_setting(run, k), sort_keys=True) != json.dumps(_setting(meta["_first"], k), sort_keys=True):
             raise InputError(f"{path} was evaluated with other {k} than {first} "
-                             f"({run[k]!r} vs {meta[k]!r}); a leaderboard compares runs on the same data only")
+                             f"({_setting(run, k)!r} vs {_setting(meta['_first'], k)!r}); a leaderboard compares "
+                             "runs on the same data only")
     for name, rec in run["methods"].items():
         if name in meta["methods"]:
             raise InputError(f"method {name!r} is in both {meta['methods'][name]['run']} and {path}; "
@@ -79,39 +97,86 @@ def add_run(meta: dict | None, run: dict, path, first, same) -> dict:
 
 
 def table(meta: dict, results: pd.DataFrame) -> pd.DataFrame:
-    """Summary rows (:func:`summarize`) with ``version`` and ``reference``, ranked within each noise level."""
+    """Summary rows (:func:`summarize`) with ``version``, ``reference``, the MAE's 95 % bootstrap interval
+    (``coverage_mae_lo``, ``coverage_mae_hi``) and the paired difference of the absolute error against the best
+    baseline of the noise level (``baseline``, ``vs_baseline``, ``vs_baseline_lo``, ``vs_baseline_hi``,
+    ``vs_baseline_pairs``; points, negative = better), ranked within each noise level."""
+    from colonbench.benchmark import stats
+    from colonbench.benchmark.registry import BASELINES
+
     s = summarize(results, meta["thresholds_mm"])
     s["version"] = s["method"].map(lambda m: meta["methods"][m]["version"])
     s["reference"] = s["method"].map(lambda m: bool(meta["methods"][m]["reference"]))
+    ci = {(n, m): stats.mae_interval(g["coverage_error"], seed=zlib.crc32(f"mae|{m}".encode()))
+          for (n, m), g in results.groupby(["noise_mm", "method"])}
+    s["coverage_mae_lo"] = [ci[(n, m)]["mae_lo"] for n, m in zip(s["noise_mm"], s["method"])]
+    s["coverage_mae_hi"] = [ci[(n, m)]["mae_hi"] for n, m in zip(s["noise_mm"], s["method"])]
+    best = stats.best_baseline(s, BASELINES)
+    s["baseline"] = s["noise_mm"].map(lambda n: best.get(n, ""))
+    for c in ("vs_baseline", "vs_baseline_lo", "vs_baseline_hi", "vs_baseline_pairs"):
+        s[c] = math.nan
+    for noise, ref in best.items():
+        sub = results[results["noise_mm"] == noise]
+        d = stats.paired_against(sub, ref).set_index("method")
+        for m in d.index:
+            at = (s["noise_mm"] == noise) & (s["method"] == m)
+            s.loc[at, ["vs_baseline", "vs_baseline_lo", "vs_baseline_hi", "vs_baseline_pairs"]] = \
+                d.loc[m, ["diff", "diff_lo", "diff_hi", "pairs"]].to_numpy(float)
     s = s.sort_values(["noise_mm", "reference", "coverage_mae", "method"], na_position="last")
     cols = ["noise_mm", "method", "version", "reference"]
     return s[cols + [c for c in s.columns if c not in cols]].reset_index(drop=True)
 
 
-def _f(x, digits=2) -> str:
-    return "n/a" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{x:.{digits}f}"
+def _f(x, digits=2, sign: str = "") -> str:
+    return "n/a" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{x:{sign}.{digits}f}"
+
+
+def interval(lo, hi, sign: str = "") -> str:
+    """``[lo, hi]`` with two decimals, or an empty string when undefined."""
+    if lo is None or hi is None or math.isnan(lo) or math.isnan(hi):
+        return ""
+    return f"[{lo:{sign}.2f}, {hi:{sign}.2f}]"
+
+
+def data_line(meta: dict, unit: str) -> str:
+    """The sentence saying what was evaluated: the suite and its content hash (verified or not), or the data."""
+    d, suite = meta["data"], meta.get("suite")
+    if suite:
+        state = "verified against the published hash" if suite["verified"] else (
+            f"**unverified**: the published hash is `{suite['published_sha256'][:16]}`")
+        return (f"Suite `{suite['id']}` ({d['samples']} {unit}; content hash `{suite['sha256'][:16]}`, {state}; "
+                f"manifest `{d['manifest_name']}`, split `{d['split']}`).")
+    return (f"Data: manifest `{d['manifest_name']}` (sha256 {str(d['manifest_sha256'])[:12]}), split `{d['split']}`, "
+            f"{d['samples']} {unit} (samples sha256 {d['samples_sha256'][:12]}; not a named suite).")
 
 
 def markdown(meta: dict, tab: pd.DataFrame) -> str:
     """The leaderboard as Markdown."""
-    d = meta["data"]
-    lines = ["# colonbench leaderboard", "",
-             f"Data: manifest `{d['manifest_name']}` (sha256 {str(d['manifest_sha256'])[:12]}), split `{d['split']}`, "
-             f"{d['samples']} segments (samples sha256 {d['samples_sha256'][:12]}). Input noise: Gaussian, sigma in "
-             f"mm, seed {meta['noise_seed']}. Coverage errors in percentage points (estimated - true); precision and "
-             f"recall at {' and '.join(f'{t:g}' for t in meta['thresholds_mm'])} mm (colonbench's docs/benchmark.md).", "",
+    lines = ["# colonbench leaderboard", "", data_line(meta, "segments") + " Input noise: Gaussian, sigma in mm, "
+             f"seed {meta['noise_seed']}. Coverage errors in percentage points (estimated - true); MAE with its 95 % "
+             "bootstrap interval over segments; Δ = the paired mean difference of the absolute error against the "
+             "best baseline of the noise level, with its interval (negative: better). Precision and recall at "
+             f"{' and '.join(f'{t:g}' for t in meta['thresholds_mm'])} mm.", "",
              "Rows marked * are references that bound the problem, not methods: they are given ground truth (the GT "
              "target heatmap or centerline) or guess the training data's mean coverage.", ""]
     ths = meta["thresholds_mm"]
     for noise, g in tab.groupby("noise_mm", sort=True):
         lines += [f"## Noise sigma = {noise:g} mm", "",
-                  "| method | version | segments | MAE | median | bias | q95 | undefined | failed | s/segment |",
-                  "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
+                  "| method | version | segments | MAE [95 % CI] | Δ vs best baseline [95 % CI] | median | bias | q95 "
+                  "| undefined | failed | s/segment |",
+                  "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
         for _, r in g.iterrows():
             name = r["method"] + (" *" if r["reference"] else "")
-            lines.append(f"| {name} | {r['version']} | {r['segments']} | {_f(r['coverage_mae'])} | "
+            vs = ("(best baseline)" if r["method"] == r["baseline"] else
+                  f"{_f(r['vs_baseline'], 2, '+')} {interval(r['vs_baseline_lo'], r['vs_baseline_hi'], '+')}"
+                  if r["baseline"] and not math.isnan(r["vs_baseline"]) else "n/a")
+            lines.append(f"| {name} | {r['version']} | {r['segments']} | {_f(r['coverage_mae'])} "
+                         f"{interval(r['coverage_mae_lo'], r['coverage_mae_hi'])} | {vs} | "
                          f"{_f(r['coverage_median'])} | {_f(r['coverage_bias'])} | {_f(r['coverage_q95'])} | "
                          f"{r['coverage_undefined']} | {r['failed']} | {_f(r['seconds'], 3)} |")
+        base = g["baseline"].iloc[0] if len(g) else ""
+        if base:
+            lines += ["", f"Best baseline at this noise level: `{base}`."]
         head = ["method"] + [f"{w} {pr} @{t:g}" for t in ths for w in ("holes", "centerline") for pr in ("P", "R")]
         lines += ["", "Precision (P) and recall (R), mean (median); undefined segments in the last column.", "",
                   "| " + " | ".join(head) + " | undefined (holes / centerline) |",
@@ -128,16 +193,49 @@ def markdown(meta: dict, tab: pd.DataFrame) -> str:
                      f"{max(r[f'centerline_precision_{t2}_undefined'], r[f'centerline_recall_{t2}_undefined'])}")
             lines.append(f"| {r['method'] + (' *' if r['reference'] else '')} | " + " | ".join(cells) + f" | {undef} |")
         lines.append("")
-    lines += ["Runs: " + ", ".join(f"`{r['path']}`" for r in meta["runs"]) + ". Rebuild with "
-              "`colonbench leaderboard RUN... --out DIR`.", ""]
+    lines += ["Breakdowns by hole model, segment length, true coverage, unseen end and noise: breakdowns.md. Runs: "
+              + ", ".join(f"`{r['path']}`" for r in meta["runs"]) + ".", ""]
     return "\n".join(lines)
 
 
-def write_leaderboard(run_dirs, out, figures: bool = True) -> dict:
+def breakdowns(results: pd.DataFrame) -> pd.DataFrame:
+    """MAE with its interval and bias per method, noise level and group, for every grouping of
+    :data:`colonbench.benchmark.stats.BREAKDOWNS` that has more than one group."""
+    from colonbench.benchmark import stats
+
+    frames = [stats.breakdown(results, by) for by in stats.BREAKDOWNS]
+    frames = [f for f in frames if f["group"].nunique() > 1 or f["by"].eq("noise_mm").all() and len(f)]
+    return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(columns=stats.BREAKDOWN_COLUMNS)
+
+
+def breakdown_markdown(meta: dict, bd: pd.DataFrame) -> str:
+    """The breakdowns as Markdown: per grouping and noise level, methods x groups, MAE [95 % CI] (n)."""
+    lines = ["# colonbench leaderboard: breakdowns", "", data_line(meta, "segments") + " Coverage MAE in points "
+             "with its 95 % bootstrap interval over the group's segments, and the group's size.", ""]
+    titles = {"hole_model": "hole model", "length_mm": "segment length, mm", "true_coverage": "true coverage",
+              "unseen_end": "an end never seen", "noise_mm": "noise sigma, mm"}
+    for by, g in bd.groupby("by", sort=False):
+        noises = [None] if by == "noise_mm" else sorted(g["noise_mm"].unique())
+        for noise in noises:
+            h = g if noise is None else g[g["noise_mm"] == noise]
+            groups = sorted(h["group"].unique(), key=lambda x: (len(x), x)) if by != "true_coverage" else \
+                sorted(h["group"].unique())
+            lines += [f"## By {titles.get(by, by)}" + ("" if noise is None else f", noise {noise:g} mm"), "",
+                      "| method | " + " | ".join(groups) + " |", "|---|" + "---:|" * len(groups)]
+            for m, r in h.groupby("method", sort=True):
+                cells = {x["group"]: f"{_f(x['mae'])} {interval(x['mae_lo'], x['mae_hi'])} ({x['segments']})"
+                         for _, x in r.iterrows()}
+                lines.append(f"| {m} | " + " | ".join(cells.get(c, "") for c in groups) + " |")
+            lines.append("")
+    return "\n".join(lines)
+
+
+def write_leaderboard(run_dirs, out, figures: bool = True, extra=()) -> dict:
     """Write ``leaderboard.md``, ``.csv`` and ``.json`` (and the figures) for runs on the same data.
 
     Whole-colon runs (``evaluate --task colon``) get their own leaderboard
-    (:func:`colonbench.reports.colon_leaderboard.write_colon_leaderboard`).
+    (:func:`colonbench.reports.colon_leaderboard.write_colon_leaderboard`). ``extra``: runs already loaded,
+    as :func:`merge_runs` takes them (whole-colon ones as ``(run, segments, colons, label)``).
 
     Returns
     -------
@@ -146,23 +244,27 @@ def write_leaderboard(run_dirs, out, figures: bool = True) -> dict:
     """
     from colonbench.benchmark.colon_evaluate import is_colon_run
 
-    colon = [is_colon_run(r) for r in run_dirs]
+    colon = [is_colon_run(r) for r in run_dirs] + [item[0].get("task") == "colon" for item in extra]
     if any(colon):
         if not all(colon):
             raise InputError("some runs are whole-colon runs (evaluate --task colon) and some segment runs; a "
                              "leaderboard compares runs of one task")
         from colonbench.reports.colon_leaderboard import write_colon_leaderboard
 
-        return write_colon_leaderboard(run_dirs, out, figures=figures)
-    meta, results = merge_runs(run_dirs)
+        return write_colon_leaderboard(run_dirs, out, figures=figures, extra=extra)
+    meta, results = merge_runs(run_dirs, extra)
     tab = table(meta, results)
+    bd = breakdowns(results)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     text = markdown(meta, tab)
-    paths = [out / "leaderboard.md", out / "leaderboard.csv", out / "leaderboard.json"]
+    paths = [out / "leaderboard.md", out / "leaderboard.csv", out / "leaderboard.json", out / "breakdowns.md",
+             out / "breakdowns.csv"]
     paths[0].write_text(text)
     tab.to_csv(paths[1], index=False)
-    paths[2].write_text(json.dumps({"data": meta["data"], "noise_mm": meta["noise_mm"],
+    paths[3].write_text(breakdown_markdown(meta, bd))
+    bd.to_csv(paths[4], index=False)
+    paths[2].write_text(json.dumps({"data": meta["data"], "suite": meta["suite"], "noise_mm": meta["noise_mm"],
                                     "noise_seed": meta["noise_seed"], "thresholds_mm": meta["thresholds_mm"],
                                     "methods": meta["methods"], "runs": meta["runs"],
                                     "rows": json.loads(tab.to_json(orient="records"))}, indent=1))

@@ -18,7 +18,7 @@ import argparse
 import resource
 import time
 
-from colonbench.mapping.colonmap import CONTEXT_MM
+from colonbench.mapping import CONTEXT_MM
 
 
 def main() -> None:

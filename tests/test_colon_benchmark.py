@@ -163,3 +163,38 @@ def test_colon_task_refuses_bad_input(colon_dataset, smoke_dataset, tmp_path, ca
     assert main(["evaluate", str(data), "--task", "colon", "--methods", "gt-heatmap", "--out", str(tmp_path / "g"),
                  "--quiet"]) == 2
     assert "ground truth" in capsys.readouterr().err
+
+
+def test_a_program_maps_whole_colons_through_exec(colon_dataset, tmp_path):
+    """exec: on whole colons: one call per map with the clouds of the segments the map estimates, each answered
+    by id in both tracks; the rows match the built-in constant guess segment for segment."""
+    import sys
+
+    from colonbench.benchmark.colon_evaluate import evaluate_colons
+
+    program = tmp_path / "point_eight.py"
+    program.write_text("import json, sys\nfrom pathlib import Path\na = sys.argv[1:]\n"
+                       "out = Path(a[a.index('--out-dir') + 1]); out.mkdir(parents=True, exist_ok=True)\n"
+                       "for f in a[:a.index('--out-dir')]:\n"
+                       "    (out / (Path(f).stem + '.json')).write_text(json.dumps({'coverage': 0.8}))\n")
+    data, _ = colon_dataset
+    run = evaluate_colons(data, [f"exec:{sys.executable} {program}", "constant"], tmp_path / "run", noise=[0],
+                          contexts=[0, 15], progress=False)
+    from colonbench.benchmark.runfolder import read_rows
+
+    seg = read_rows(run / "results" / "segments.csv")   # error "" where there is none
+    mine, const = seg[seg["method"] == "point_eight"], seg[seg["method"] == "constant"]
+    key = ["track", "index", "segment"]
+    a, b = mine.set_index(key).sort_index(), const.set_index(key).sort_index()
+    assert a.index.equals(b.index) and len(a) > 10
+    guess = const["coverage"].mode().iloc[0]
+    plain = b["coverage"] == guess   # segments estimated whole (no unreconstructed stretch added)
+    assert plain.sum() > 5 and np.allclose(a.loc[plain, "coverage"], 0.8)
+    assert a["error"].eq(b["error"]).all()
+    # both tracks give the program each segment's own points: the same answers
+    assert np.allclose(a.xs("segment-only")["coverage"], a.xs("context-15mm")["coverage"], equal_nan=True)
+    from colonbench.mapping.colonmap import MIN_POINTS
+
+    answers = sorted((run / "predictions" / "point_eight").glob("*.json"))
+    assert len(answers) == int((a.xs("segment-only")["points"] >= MIN_POINTS).sum())   # one per estimated segment
+    assert all("_seg" in p.stem and p.stem.startswith("test_colon-00000_") for p in answers)

@@ -1,0 +1,105 @@
+"""What crosses the benchmark's boundary to a method outside it: sample ids, input files, prediction files.
+
+A method that is not a Python class in colonbench's environment (a C++ SLAM
+post-processor, a network in its own conda environment) sees a suite as
+files and answers with files (docs/formats.md):
+
+* **inputs**: one PLY per evaluated cloud (binary little-endian, float64
+  ``x, y, z`` in mm, noise already added), named by its :func:`sample_id`,
+  and ``index.csv`` listing them (``sample_id, file, noise_mm, points``); no truth;
+* **predictions**: ``<sample_id>.json`` per input, the JSON of ``colonbench
+  estimate``: ``{"coverage": float in [0, 1], "holes": [[x, y, z], ...],
+  "centerline": [[x, y, z], ...]}`` in mm, the input's frame (more keys are allowed).
+
+:func:`read_prediction` checks a prediction file and says in one line what is
+wrong with it; the benchmark records that as the segment's failure.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+from colonbench.errors import InputError
+from colonbench.estimate import Estimate, points_array
+
+#: Columns of an export's ``index.csv``.
+INDEX_COLUMNS = ["sample_id", "file", "noise_mm", "points"]
+INDEX_NAME = "index.csv"
+#: The export's own record: suite, hash, counts.
+EXPORT_NAME = "suite.json"
+
+
+def sample_id(shard_name: str, index: int, sigma: float) -> str:
+    """The id of one evaluated cloud: ``<split>_<shard stem>_<index>_noise<sigma>``.
+
+    Examples
+    --------
+    >>> sample_id("test/colon-00003-50mm.h5", 2, 0.5)
+    'test_colon-00003-50mm_002_noise0.5'
+    """
+    stem = Path(shard_name).with_suffix("").as_posix().replace("/", "_")
+    return f"{stem}_{int(index):03d}_noise{float(sigma):g}"
+
+
+def segment_id(sample: str, segment: int) -> str:
+    """The id of segment ``segment`` of a whole-colon map of sample ``sample`` (``<sample>_seg<k>``)."""
+    return f"{sample}_seg{int(segment):03d}"
+
+
+def write_input(path, points) -> Path:
+    """One input cloud as a binary PLY of float64 x, y, z (mm), written atomically."""
+    from colonbench.datagen.generate import write_points_ply
+
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.tmp")
+    write_points_ply(tmp, points)
+    tmp.replace(path)
+    return path
+
+
+def write_index(folder, rows: list[dict]) -> Path:
+    """``index.csv`` of an input folder (columns :data:`INDEX_COLUMNS`)."""
+    import pandas as pd
+
+    path = Path(folder) / INDEX_NAME
+    pd.DataFrame(rows, columns=INDEX_COLUMNS).to_csv(path, index=False)
+    return path
+
+
+def read_prediction(path, method: str = "predictions") -> Estimate:
+    """A prediction file, checked.
+
+    Parameters
+    ----------
+    path : path
+        ``<sample_id>.json``.
+    method : str
+        The name the estimate is given.
+
+    Raises
+    ------
+    InputError
+        No such file, not a JSON object, ``coverage`` missing, not a number, NaN or outside [0, 1], or
+        ``holes`` / ``centerline`` not (n, 3) finite numbers; the message names the file and the fault.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"no prediction {path.name}")
+    try:
+        obj = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(f"{path.name}: not valid JSON ({exc})") from None
+    if not isinstance(obj, dict):
+        raise InputError(f"{path.name}: a JSON {type(obj).__name__}, expected an object with 'coverage'")
+    if "coverage" not in obj:
+        raise InputError(f"{path.name}: no 'coverage'")
+    c = obj["coverage"]
+    if isinstance(c, bool) or not isinstance(c, (int, float)):
+        raise InputError(f"{path.name}: coverage {c!r} is not a number")
+    c = float(c)
+    if math.isnan(c) or not 0.0 <= c <= 1.0:
+        raise InputError(f"{path.name}: coverage {c} is not a fraction in [0, 1]")
+    return Estimate(c, points_array(obj.get("holes"), "holes", path.name),
+                    points_array(obj.get("centerline"), "centerline", path.name), method)

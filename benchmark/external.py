@@ -1,0 +1,218 @@
+"""Methods outside colonbench's environment: a folder of predictions, or any program run on input files.
+
+``predictions:DIR`` (:class:`PredictionMethod`) reads ``DIR/<sample_id>.json``
+for each evaluated cloud (``colonbench export`` writes the inputs,
+``colonbench score`` scores such a folder). ``exec:PROGRAM ARGS``
+(:class:`ExecMethod`) runs the program exactly as ``colonbench estimate`` is
+called, ``PROGRAM ARGS FILE... --out-dir DIR``, on batches of input PLYs named
+by sample id, and then reads its predictions the same way. A missing or
+malformed prediction, a crash or a timeout is that segment's failure in the
+results (its message says which), never the run's.
+
+Both are matched to the clouds they answer by sample id; in a whole-colon map,
+where the benchmark cuts the segments itself, a segment's cloud is matched by
+its content (:func:`content_key`) to the id it was written under.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import shlex
+import signal
+import subprocess
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+from colonbench.benchmark.exchange import read_prediction, write_input
+from colonbench.errors import InputError
+
+#: Inputs per program call by default, and seconds allowed per input.
+BATCH = 64
+TIMEOUT_S = 300.0
+#: The program's wall time per input, one ``sample_id,seconds`` line per input, in its predictions folder.
+SECONDS_NAME = "seconds.csv"
+#: Interpreters whose next argument names the method (``exec:python my_method.py`` is ``my_method``).
+INTERPRETERS = {"python", "python3", "bash", "sh", "Rscript", "julia", "node", "conda", "uv", "pixi", "env",
+                "matlab", "octave"}
+
+
+def content_key(points) -> str:
+    """A key of a cloud's exact values (the same array gives the same key)."""
+    return hashlib.sha1(np.ascontiguousarray(points, dtype=np.float64).tobytes()).hexdigest()
+
+
+class PredictionMethod:
+    """Predictions read from a folder of ``<sample_id>.json`` files (docs/formats.md).
+
+    Parameters
+    ----------
+    folder : path
+    name : str
+    version : str, optional
+        Default: a sha256 of the folder's prediction files (``files:<12 hex>``), so that another set of
+        predictions is another version.
+    """
+
+    #: The benchmark gives this method its sample ids (:meth:`predicted`) instead of clouds.
+    by_sample = True
+    #: It returns no completed mesh: in a whole-colon map it is given each segment's own points.
+    completes_surface = False
+
+    def __init__(self, folder, name: str = "predictions", version: str | None = None):
+        self.folder = Path(folder)
+        self.name = name
+        self.version = version if version is not None else f"files:{_folder_digest(self.folder)}"
+        self.lookup: dict[str, str] = {}
+
+    def predicted(self, sid: str):
+        """The checked estimate of sample ``sid`` (:func:`colonbench.benchmark.exchange.read_prediction`), with
+        the program's wall time per input of its call as ``seconds["program"]`` where it was timed.
+
+        Raises
+        ------
+        InputError
+            Why there is none: the program's failure recorded for it, or what is wrong with its file.
+        """
+        failure = self.folder / f"{sid}.error"
+        if failure.is_file() and not (self.folder / f"{sid}.json").is_file():
+            raise InputError(failure.read_text().strip())
+        est = read_prediction(self.folder / f"{sid}.json", self.name)
+        seconds = self._seconds().get(sid)
+        if seconds is not None:
+            est.seconds = {"program": seconds}
+        return est
+
+    def _seconds(self) -> dict:
+        timing = self.folder / SECONDS_NAME
+        if not hasattr(self, "_timing") and timing.is_file():
+            rows = (line.split(",") for line in timing.read_text().splitlines() if "," in line)
+            self._timing = {sid: float(s) for sid, s in rows}
+        return getattr(self, "_timing", {})
+
+    def estimate(self, points):
+        """The prediction of a cloud the benchmark wrote under a sample id (:attr:`lookup`)."""
+        sid = self.lookup.get(content_key(points))
+        if sid is None:
+            raise InputError(f"method {self.name!r} answers by sample id; this cloud is not one of the inputs it "
+                             "was given (run it with colonbench benchmark, evaluate or score)")
+        return self.predicted(sid)
+
+
+class ExecMethod(PredictionMethod):
+    """Any program that takes input files and writes ``<out-dir>/<name>.json`` as ``colonbench estimate`` does.
+
+    Parameters
+    ----------
+    command : str
+        ``PROGRAM ARGS``, split as a shell would (no shell runs it).
+    predictions : path
+        Folder its outputs go to (``<run>/predictions``); this method's own subfolder is made in it.
+    name : str, optional
+        Default: the program's file stem (after an interpreter such as ``python``).
+    timeout : float
+        Seconds allowed per input file; a call gets that times its number of files.
+    batch : int
+        Input files per call.
+    """
+
+    def __init__(self, command: str, predictions=None, name: str | None = None, timeout: float = TIMEOUT_S,
+                 batch: int = BATCH):
+        try:
+            self.argv = shlex.split(command)
+        except ValueError as exc:
+            raise InputError(f"exec:{command}: cannot split the command line ({exc})") from None
+        if not self.argv:
+            raise InputError("exec: needs a program, e.g. exec:python my_method.py")
+        if timeout <= 0 or batch < 1:
+            raise InputError(f"exec: timeout must be positive and batch at least 1, got {timeout} and {batch}")
+        self.command, self.timeout, self.batch = command, float(timeout), int(batch)
+        self._lock = threading.Lock()
+        name = name or default_name(self.argv)
+        root = Path(predictions) if predictions is not None else Path(tempfile.mkdtemp(prefix="colonbench-exec-"))
+        super().__init__(root / name, name, "command:" + hashlib.sha256(command.encode()).hexdigest()[:12])
+
+    def missing(self, sids) -> list[str]:
+        """The ids among ``sids`` with neither a prediction nor a recorded failure."""
+        return [s for s in sids if not (self.folder / f"{s}.json").is_file()
+                and not (self.folder / f"{s}.error").is_file()]
+
+    def run(self, items, workers: int = 1, progress=None) -> None:
+        """Run the program on ``items`` (``(sample id, points)`` pairs) that have no answer yet, in batches.
+
+        Parameters
+        ----------
+        items : iterable of (str, (n, 3) float)
+        workers : int
+            Calls at the same time.
+        progress : callable, optional
+            Called with the number of inputs of each finished call.
+        """
+        from concurrent.futures import ThreadPoolExecutor
+
+        todo = [(s, p) for s, p in items if self.missing([s])]
+        if not todo:
+            return
+        self.folder.mkdir(parents=True, exist_ok=True)
+        batches = [todo[k:k + self.batch] for k in range(0, len(todo), self.batch)]
+        with ThreadPoolExecutor(max(1, workers)) as pool:
+            for n in pool.map(self._call, batches):
+                if progress is not None:
+                    progress(n)
+
+    def _call(self, batch) -> int:
+        t = time.perf_counter()
+        with tempfile.TemporaryDirectory(prefix="colonbench-inputs-") as tmp:
+            files = [str(write_input(Path(tmp) / f"{sid}.ply", pts)) for sid, pts in batch]
+            limit = self.timeout * len(files)
+            why = _run_program(self.argv + files + ["--out-dir", str(self.folder)], limit, len(files))
+        per_input = (time.perf_counter() - t) / len(batch)
+        with self._lock, open(self.folder / SECONDS_NAME, "a") as fh:
+            fh.writelines(f"{sid},{per_input:.4f}\n" for sid, _ in batch)
+        for sid, _ in batch:
+            if not (self.folder / f"{sid}.json").is_file():
+                (self.folder / f"{sid}.error").write_text(
+                    f"{self.name}: no prediction {sid}.json" + (f" ({why})" if why else "") + "\n")
+        return len(batch)
+
+
+def _run_program(argv: list[str], limit: float, files: int) -> str:
+    """Run a program in its own process group; '' on success, else why it failed (one line)."""
+    t = time.perf_counter()
+    try:
+        proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True)
+    except OSError as exc:
+        return f"the program could not start: {exc.strerror or exc}: {argv[0]}"
+    try:
+        _, err = proc.communicate(timeout=limit)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.communicate()
+        return f"the program was stopped after {limit:.0f} s, the time allowed for its {files} input(s)"
+    if proc.returncode == 0:
+        return ""
+    tail = " ".join(err.decode(errors="replace").strip().splitlines()[-2:])[-300:]
+    return f"the program exited with status {proc.returncode} after {time.perf_counter() - t:.1f} s" + (
+        f": {tail}" if tail else "")
+
+
+def default_name(argv: list[str]) -> str:
+    """A method name from a command line: the program's stem, or the script's after an interpreter."""
+    words = [w for w in argv if not w.startswith("-")]
+    first = Path(words[0]).name if words else "exec"
+    if first in INTERPRETERS and len(words) > 1:
+        first = words[1]
+    return Path(first).stem or "exec"
+
+
+def _folder_digest(folder: Path) -> str:
+    h = hashlib.sha256()
+    if folder.is_dir():
+        for p in sorted(folder.glob("*.json")):
+            h.update(p.name.encode())
+            h.update(hashlib.sha256(p.read_bytes()).digest())
+    return h.hexdigest()[:12]

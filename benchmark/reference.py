@@ -1,0 +1,98 @@
+"""The built-in methods' reference results on every suite, shipped with colonbench.
+
+``benchmark/reference/<suite id>/`` is a run folder without its working
+files: ``run.json`` (suite, content hash, methods with their versions,
+package versions, how long it took) and ``results/`` (segment suites:
+``<method>.csv`` per segment and ``<method>.json`` summary; the whole-colon
+suite: ``segments.csv`` and ``colons.csv``). ``colonbench benchmark`` merges
+them into its leaderboards when their suite hash is the published one, so a
+user runs only their own method; a method the user evaluates themselves
+replaces its shipped rows.
+
+They are made by ``python scripts/reference_results.py`` (every built-in
+method on every suite, then :func:`publish`), never edited by hand.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import pandas as pd
+
+from colonbench.benchmark.runfolder import RUN_FILE, read_rows, read_run, write_json
+from colonbench.errors import InputError
+
+#: Where the shipped results live in the package.
+REFERENCE_DIR = Path(__file__).resolve().parent / "reference"
+#: Significant digits kept of each float in a shipped CSV.
+DIGITS = 10
+
+
+def folder(suite) -> Path:
+    """The shipped results folder of a suite."""
+    return REFERENCE_DIR / suite.id
+
+
+def load(suite, exclude=()) -> tuple | None:
+    """The shipped results of a suite as a loaded run, less the methods in ``exclude``; None when there are
+    none, or when they were made on other data than the published suite (another hash).
+
+    Returns
+    -------
+    tuple or None
+        Segment suites ``(run record, results, label)``; whole colons ``(run record, segments, colons, label)``
+        (:func:`colonbench.reports.leaderboard.merge_runs` and ``merge_colon_runs`` take them).
+    """
+    where = folder(suite)
+    if not (where / RUN_FILE).is_file():
+        return None
+    run = read_run(where)
+    if (run.get("suite") or {}).get("sha256") != suite.sha256:
+        return None
+    methods = {n: r for n, r in run["methods"].items() if n not in set(exclude)}
+    if not methods:
+        return None
+    run = {**run, "methods": methods}
+    label = f"shipped {suite.id}"
+    if run.get("task") == "colon":
+        segs = read_rows(where / "results" / "segments.csv")
+        cols = read_rows(where / "results" / "colons.csv")
+        return run, segs[segs["method"].isin(methods)], cols[cols["method"].isin(methods)], label
+    frames = [read_rows(where / "results" / f"{n}.csv") for n in methods]
+    return run, pd.concat(frames, ignore_index=True), label
+
+
+def publish(run_dir, suite) -> Path:
+    """Copy a finished run of a suite into the shipped results (replacing what was there).
+
+    Raises
+    ------
+    InputError
+        The run is not of this suite, not verified against its published hash, or not finished.
+    """
+    run_dir = Path(run_dir)
+    run = read_run(run_dir)
+    rec = run.get("suite") or {}
+    if rec.get("id") != suite.id or not rec.get("verified") or rec.get("sha256") != suite.sha256:
+        raise InputError(f"{run_dir}: not a verified run of {suite.id} (its suite record: {rec or 'none'})")
+    if not run.get("complete"):
+        raise InputError(f"{run_dir}: not finished")
+    out = folder(suite)
+    if out.exists():
+        shutil.rmtree(out)
+    (out / "results").mkdir(parents=True)
+    run = {k: v for k, v in run.items() if k != "data_path"}
+    names = ["segments.csv", "colons.csv"] if run.get("task") == "colon" else \
+        [f"{n}.{ext}" for n in run["methods"] for ext in ("csv", "json")]
+    for name in names:
+        src = run_dir / "results" / name
+        if name.endswith(".csv"):
+            read_rows(src).to_csv(out / "results" / name, index=False, float_format=f"%.{DIGITS}g")
+        else:
+            summary = json.loads(src.read_text())
+            summary.pop("data_path", None)
+            write_json(out / "results" / name, summary)
+    write_json(out / RUN_FILE, run)
+    return out

@@ -1,0 +1,155 @@
+"""Run folders: their record (``run.json``), their CSV and JSON files, written atomically, and who may extend them.
+
+A run folder is made by ``colonbench evaluate`` (segments or whole colons),
+``colonbench benchmark`` (one per suite) or ``colonbench score``. Its
+``run.json`` says what was evaluated (data identity, suite and hash, noise,
+metric settings, methods with their versions, package versions, sessions); a
+rerun with the same settings finishes it or adds methods, and anything else is
+refused (:class:`RunMismatch`).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from colonbench._version import __version__
+from colonbench.errors import InputError
+
+RUN_FILE = "run.json"
+RUN_FORMAT = "colonbench-run"
+RUN_FORMAT_VERSION = 1
+
+
+class RunMismatch(InputError):
+    """The run folder holds a run with other data, settings or method versions."""
+
+
+def write_csv(path: Path, rows, columns: list[str] | None = None) -> Path:
+    """Rows (a DataFrame, or dicts with ``columns``) as CSV, atomically."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    df = rows if isinstance(rows, pd.DataFrame) else pd.DataFrame(rows, columns=columns)
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    df.to_csv(tmp, index=False)
+    tmp.replace(path)
+    return path
+
+
+def read_rows(path) -> pd.DataFrame:
+    """A per-segment (or per-map) results CSV; ``error`` is "" where there was none."""
+    df = pd.read_csv(path, dtype={"error": str, "shard": str, "method": str, "hole_model": str})
+    df["error"] = df["error"].fillna("")
+    return df
+
+
+def json_default(o):
+    """numpy scalars for :func:`json.dumps`."""
+    if isinstance(o, (np.floating, np.integer)):
+        return o.item()
+    if isinstance(o, np.bool_):
+        return bool(o)
+    raise TypeError(f"not JSON serializable: {type(o).__name__}")
+
+
+def write_json(path: Path, obj: dict) -> Path:
+    """A JSON file, atomically (numpy scalars allowed)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    tmp.write_text(json.dumps(obj, indent=1, default=json_default))
+    tmp.replace(path)
+    return path
+
+
+def versions() -> dict:
+    """Versions of colonbench, Python and the libraries that shape the numbers."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    out = {"colonbench": __version__, "python": platform.python_version()}
+    for pkg in ("numpy", "scipy", "scikit-image", "scikit-fmm", "edt", "torch", "monai", "h5py"):
+        try:
+            out[pkg] = version(pkg)
+        except PackageNotFoundError:
+            pass
+    return out
+
+
+def method_record(spec: str, m) -> dict:
+    """What a run keeps of a method: how it was named, its version, whether it is a reference, its class."""
+    return {"spec": spec, "version": str(getattr(m, "version", "unversioned")),
+            "uses_truth": bool(getattr(m, "uses_truth", False)),
+            "reference": bool(getattr(m, "reference", getattr(m, "uses_truth", False))),
+            "class": f"{type(m).__module__}.{type(m).__qualname__}"}
+
+
+def open_run(out: Path, settings: dict, methods: dict[str, dict]) -> dict:
+    """The run record: a new one, or the existing one extended by new methods (after checking it matches)."""
+    path = out / RUN_FILE
+    if path.exists():
+        try:
+            run = json.loads(path.read_text())
+        except json.JSONDecodeError as exc:
+            raise InputError(f"{path}: unreadable ({exc})") from None
+        if run.get("format") != RUN_FORMAT:
+            raise InputError(f"{path}: not a colonbench run")
+        for key, value in settings.items():
+            if json.dumps(run.get(key), sort_keys=True) != json.dumps(value, sort_keys=True, default=json_default):
+                raise RunMismatch(f"{out} is a run with other {key} ({run.get(key)!r}, now {value!r}); "
+                                  "evaluate into a new run folder")
+        for name, rec in methods.items():
+            old = run["methods"].get(name)
+            if old is not None and old["version"] != rec["version"]:
+                raise RunMismatch(f"{out}: method {name!r} was evaluated as version {old['version']!r}, it is now "
+                                  f"{rec['version']!r}; evaluate into a new run folder")
+            run["methods"].setdefault(name, rec)
+    else:
+        run = {"format": RUN_FORMAT, "format_version": RUN_FORMAT_VERSION, **settings, "methods": dict(methods),
+               "sessions": []}
+    return run
+
+
+def check_run_folder(out: Path) -> None:
+    """Create a run folder, refusing a non-empty folder that holds no run."""
+    out = Path(out)
+    if out.is_dir() and not (out / RUN_FILE).exists() and any(not p.name.startswith(".") for p in out.iterdir()):
+        raise InputError(f"{out} is not empty and holds no {RUN_FILE}; give a new or empty run folder")
+    out.mkdir(parents=True, exist_ok=True)
+
+
+def begin_run(out: Path, settings: dict, loaded: dict, data: Path) -> dict:
+    """Open (or extend) the run record of a locked run folder, write it, and clear leftovers of killed runs."""
+    records = {name: method_record(spec, m) for name, (spec, m) in loaded.items()}
+    run = open_run(out, settings, records)
+    run["versions"] = run.get("versions") or versions()
+    run["data_path"] = str(data)
+    write_json(out / RUN_FILE, run)
+    for tmp in out.rglob(".*.tmp*"):
+        tmp.unlink()
+    return run
+
+
+def read_run(run_dir) -> dict:
+    """A run folder's record.
+
+    Raises
+    ------
+    InputError
+        Not a run folder, unreadable, or of another format version.
+    """
+    run_dir = Path(run_dir)
+    path = run_dir / RUN_FILE
+    if not path.is_file():
+        raise InputError(f"{run_dir}: not a colonbench run (no {RUN_FILE}); colonbench evaluate writes one")
+    try:
+        run = json.loads(path.read_text())
+    except json.JSONDecodeError as exc:
+        raise InputError(f"{path}: unreadable ({exc})") from None
+    if run.get("format") != RUN_FORMAT or run.get("format_version") != RUN_FORMAT_VERSION:
+        raise InputError(f"{path}: not a colonbench run of format version {RUN_FORMAT_VERSION}")
+    return run

@@ -1,0 +1,213 @@
+"""The benchmark in one call: suites made where missing, methods evaluated, shipped results merged, tables written.
+
+:func:`run_benchmark` is ``colonbench benchmark`` (and ``colonbench.benchmark(...)`` from Python):
+
+1. each suite's data is generated where it is missing into the data folder
+   (``root/<suite id>``, cached and resumable) and checked against its
+   published content hash;
+2. the methods are evaluated on it into ``RUN/runs/<suite id>/`` (a run
+   folder of ``colonbench evaluate``: resumable, in parallel or on Dask);
+3. the shipped reference results of the built-in methods
+   (:mod:`colonbench.benchmark.reference`) join them, except for methods the
+   user evaluated themselves;
+4. per suite ``RUN/suites/<suite id>/leaderboard.md`` (and ``.csv``, ``.json``,
+   breakdowns, figures), and across suites ``RUN/leaderboard.md``, ``.csv``
+   and ``.json`` (:mod:`colonbench.reports.benchmark_report`).
+
+:func:`export_suite` and :func:`score_suite` are the offline route: inputs
+written as files, predictions made anywhere, then scored into a run folder
+that ``colonbench leaderboard`` (or :func:`write_report`) merges with the
+shipped results.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+from colonbench.benchmark import reference, suites
+from colonbench.errors import InputError
+
+
+def _evaluate(suite, data, methods, run_dir, **kw) -> Path:
+    from colonbench.benchmark.colon_evaluate import evaluate_colons
+    from colonbench.benchmark.evaluate import evaluate
+
+    if suite.task == "colon":
+        kw.pop("examples", None)
+        return evaluate_colons(data, methods, run_dir, noise=suite.noise_mm, contexts=suite.contexts_mm,
+                               segment_mm=suite.segment_mm, split=suite.split, limit=suite.limit,
+                               noise_seed=suite.noise_seed, **kw)
+    return evaluate(data, methods, run_dir, noise=suite.noise_mm, split=suite.split, limit=suite.limit,
+                    noise_seed=suite.noise_seed, **kw)
+
+
+def _check_suite_run(run_dir: Path, suite) -> None:
+    from colonbench.benchmark.runfolder import read_run
+
+    rec = read_run(run_dir).get("suite") or {}
+    if rec.get("id") != suite.id:
+        raise InputError(f"{run_dir}: the data evaluated is not suite {suite.id} (it was made from another manifest "
+                         "or selection); use a new data folder")
+
+
+def run_benchmark(methods=(), suites_=("demo-v1",), out="runs/benchmark", data=None, workers: int = 1,
+                  scheduler=None, model=None, device: str = "cpu", allow_unverified: bool = False,
+                  shipped: bool = True, timeout: float | None = None, batch: int | None = None,
+                  figures: bool = True, progress: bool = True) -> dict:
+    """Evaluate methods on named suites and write the cross-suite leaderboard.
+
+    Parameters
+    ----------
+    methods : list of str or method objects
+        Registered names, ``module:Class``, ``exec:PROGRAM ARGS``, ``predictions:DIR`` (``NAME=`` before any
+        of them names its row), or objects with ``name`` and ``estimate(points)``. May be empty: the
+        shipped results alone.
+    suites_ : str or list of str or Suite
+        Suite ids or names, or ``"all"``.
+    out : path
+        The benchmark run folder.
+    data : path, optional
+        Where suite data is cached (default :func:`colonbench.benchmark.suites.default_data_root`).
+    workers, scheduler
+        Local processes, or a Dask scheduler address, for generating and evaluating.
+    model, device
+        For the built-in methods built on the network.
+    allow_unverified : bool
+        Evaluate suite data whose content hash is not the published one (results say ``unverified``; the
+        shipped results then stay out).
+    shipped : bool
+        Merge the shipped reference results.
+    timeout, batch
+        ``exec:`` methods: seconds per input, inputs per call.
+    figures, progress : bool
+
+    Returns
+    -------
+    dict
+        ``summary`` (the cross-suite table), ``markdown``, ``paths`` (written files), ``runs`` (per suite id).
+    """
+    from colonbench.reports.benchmark_report import write_report
+
+    chosen = suites.parse(suites_) if isinstance(suites_, str) else \
+        [s if isinstance(s, suites.Suite) else suites.get(s) for s in suites_]
+    methods = [methods] if isinstance(methods, str) or not isinstance(methods, (list, tuple)) else list(methods)
+    methods = [m.strip() if isinstance(m, str) else m for m in methods if not isinstance(m, str) or m.strip()]
+    if not methods and not shipped:
+        raise InputError("no methods to evaluate and --no-shipped: nothing to show")
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    runs, timing = {}, {}
+    for suite in chosen:
+        if not methods:
+            continue
+        t0 = time.perf_counter()
+        data_dir = suites.ensure_data(suite, data, workers=workers, scheduler=scheduler, progress=progress)
+        t1 = time.perf_counter()
+        run_dir = out / "runs" / suite.id
+        _evaluate(suite, data_dir, methods, run_dir, workers=workers, scheduler=scheduler, model=model,
+                  device=device, progress=progress, allow_unverified=allow_unverified, timeout=timeout, batch=batch)
+        _check_suite_run(run_dir, suite)
+        runs[suite.id] = run_dir
+        timing[suite.id] = {"data_seconds": round(t1 - t0, 1), "evaluate_seconds": round(time.perf_counter() - t1, 1)}
+    result = write_report(out, chosen, runs, shipped=shipped, figures=figures)
+    result["runs"], result["seconds"] = runs, timing
+    return result
+
+
+def export_suite(suite, out, data=None, workers: int = 1, scheduler=None, allow_unverified: bool = False,
+                 progress: bool = True) -> dict:
+    """Write a suite's inputs only: one PLY per evaluated cloud (noise added), ``index.csv``, ``suite.json``.
+
+    A whole-colon suite's inputs are the clouds of the segments its maps estimate, cut by colonbench's own
+    map of each noisy reconstruction (what a segment method is given in its tracks).
+
+    Returns
+    -------
+    dict
+        ``suite.json``'s content: ``suite``, ``sha256``, ``inputs``, ``contract``.
+    """
+    from tqdm.auto import tqdm
+
+    from colonbench.benchmark import exchange
+    from colonbench.benchmark.evaluate import select
+    from colonbench.benchmark.runfolder import write_json
+
+    suite = suite if isinstance(suite, suites.Suite) else suites.get(suite)
+    out = Path(out)
+    if out.exists() and any(p for p in out.iterdir() if p.name != exchange.EXPORT_NAME and p.suffix != ".ply"
+                            and p.name != exchange.INDEX_NAME):
+        raise InputError(f"{out} holds other files; export into a new or empty folder")
+    data_dir = suites.ensure_data(suite, data, workers=workers, scheduler=scheduler, progress=progress)
+    record = suites.verify(suite, data_dir, allow_unverified)
+    out.mkdir(parents=True, exist_ok=True)
+    _, picks = select(data_dir, suite.split, suite.limit)
+    rows = []
+    bar = tqdm(total=sum(len(i) for _, i in picks) * len(suite.noise_mm), unit="sample", desc="export",
+               disable=None if progress else True)
+    for shard_name, indices in picks:
+        for i in indices:
+            for sigma in suite.noise_mm:
+                sid = exchange.sample_id(shard_name, i, sigma)
+                for name, pts in _inputs(suite, data_dir, shard_name, i, sigma, sid):
+                    exchange.write_input(out / f"{name}.ply", pts)
+                    rows.append({"sample_id": name, "file": f"{name}.ply", "noise_mm": sigma, "points": len(pts)})
+                bar.update(1)
+    bar.close()
+    exchange.write_index(out, rows)
+    info = {"suite": record, "inputs": len(rows), "contract": "docs/formats.md: colonbench score SUITE PRED_DIR "
+            "reads PRED_DIR/<sample_id>.json with coverage, holes, centerline (mm, the input's frame)"}
+    write_json(out / exchange.EXPORT_NAME, info)
+    return info
+
+
+def _inputs(suite, data_dir, shard_name, i, sigma, sid):
+    from colonbench.benchmark.evaluate import noisy
+
+    if suite.task == "colon":
+        from colonbench.benchmark.colon_evaluate import segment_inputs
+        from colonbench.errors import ColonbenchError
+        from colonbench.mapping.centerline import colon_centerline
+        from colonbench.shards.colonshard import ColonShard
+
+        sample = ColonShard(Path(data_dir) / shard_name).sample(i)
+        points = noisy(sample["points"], sigma, suite.noise_seed, shard_name, i)
+        try:
+            pieces = colon_centerline(points, positions=sample["positions"])
+        except ColonbenchError:
+            pieces = None
+        return segment_inputs(points, sample["positions"], pieces, suite.segment_mm, sid)
+    from colonbench.shards.reader import Shard
+
+    with Shard(Path(data_dir) / shard_name) as shard:
+        return [(sid, noisy(shard.geometry(i)["partial_points"], sigma, suite.noise_seed, shard_name, i))]
+
+
+def score_suite(suite, predictions, out, name: str | None = None, data=None, workers: int = 1, scheduler=None,
+                allow_unverified: bool = False, progress: bool = True) -> Path:
+    """Score a folder of predictions (``<sample_id>.json``) on a suite into a run folder.
+
+    Returns
+    -------
+    Path
+        The run folder (``colonbench leaderboard RUN`` merges it with the shipped results' run folders, or
+        ``colonbench benchmark --methods predictions:DIR`` does all at once).
+    """
+    suite = suite if isinstance(suite, suites.Suite) else suites.get(suite)
+    folder = Path(predictions)
+    if not folder.is_dir():
+        raise InputError(f"{folder}: no such folder of predictions")
+    if not any(folder.glob("*.json")):
+        raise InputError(f"{folder}: no <sample_id>.json predictions in it (docs/formats.md)")
+    data_dir = suites.ensure_data(suite, data, workers=workers, scheduler=scheduler, progress=progress)
+    spec = f"{name or folder.resolve().name}=predictions:{folder}"
+    _evaluate(suite, data_dir, [spec], Path(out), workers=workers, scheduler=scheduler, progress=progress,
+              allow_unverified=allow_unverified)
+    _check_suite_run(Path(out), suite)
+    return Path(out)
+
+
+def shipped_items(suite, exclude=()) -> list:
+    """The shipped results of ``suite`` as extra runs for a leaderboard (an empty list when there are none)."""
+    item = reference.load(suite, exclude)
+    return [item] if item is not None else []

@@ -1,0 +1,197 @@
+"""``colonbench suites``, ``benchmark``, ``export`` and ``score``: the benchmark release's verbs."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+
+
+def parse_methods(values) -> list[str]:
+    """Method specs from ``--methods`` values: comma-separated names, except that a value holding ``exec:`` is one
+    program's command line (commas and all); ``all`` is every built-in method."""
+    from colonbench.benchmark.registry import DEFAULT_METHODS
+
+    specs = []
+    for value in values or ():
+        if "exec:" in value:
+            specs.append(value.strip())
+        else:
+            specs += [m.strip() for m in value.split(",") if m.strip()]
+    return list(DEFAULT_METHODS) if specs == ["all"] else specs
+
+
+def _positive_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not value > 0 or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
+    return value
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be 1 or more, got {text}")
+    return value
+
+
+def add_external_args(p) -> None:
+    """``--timeout`` and ``--batch`` of ``exec:`` methods."""
+    p.add_argument("--timeout", type=_positive_float, help="exec: methods: seconds allowed per input file (a call "
+                   "gets that times its files; default 300)")
+    p.add_argument("--batch", type=_positive_int, help="exec: methods: input files per program call (default 64)")
+
+
+def _add_data_args(p) -> None:
+    p.add_argument("--data", help="where suite data is cached (default $COLONBENCH_DATA, else "
+                   "~/.cache/colonbench/suites): one folder per suite, made where missing")
+    p.add_argument("--workers", type=_positive_int, default=1, help="local processes (default 1)")
+    p.add_argument("--scheduler", help="Dask scheduler address (tcp://host:8786): generate and evaluate on its "
+                   "workers, which must see the data and output folders at the same paths")
+    p.add_argument("--allow-unverified", action="store_true",
+                   help="evaluate suite data whose content hash is not the published one (development; results "
+                        "then say 'unverified' and the shipped results stay out)")
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
+
+
+def cmd_suites(args):
+    """List the named suites with what they test, their size, content hash and generation time."""
+    from colonbench.benchmark import suites
+
+    rows = suites.SUITES if args.all_versions else tuple(suites.latest().values())
+    cached = suites.default_data_root() if args.data is None else args.data
+    for s in rows:
+        here = suites.data_dir(s, cached)
+        state = "cached" if (here / "dataset.lock.json").is_file() else "not generated"
+        what = "whole-colon reconstructions" if s.task == "colon" else "segments"
+        noise = ", ".join(f"{n:g}" for n in s.noise_mm)
+        print(f"{s.id:<9} {s.samples:4d} {what} x noise {noise} mm; generates in {s.generate_seconds:.0f} s on "
+              f"2 cores ({state} in {here})\n          {s.tests}\n          manifest {s.manifest}, split {s.split}"
+              + (f", {s.limit} spread evenly" if s.limit else "") + f"\n          sha256 {s.sha256}\n")
+    if args.check:
+        failed = 0
+        for s in rows:
+            here = suites.data_dir(s, cached)
+            if not (here / "dataset.lock.json").is_file():
+                continue
+            t = time.perf_counter()
+            found = suites.fingerprint(s, here)
+            ok = found == s.sha256
+            failed += not ok
+            print(f"{s.id}: {'OK' if ok else 'DIFFERS: ' + found} ({time.perf_counter() - t:.1f} s)")
+        return 1 if failed else 0
+    return 0
+
+
+def cmd_benchmark(args):
+    """Evaluate methods on named suites (data made where missing) and write the cross-suite leaderboard."""
+    from colonbench.benchmark.runner import run_benchmark
+
+    t = time.perf_counter()
+    methods = parse_methods(args.methods)
+    result = run_benchmark(methods, args.suites, args.out, data=args.data, workers=args.workers,
+                           scheduler=args.scheduler, model=args.model, device=args.device,
+                           allow_unverified=args.allow_unverified, shipped=not args.no_shipped, timeout=args.timeout,
+                           batch=args.batch, figures=not args.no_figures, progress=not args.quiet)
+    print(result["markdown"])
+    for suite, sec in result["seconds"].items():
+        print(f"{suite}: data {sec['data_seconds']:.0f} s, evaluation {sec['evaluate_seconds']:.0f} s")
+    failed = result["summary"][result["summary"]["failed"] > 0]
+    for _, r in failed.iterrows():
+        print(f"colonbench: warning: {r['method']} failed on {r['failed']} of {r['segments']} samples of "
+              f"{r['suite']} at noise {r['noise_mm']:g} mm (the error of each is in runs/{r['suite']}/results)",
+              file=sys.stderr)
+    print(f"wrote {args.out}/leaderboard.md (.csv, .json) and suites/<suite>/ in {time.perf_counter() - t:.0f} s")
+
+
+def cmd_export(args):
+    """Write a suite's inputs (one PLY per cloud, noise added, and index.csv; no truth) for offline methods."""
+    from colonbench.benchmark.runner import export_suite
+
+    info = export_suite(args.suite, args.out, data=args.data, workers=args.workers, scheduler=args.scheduler,
+                        allow_unverified=args.allow_unverified, progress=not args.quiet)
+    print(f"wrote {info['inputs']} inputs of {info['suite']['id']} (hash {info['suite']['sha256'][:16]}...) to "
+          f"{args.out}; predict PRED_DIR/<sample_id>.json for each, then colonbench score {info['suite']['id']} "
+          "PRED_DIR --out RUN")
+
+
+def cmd_score(args):
+    """Score a folder of predictions (<sample_id>.json) on a suite into a run folder."""
+    from colonbench.benchmark.evaluate import load_results
+    from colonbench.benchmark.runner import score_suite
+    from colonbench.benchmark.summary import summarize
+
+    run = score_suite(args.suite, args.predictions, args.out, name=args.name, data=args.data, workers=args.workers,
+                      scheduler=args.scheduler, allow_unverified=args.allow_unverified, progress=not args.quiet)
+    from colonbench.benchmark.colon_evaluate import is_colon_run
+
+    if not is_colon_run(run):
+        _, results = load_results(run)
+        for _, r in summarize(results).iterrows():
+            failed = f", {r['failed']} without a valid prediction" if r["failed"] else ""
+            print(f"noise {r['noise_mm']:g} mm  {r['method']}: MAE {r['coverage_mae']:.2f} points over "
+                  f"{r['segments'] - r['coverage_undefined']} of {r['segments']} segments{failed}")
+    print(f"wrote {run}; the leaderboard with the shipped results: colonbench benchmark --suites "
+          f"{args.suite} --methods predictions:{args.predictions} --out DIR, or colonbench leaderboard {run} "
+          "--out DIR --shipped")
+
+
+def add_parsers(sub) -> None:
+    """Add ``suites``, ``benchmark``, ``export`` and ``score`` to the ``colonbench`` subparsers."""
+    p = sub.add_parser("suites", help="list the named, versioned suites: size, what each tests, content hash",
+                       description="List the benchmark's named, versioned suites: what each tests, its size, its "
+                                   "published content hash and the time to generate it.")
+    p.add_argument("--data", help="suite data folder to report on (default $COLONBENCH_DATA or "
+                                  "~/.cache/colonbench/suites)")
+    p.add_argument("--check", action="store_true", help="also hash the cached data of each suite and compare it "
+                                                        "with the published hash (exit 1 on a difference)")
+    p.add_argument("--all-versions", action="store_true", help="also list older versions of the suites")
+    p.set_defaults(func=cmd_suites)
+
+    p = sub.add_parser("benchmark", help="evaluate methods on named suites and write one cross-suite leaderboard",
+                       description="Evaluate methods on named suites and write one cross-suite leaderboard, the "
+                                   "built-in methods' shipped results merged in. Suite data is generated where "
+                                   "missing (cached, resumable) and checked against its published hash.")
+    p.add_argument("--methods", action="append", metavar="M1,M2",
+                   help="methods: registered names (colonbench methods), package.module:Class, "
+                        "'exec:PROGRAM ARGS' (called as PROGRAM ARGS FILE... --out-dir DIR, writing "
+                        "DIR/<name>.json as colonbench estimate does) or predictions:DIR; NAME=... names the row. "
+                        "Repeat --methods for several exec: programs. None: the shipped results only")
+    p.add_argument("--suites", default="demo-v1", help="comma-separated suite ids, or all (default demo-v1, the "
+                                                      "smoke test; colonbench suites lists them)")
+    p.add_argument("--out", required=True, help="benchmark folder: leaderboard.md/.csv/.json, suites/<suite>/, "
+                                                "runs/<suite>/ (a rerun finishes or extends it)")
+    _add_data_args(p)
+    p.add_argument("--model", help="model for the built-in methods on the network (default: the shipped one)")
+    p.add_argument("--device", default="cpu", help="cpu, cuda, auto (default cpu)")
+    add_external_args(p)
+    p.add_argument("--no-shipped", action="store_true", help="leave the shipped reference results out")
+    p.add_argument("--no-figures", action="store_true", help="tables only")
+    p.set_defaults(func=cmd_benchmark)
+
+    p = sub.add_parser("export", help="write a suite's inputs (one PLY per cloud, an index; no truth) for "
+                                      "methods run elsewhere",
+                       description="Write a suite's inputs only, for a method run outside colonbench: one PLY per "
+                                   "evaluated cloud (noise added), named by its sample id, index.csv and suite.json; "
+                                   "no truth. Score the predictions with colonbench score.")
+    p.add_argument("suite", help="suite id or name (colonbench suites)")
+    p.add_argument("--out", required=True, help="folder for the PLY files, index.csv and suite.json")
+    _add_data_args(p)
+    p.set_defaults(func=cmd_export)
+
+    p = sub.add_parser("score", help="score a folder of predictions (<sample_id>.json) on a suite into a run folder",
+                       description="Score a folder of predictions, PRED_DIR/<sample_id>.json in the JSON of "
+                                   "colonbench estimate, on a suite into a run folder (docs/formats.md).")
+    p.add_argument("suite", help="suite id or name (colonbench suites)")
+    p.add_argument("predictions", help="folder of <sample_id>.json predictions")
+    p.add_argument("--out", required=True, help="run folder to write")
+    p.add_argument("--name", help="the method's row name (default: the predictions folder's name)")
+    _add_data_args(p)
+    p.set_defaults(func=cmd_score)
+

@@ -1,0 +1,155 @@
+"""``colonbench evaluate``, ``leaderboard`` and ``methods``: methods run over a dataset, tables from stored runs."""
+
+from __future__ import annotations
+
+import sys
+import time
+
+from colonbench.commands import benchmark as benchmark_verbs
+from colonbench.commands.common import add_model_args, finite, floats, method_list, positive
+from colonbench.errors import ColonbenchError
+from colonbench.mapping import CONTEXT_MM, SEGMENT_MM
+
+
+def cmd_evaluate(args):
+    """Evaluate methods on a dataset's test shards into a run folder (resumable)."""
+    from colonbench.benchmark.colon_evaluate import dataset_task
+    from colonbench.benchmark.evaluate import evaluate, load_results
+    from colonbench.benchmark.summary import summarize
+
+    made_for = dataset_task(args.data)
+    task = args.task or made_for
+    if task != made_for:
+        raise ColonbenchError(f"{args.data} is a {made_for} dataset; --task {task} needs a "
+                              f"{'task: colon' if task == 'colon' else 'segment'} manifest's data")
+    if task == "colon":
+        return _evaluate_colons(args)
+    if args.context_model:
+        raise ColonbenchError("--context-model is for whole-colon maps (--task colon), where segments have planes "
+                              "and context; the segment benchmark keeps the paper's protocol")
+    t = time.perf_counter()
+    run = evaluate(args.data, method_list(args.methods), args.out, noise=args.noise, split=args.split,
+                   limit=args.limit, workers=args.workers, model=args.model, device=args.device,
+                   examples=args.examples, noise_seed=args.noise_seed, progress=not args.quiet,
+                   scheduler=args.scheduler, allow_unverified=args.allow_unverified, timeout=args.timeout,
+                   batch=args.batch)
+    meta, results = load_results(run)
+    s = summarize(results)
+    for _, r in s.iterrows():
+        failed = f", {r['failed']} failed" if r["failed"] else ""
+        print(f"noise {r['noise_mm']:g} mm  {r['method']:<14} MAE {r['coverage_mae']:6.2f} points over "
+              f"{r['segments'] - r['coverage_undefined']} of {r['segments']} segments{failed}")
+    errors = results[results["error"] != ""]
+    for name, g in errors.groupby("method"):
+        print(f"colonbench: warning: {name} failed on {len(g)} segment(s); first: {g['error'].iloc[0]}",
+              file=sys.stderr)
+    session = meta["sessions"][-1]
+    print(f"wrote {run}/results/: {session['segments']} segment evaluations in {time.perf_counter() - t:.0f} s "
+          f"with {session['workers']} worker(s), peak memory {session['peak_process_mib']} MiB per process; "
+          f"tables: colonbench leaderboard {run} --out DIR")
+
+
+def _evaluate_colons(args):
+    """colonbench evaluate --task colon: map every whole-colon sample with every method and track."""
+    from colonbench.benchmark.colon_evaluate import ALL_METHODS, evaluate_colons, load_colon_results
+    from colonbench.reports.colon_leaderboard import colon_table
+
+    t = time.perf_counter()
+    methods = list(ALL_METHODS) if args.methods in (None, ["all"]) else method_list(args.methods)
+    run = evaluate_colons(args.data, methods, args.out, noise=args.noise, contexts=args.contexts,
+                          segment_mm=args.segment_length, split=args.split, limit=args.limit, workers=args.workers,
+                          model=args.model, device=args.device, noise_seed=args.noise_seed,
+                          progress=not args.quiet, context_model=args.context_model, scheduler=args.scheduler,
+                          allow_unverified=args.allow_unverified, timeout=args.timeout, batch=args.batch)
+    meta, segments, colons = load_colon_results(run)
+    tab = colon_table(segments, colons)
+    for _, r in tab.iterrows():
+        print(f"noise {r['noise_mm']:g} mm  {r['method']:<13} {r['track']:<14} segment MAE {r['segment_mae']:6.2f} "
+              f"points over {r['segments']} segments, whole colon |error| {r['whole_mae']:5.2f} points")
+    print(f"wrote {run}/results/ in {time.perf_counter() - t:.0f} s; tables: colonbench leaderboard {run} --out DIR")
+
+
+def cmd_leaderboard(args):
+    """Rebuild the leaderboard tables (and figures) from stored runs."""
+    from colonbench.reports.leaderboard import write_leaderboard
+
+    extra = _shipped_for(args.runs) if args.shipped else []
+    result = write_leaderboard(args.runs, args.out, figures=not args.no_figures, extra=extra)
+    print(result["markdown"])
+    print(f"wrote {', '.join(p.name for p in result['paths'])} to {args.out}")
+
+
+def _shipped_for(run_dirs) -> list:
+    """The shipped results of the suite the runs evaluated, less the methods they hold."""
+    from colonbench.benchmark import suites
+    from colonbench.benchmark.runfolder import read_run
+    from colonbench.benchmark.runner import shipped_items
+
+    runs = [read_run(r) for r in run_dirs]
+    rec = runs[0].get("suite") if runs else None
+    if not rec:
+        raise ColonbenchError(f"{run_dirs[0]} is not a run of a named suite: there are no shipped results for it")
+    if not rec.get("verified"):
+        raise ColonbenchError(f"{run_dirs[0]}: its data is not the published {rec['id']} (unverified); the shipped "
+                              "results are not comparable")
+    items = shipped_items(suites.get(rec["id"]), exclude={m for r in runs for m in r["methods"]})
+    if not items:
+        raise ColonbenchError(f"no shipped results of {rec['id']} to merge")
+    return items
+
+
+def cmd_methods(args):
+    """List the registered methods."""
+    from colonbench.benchmark.registry import available
+
+    for name, target in sorted(available().items()):
+        print(f"{name:<14} {target}")
+
+
+def add_parsers(sub) -> None:
+    """Add ``evaluate``, ``leaderboard``, ``methods`` to the ``colonbench`` subparsers."""
+    p = sub.add_parser("evaluate", help="run methods over a dataset's test shards into a run folder (resumable)")
+    p.add_argument("data", help="dataset folder (colonbench generate)")
+    p.add_argument("--methods", action="append",
+                   help="comma-separated registered names, package.module:Class, predictions:DIR, or one "
+                        "'exec:PROGRAM ARGS' per --methods (default all: the paper's method, its baselines and the "
+                        "reference rows; see colonbench methods)")
+    p.add_argument("--noise", type=floats, default=[0.0, 0.5],
+                   help="input noise sigmas, mm, comma-separated (default 0,0.5)")
+    p.add_argument("--out", required=True, help="run folder (a rerun finishes it or adds methods)")
+    p.add_argument("--split", default="test", help="split to evaluate (default test)")
+    p.add_argument("--limit", type=positive(int), help="only this many samples, spread evenly over the split")
+    p.add_argument("--workers", type=positive(int), default=1, help="processes (default 1)")
+    add_model_args(p, "model .safetensors for the methods built on the network, or a shipped model by name "
+                       "(default: small)")
+    p.add_argument("--examples", type=int, default=3, help="segments whose meshes are kept for figures (default 3)")
+    p.add_argument("--noise-seed", type=int, default=0, help="root seed of the input noise (default 0)")
+    p.add_argument("--scheduler", help="Dask scheduler address (tcp://host:8786): evaluate on its workers, which "
+                                       "must see the data and run folders at the same paths")
+    p.add_argument("--allow-unverified", action="store_true",
+                   help="evaluate data that is a named suite's by manifest and selection but not by its published "
+                        "content hash (the run then says unverified)")
+    benchmark_verbs.add_external_args(p)
+    p.add_argument("--task", choices=["segments", "colon"],
+                   help="segments (the paper's protocol) or colon (whole-colon maps, docs/mapping.md); "
+                        "default: what the dataset was made for")
+    p.add_argument("--contexts", type=floats, default=[0.0, CONTEXT_MM],
+                   help=f"--task colon: context margins, one track each, mm (0 = segment-only; default 0,"
+                        f"{CONTEXT_MM:g})")
+    p.add_argument("--segment-length", type=finite, default=SEGMENT_MM,
+                   help=f"--task colon: segment arc length of the maps, mm (default {SEGMENT_MM:g})")
+    p.add_argument("--context-model", help="--task colon: an in-context model for the tracks with context (the "
+                                           "segment-only track keeps --model; docs/mapping.md)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=cmd_evaluate)
+
+    p = sub.add_parser("leaderboard", help="tables (md, csv, json) and figures from stored runs on the same data")
+    p.add_argument("runs", nargs="+", help="run folders (colonbench evaluate)")
+    p.add_argument("--out", required=True, help="folder for leaderboard.md/.csv/.json and the figures")
+    p.add_argument("--no-figures", action="store_true", help="tables only")
+    p.add_argument("--shipped", action="store_true", help="merge the shipped reference results of the runs' suite "
+                                                          "(methods the runs hold are left out of them)")
+    p.set_defaults(func=cmd_leaderboard)
+
+    p = sub.add_parser("methods", help="list the registered coverage-estimation methods")
+    p.set_defaults(func=cmd_methods)

@@ -1,0 +1,148 @@
+"""The cross-suite leaderboard of ``colonbench benchmark``: methods x suites, rebuilt from runs and shipped results.
+
+For each suite, :func:`write_report` writes the suite's own leaderboard
+(``suites/<suite id>/``: :func:`colonbench.reports.leaderboard.write_leaderboard`
+with the shipped results merged in), then one summary across suites:
+
+* ``leaderboard.md``: per noise level a table, one row per method and one
+  column per suite, each cell the coverage MAE in points with its 95 %
+  bootstrap interval; a whole-colon suite's cell is the segment MAE of its
+  in-context track (what ``colonbench map`` reports); a missing cell is shown
+  as missing, never averaged over;
+* ``leaderboard.csv``: one row per suite, noise level and method (``mae``,
+  ``mae_lo``, ``mae_hi``, ``segments``, ``failed``, ``version``,
+  ``reference``, ``source``: ``shipped`` or the run folder);
+* ``leaderboard.json``: the same rows with each suite's id, content hash and
+  whether the data was verified.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import pandas as pd
+
+from colonbench.errors import InputError
+
+SUMMARY_COLUMNS = ["suite", "noise_mm", "method", "version", "reference", "mae", "mae_lo", "mae_hi", "segments",
+                   "failed", "source"]
+
+
+def _rows(suite, folder: Path) -> tuple[list[dict], dict]:
+    """Summary rows of one suite's leaderboard folder, and its suite record."""
+    lb = json.loads((folder / "leaderboard.json").read_text())
+    tab = pd.read_csv(folder / "leaderboard.csv")
+    methods = lb["methods"]
+    rows = []
+    if suite.task == "colon":
+        track = f"context-{max(suite.contexts_mm):g}mm" if max(suite.contexts_mm) > 0 else "segment-only"
+        tab = tab[tab["track"] == track]
+        for _, r in tab.iterrows():
+            rows.append({"noise_mm": r["noise_mm"], "method": r["method"], "mae": r["segment_mae"],
+                         "mae_lo": r["segment_mae_lo"], "mae_hi": r["segment_mae_hi"], "segments": r["segments"],
+                         "failed": r["failed_maps"]})
+    else:
+        for _, r in tab.iterrows():
+            rows.append({"noise_mm": r["noise_mm"], "method": r["method"], "mae": r["coverage_mae"],
+                         "mae_lo": r["coverage_mae_lo"], "mae_hi": r["coverage_mae_hi"], "segments": r["segments"],
+                         "failed": r["failed"]})
+    for row in rows:
+        rec = methods.get(row["method"], {})
+        row.update(suite=suite.id, version=rec.get("version", ""), reference=bool(rec.get("reference", False)),
+                   source="shipped" if str(rec.get("run", "")).startswith("shipped") else str(rec.get("run", "")))
+    return rows, lb.get("suite") or {}
+
+
+def write_report(out, chosen, runs: dict, shipped: bool = True, figures: bool = True) -> dict:
+    """Per-suite leaderboards and the cross-suite summary under ``out``.
+
+    Parameters
+    ----------
+    out : path
+    chosen : list of Suite
+    runs : dict
+        ``{suite id: run folder}`` of the methods evaluated (a suite may have none: shipped results only).
+    shipped, figures : bool
+
+    Returns
+    -------
+    dict
+        ``summary`` (DataFrame, :data:`SUMMARY_COLUMNS`), ``markdown``, ``paths``.
+    """
+    from colonbench.benchmark.runfolder import read_run
+    from colonbench.benchmark.runner import shipped_items
+    from colonbench.reports.leaderboard import write_leaderboard
+
+    out = Path(out)
+    rows, records, paths, skipped = [], {}, [], []
+    for suite in chosen:
+        run_dir = runs.get(suite.id)
+        mine = read_run(run_dir) if run_dir is not None else None
+        extra = []
+        if shipped and (mine is None or (mine.get("suite") or {}).get("verified")):
+            extra = shipped_items(suite, exclude=mine["methods"] if mine else ())
+        if mine is None and not extra:
+            skipped.append(suite.id)
+            continue
+        folder = out / "suites" / suite.id
+        res = write_leaderboard([run_dir] if run_dir is not None else [], folder, figures=figures, extra=extra)
+        paths += res["paths"]
+        suite_rows, records[suite.id] = _rows(suite, folder)
+        rows += suite_rows
+    if not rows:
+        raise InputError(f"nothing to show for {', '.join(s.id for s in chosen)}: no methods were evaluated and no "
+                         "shipped results match these suites")
+    summary = pd.DataFrame(rows, columns=SUMMARY_COLUMNS)
+    text = markdown(summary, chosen, records, skipped)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "leaderboard.md").write_text(text)
+    summary.to_csv(out / "leaderboard.csv", index=False)
+    (out / "leaderboard.json").write_text(json.dumps(
+        {"suites": {s.id: {**records.get(s.id, {}), "tests": s.tests, "samples": s.samples} for s in chosen
+                    if s.id in records}, "rows": json.loads(summary.to_json(orient="records"))}, indent=1))
+    paths += [out / "leaderboard.md", out / "leaderboard.csv", out / "leaderboard.json"]
+    return {"summary": summary, "markdown": text, "paths": paths}
+
+
+def _cell(r) -> str:
+    if r is None or math.isnan(r["mae"]):
+        return "—"
+    ci = "" if math.isnan(r["mae_lo"]) else f" [{r['mae_lo']:.2f}, {r['mae_hi']:.2f}]"
+    return f"{r['mae']:.2f}{ci}"
+
+
+def markdown(summary: pd.DataFrame, chosen, records: dict, skipped: list[str]) -> str:
+    """The cross-suite leaderboard as Markdown."""
+    ids = [s.id for s in chosen if s.id in records]
+    lines = ["# colonbench benchmark", "",
+             "Coverage MAE in percentage points with its 95 % bootstrap interval over segments, per suite; a "
+             "whole-colon suite's cell is the segment MAE of its in-context track. Rows marked * are references "
+             "given ground truth (or the constant guess); rows marked † come from the shipped reference results. "
+             "Each suite's own page (suites/<suite>/leaderboard.md) has medians, bias, q95, holes and centerline "
+             "precision / recall, the paired difference against the best baseline and the breakdowns.", ""]
+    for noise, g in summary.groupby("noise_mm", sort=True):
+        keyed = {(r["method"], r["suite"]): r for _, r in g.iterrows()}
+        order = g.groupby("method").agg(reference=("reference", "max"), mae=("mae", "mean")).reset_index()
+        order = order.sort_values(["reference", "mae", "method"])
+        lines += [f"## Noise sigma = {noise:g} mm", "", "| method | version | " + " | ".join(ids) + " |",
+                  "|---|---|" + "---:|" * len(ids)]
+        for _, o in order.iterrows():
+            m = o["method"]
+            first = next(keyed[(m, s)] for s in ids if (m, s) in keyed)
+            mark = (" *" if first["reference"] else "") + (" †" if first["source"] == "shipped" else "")
+            lines.append(f"| {m}{mark} | {first['version']} | "
+                         + " | ".join(_cell(keyed.get((m, s))) for s in ids) + " |")
+        lines.append("")
+    lines += ["Suites (content hash; verified = the data evaluated is the published suite):", ""]
+    for s in chosen:
+        if s.id in records:
+            rec = records[s.id]
+            state = "verified" if rec.get("verified") else "UNVERIFIED"
+            lines.append(f"- `{s.id}`: {s.tests}. Hash `{rec.get('sha256', s.sha256)}` ({state}).")
+    if skipped:
+        lines += ["", f"No results for {', '.join(skipped)}: no method was evaluated there and no shipped results "
+                  "match."]
+    lines.append("")
+    return "\n".join(lines)

@@ -1,0 +1,297 @@
+"""The benchmark release: named suites and their hashes, exec: and offline methods, shipped results, one command."""
+
+import json
+import re
+import shutil
+import sys
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pandas as pd
+import pytest
+
+from colonbench.benchmark import reference, suites
+from colonbench.cli import main
+from colonbench.errors import InputError
+
+EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "constant_method.py"
+#: A program outside colonbench that gets one thing wrong per input, by the input's position in its call.
+FAULTY = '''
+import json, sys, time
+from pathlib import Path
+args = sys.argv[1:]
+out = Path(args[args.index("--out-dir") + 1]); out.mkdir(parents=True, exist_ok=True)
+files = [Path(a) for a in args if a.endswith(".ply")]
+answers = [{"coverage": 0.7, "holes": [[0, 0, 0]], "centerline": [[0, 0, 0], [0, 0, 1]]},
+           None, {"coverage": float("nan")}, {"coverage": 1.5}, {"coverage": 0.5, "holes": [[1, 2]]}, "{not json"]
+for k, f in enumerate(files):
+    a = answers[k % len(answers)]
+    if a is not None:
+        (out / (f.stem + ".json")).write_text(a if isinstance(a, str) else json.dumps(a))
+sys.exit(3 if "--crash" in args else 0)
+'''
+
+
+@pytest.fixture(scope="session")
+def demo_data(tmp_path_factory):
+    """demo-v1 generated from its manifest, as colonbench benchmark makes it: the data root."""
+    root = tmp_path_factory.mktemp("suites")
+    suites.ensure_data(suites.get("demo-v1"), root, workers=2, progress=False)
+    return root
+
+
+# ------------------------------------------------------------------------------------------------ the registry
+
+
+def test_registry_names_every_v1_suite_with_its_manifest():
+    ids = [s.id for s in suites.SUITES]
+    assert ids == ["demo-v1", "paper-v1", "wide-v1", "real-v1", "video-v1", "colon-v1"]
+    assert len(set(s.sha256 for s in suites.SUITES)) == len(ids)
+    for s in suites.SUITES:
+        assert suites.manifest_path(s).is_file(), s.manifest
+        assert s.sha256.startswith("cb1-") and len(s.sha256) == 4 + 64
+        assert s.tests and s.samples > 0 and s.noise_mm == (0.0, 0.5)
+    assert suites.get("paper").id == "paper-v1" and suites.get("real-v1").manifest == "real-test.yaml"
+    assert [s.id for s in suites.parse("all")] == ids
+    assert [s.id for s in suites.parse("real,demo-v1,real-v1")] == ["real-v1", "demo-v1"]
+    with pytest.raises(InputError, match="unknown suite 'paper-v9'"):
+        suites.get("paper-v9")
+
+
+def test_hashing_rounds_to_a_micrometre():
+    from colonbench.benchmark.fingerprint import _Hasher
+
+    def digest(points):
+        h = _Hasher()
+        h.lengths("input", points)
+        return h.hexdigest()
+
+    p = np.array([[10.0001, 20.0, 30.0], [1.0, 2.0, 3.0]])
+    assert digest(p) == digest(p + 1e-9)             # float noise far below the rounding step
+    assert digest(p) != digest(p + [[0, 0, 0], [0.002, 0, 0]])   # one coordinate 2 µm off
+    assert digest(p) != digest(p[::-1])              # the order is part of the data
+
+
+def test_demo_v1_regenerates_to_its_published_hash(demo_data):
+    """CI's check that the generator still makes the published suite (a change that moves it needs demo-v2)."""
+    suite = suites.get("demo-v1")
+    assert suites.fingerprint(suite, suites.data_dir(suite, demo_data)) == suite.sha256
+
+
+@pytest.mark.slow
+def test_real_v1_regenerates_to_its_published_hash(tmp_path):
+    suite = suites.get("real-v1")
+    data = suites.ensure_data(suite, tmp_path, workers=2, progress=False)
+    assert suites.fingerprint(suite, data) == suite.sha256
+
+
+def test_a_tampered_sample_is_refused(demo_data, tmp_path, capsys):
+    suite = suites.get("demo-v1")
+    data = tmp_path / "demo-v1"
+    shutil.copytree(suites.data_dir(suite, demo_data), data)
+    shard = sorted((data / "test").glob("*.h5"))[0]
+    with h5py.File(shard, "r+") as h5:
+        pts = h5["samples/partial_points"]
+        pts[5] = pts[5] + np.float32(1.0)          # one point moved by 1 mm along each axis
+    assert main(["evaluate", str(data), "--methods", "constant", "--out", str(tmp_path / "run"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "does not hold suite demo-v1" in err and "--allow-unverified" in err
+    assert main(["evaluate", str(data), "--methods", "constant", "--out", str(tmp_path / "run"), "--quiet",
+                 "--allow-unverified"]) == 0
+    rec = json.loads((tmp_path / "run" / "run.json").read_text())["suite"]
+    assert rec["id"] == "demo-v1" and rec["verified"] is False and rec["sha256"] != suite.sha256
+    assert main(["leaderboard", str(tmp_path / "run"), "--out", str(tmp_path / "lb"), "--no-figures"]) == 0
+    assert "**unverified**" in (tmp_path / "lb" / "leaderboard.md").read_text()
+    assert main(["leaderboard", str(tmp_path / "run"), "--out", str(tmp_path / "lb2"), "--shipped"]) == 2
+    assert "not the published demo-v1" in capsys.readouterr().err
+
+
+# ------------------------------------------------------------------------------------------------ other programs
+
+
+def test_a_program_outside_colonbench_joins_the_shipped_leaderboard(demo_data, tmp_path):
+    """The README's promise: a 10-line script writing a constant, on demo-v1, beside the shipped results."""
+    out = tmp_path / "bench"
+    assert main(["benchmark", "--methods", f"exec:{sys.executable} {EXAMPLE}", "--suites", "demo-v1",
+                 "--data", str(demo_data), "--out", str(out), "--quiet", "--no-figures"]) == 0
+    summary = pd.read_csv(out / "leaderboard.csv")
+    shipped = reference.load(suites.get("demo-v1"))
+    assert shipped is not None, "benchmark/reference/demo-v1 is missing: python scripts/reference_results.py"
+    assert set(summary["method"]) == {"constant_method"} | set(shipped[0]["methods"])
+    assert (summary.loc[summary["method"] != "constant_method", "source"] == "shipped").all()
+    mine = pd.read_csv(out / "runs" / "demo-v1" / "results" / "constant_method.csv")
+    assert (mine["error"].isna()).all() and np.allclose(mine["coverage"], 0.8)
+    assert np.allclose(mine["coverage_error"], 0.8 - mine["true_coverage"])
+    row = summary[(summary["method"] == "constant_method") & (summary["noise_mm"] == 0)].iloc[0]
+    assert row["mae"] == pytest.approx(100 * np.abs(0.8 - mine["true_coverage"]).mean() / 1)
+    assert row["mae_lo"] < row["mae"] < row["mae_hi"]
+    page = (out / "suites" / "demo-v1" / "leaderboard.md").read_text()
+    assert suites.get("demo-v1").sha256[:16] in page and "verified against the published hash" in page
+    assert "constant_method" in (out / "leaderboard.md").read_text()
+    # the same through export + score
+    inputs, preds = tmp_path / "inputs", tmp_path / "preds"
+    assert main(["export", "demo-v1", "--data", str(demo_data), "--out", str(inputs), "--quiet"]) == 0
+    index = pd.read_csv(inputs / "index.csv")
+    assert len(index) == 24 * 2 and (inputs / index["file"].iloc[0]).is_file()
+    assert not any("coverage" in c for c in index.columns)        # no truth in an export
+    files = [str(inputs / f) for f in index["file"]]
+    import subprocess
+
+    subprocess.run([sys.executable, str(EXAMPLE), *files, "--out-dir", str(preds)], check=True)
+    run = tmp_path / "scored"
+    assert main(["score", "demo-v1", str(preds), "--name", "constant_method", "--data", str(demo_data),
+                 "--out", str(run), "--quiet"]) == 0
+    scored = pd.read_csv(run / "results" / "constant_method.csv")
+    key = ["shard", "index", "noise_mm"]
+    a, b = mine.set_index(key).sort_index(), scored.set_index(key).sort_index()
+    assert np.array_equal(a["coverage_error"], b["coverage_error"])
+    assert main(["leaderboard", str(run), "--out", str(tmp_path / "lb"), "--shipped", "--no-figures"]) == 0
+    text = (tmp_path / "lb" / "leaderboard.md").read_text()
+    assert "constant_method" in text and "| completion |" in text
+
+
+def test_exec_colonbench_estimate_gives_the_in_process_results(demo_data, tmp_path):
+    suite = suites.get("demo-v1")
+    data = suites.data_dir(suite, demo_data)
+    colonbench = Path(sys.executable).with_name("colonbench")
+    from colonbench.benchmark.evaluate import evaluate
+
+    import torch
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)   # the network's sums run in the same order in both processes (one thread each)
+    try:
+        run = evaluate(data, ["completion", f"viaexec=exec:env OMP_NUM_THREADS=1 {colonbench} estimate --method "
+                                            "completion"], tmp_path / "run", limit=4, progress=False, examples=0)
+    finally:
+        torch.set_num_threads(threads)
+    rows = pd.read_csv(run / "results" / "completion.csv")
+    other = pd.read_csv(run / "results" / "viaexec.csv")
+    assert (other["error"].isna()).all()
+    assert np.array_equal(rows["coverage"], other["coverage"])        # exactly: JSON floats round-trip
+    metrics = [c for c in rows.columns if "precision" in c or "recall" in c]
+    assert np.allclose(rows[metrics], other[metrics], equal_nan=True)
+
+
+def test_bad_outputs_are_that_segments_failure(demo_data, tmp_path):
+    program = tmp_path / "faulty.py"
+    program.write_text(FAULTY)
+    data = suites.data_dir(suites.get("demo-v1"), demo_data)
+    from colonbench.benchmark.evaluate import evaluate
+
+    run = evaluate(data, [f"exec:{sys.executable} {program}"], tmp_path / "run", noise=[0], limit=12,
+                   progress=False, batch=6)
+    rows = pd.read_csv(run / "results" / "faulty.csv").fillna({"error": ""})
+    assert len(rows) == 12
+    errors = list(rows["error"])
+    # inputs go in sample order, six per call: each call's k-th input gets the k-th answer
+    assert errors[0] == "" and rows["coverage"].iloc[0] == 0.7
+    assert "no prediction" in errors[1]
+    assert "not a fraction in [0, 1]" in errors[2] and "nan" in errors[2]
+    assert "1.5 is not a fraction" in errors[3]
+    assert "'holes' has shape (1, 2)" in errors[4]
+    assert "not valid JSON" in errors[5]
+    kinds = [re.sub(r"test_colon\S+?_noise0", "ID", e) for e in errors]   # the same fault, another sample
+    assert kinds[6:] == kinds[:6]
+    assert rows["coverage_error"].isna().sum() == 10   # failures are counted, not dropped
+    # a crash and a timeout: the program's own words end up in the rows
+    crash = evaluate(data, [f"exec:{sys.executable} {program} --crash"], tmp_path / "crash", noise=[0], limit=2,
+                     progress=False)
+    err = pd.read_csv(crash / "results" / "faulty.csv")["error"].fillna("")
+    assert err.iloc[0] == "" and "exited with status 3" in err.iloc[1]
+    sleeper = tmp_path / "sleeper.py"
+    sleeper.write_text("import time; time.sleep(30)\n")
+    slow = evaluate(data, [f"exec:{sys.executable} {sleeper}"], tmp_path / "slow", noise=[0], limit=2,
+                    progress=False, timeout=0.5)
+    assert pd.read_csv(slow / "results" / "sleeper.csv")["error"].str.contains("stopped after 1 s").all()
+
+
+def test_a_method_object_from_a_notebook(demo_data):
+    import colonbench as cb
+
+    class Half:  # defined here, importable from nowhere: it runs in this process
+        name = "half"
+
+        def estimate(self, points):
+            return {"coverage": 0.5}
+
+    result = cb.benchmark(Half(), "demo-v1", data=demo_data, progress=False, figures=False, workers=2)
+    mine = result["summary"][result["summary"]["method"] == "half"]
+    assert len(mine) == 2 and (mine["source"] != "shipped").all()
+    est = cb.load_method("constant").estimate(np.zeros((10, 3)))
+    assert isinstance(est, cb.Estimate) and isinstance(cb.load_method("constant"), cb.Method)
+
+
+def test_dask_gives_the_single_process_results(demo_data, tmp_path):
+    from distributed import LocalCluster
+
+    from colonbench.benchmark.evaluate import evaluate
+
+    data = suites.data_dir(suites.get("demo-v1"), demo_data)
+    one = evaluate(data, ["unwrap-pca", "constant"], tmp_path / "one", limit=6, progress=False)
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+        dask = evaluate(data, ["unwrap-pca", "constant"], tmp_path / "dask", limit=6, progress=False,
+                        scheduler=cluster.scheduler_address)
+    for m in ("unwrap-pca", "constant"):
+        a = pd.read_csv(one / "results" / f"{m}.csv").drop(columns="seconds")
+        b = pd.read_csv(dask / "results" / f"{m}.csv").drop(columns="seconds")
+        pd.testing.assert_frame_equal(a, b)
+
+
+# ------------------------------------------------------------------------------------------------ shipped results
+
+
+def test_shipped_results_are_of_the_published_suites_and_todays_methods():
+    from colonbench.benchmark.registry import load_method
+
+    versions = {}
+    for suite in suites.SUITES:
+        item = reference.load(suite)
+        assert item is not None, f"no shipped results of {suite.id} (or made on other data)"
+        run = item[0]
+        assert run["suite"]["sha256"] == suite.sha256 and run["suite"]["verified"]
+        assert "data_path" not in run
+        for name, rec in run["methods"].items():
+            if name not in versions:
+                versions[name] = load_method(name).version
+            assert rec["version"] == versions[name], f"{suite.id}: {name} shipped as {rec['version']}"
+        rows = item[1]
+        assert len(rows) > 0 and rows["method"].isin(run["methods"]).all()
+
+
+def test_shipped_demo_results_reproduce(demo_data, tmp_path):
+    """The safety net of every refactoring: today's code gives the shipped demo-v1 rows."""
+    from colonbench.benchmark.evaluate import evaluate
+
+    suite = suites.get("demo-v1")
+    methods = ["completion", "thresholding", "unwrap-pca", "constant"]
+    run = evaluate(suites.data_dir(suite, demo_data), methods, tmp_path / "run", progress=False, workers=2,
+                   examples=0)
+    shipped = reference.load(suite)[1]
+    key = ["method", "shard", "index", "noise_mm"]
+    for m in methods:
+        a = pd.read_csv(run / "results" / f"{m}.csv").set_index(key).sort_index()
+        b = shipped[shipped["method"] == m].set_index(key).sort_index()
+        cols = [c for c in a.columns if c not in ("seconds", "error", "hole_model")]
+        assert (a["hole_model"] == b["hole_model"]).all()
+        assert np.allclose(a[cols].to_numpy(float), b[cols].to_numpy(float), rtol=1e-8, atol=1e-9, equal_nan=True), m
+
+
+def test_cli_lists_suites_and_says_what_each_verb_does(capsys):
+    assert main(["suites"]) == 0
+    out = capsys.readouterr().out
+    for s in suites.SUITES:
+        assert s.id in out and s.sha256 in out
+    from colonbench.cli import build_parser
+
+    verbs = build_parser()._subparsers._group_actions[0].choices
+    assert {"suites", "benchmark", "export", "score", "video", "estimate"} <= set(verbs)
+    for verb in verbs:   # every verb's --help opens with one line saying what it does, then its usage
+        with pytest.raises(SystemExit):
+            main([verb, "--help"])
+        lines = capsys.readouterr().out.splitlines()
+        assert lines[0][0].isupper() and lines[0].endswith(".") and not lines[0].startswith("usage"), verb
+        assert lines[2].startswith(f"usage: colonbench {verb}"), verb
+    assert main(["benchmark", "--suites", "paper-v7", "--out", "x"]) == 2
+    assert "unknown suite" in capsys.readouterr().err
