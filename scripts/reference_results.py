@@ -1,0 +1,43 @@
+"""Make the shipped reference results: every built-in method on every suite, evaluated and published.
+
+    python scripts/reference_results.py [--suites all] [--data DIR] [--workers 2] [--out runs/reference]
+
+Each suite's data is generated where missing (and checked against its
+published hash), the built-in methods are evaluated into OUT/runs/<suite>/ by
+colonbench benchmark (resumable: rerun to finish), and the finished run is
+copied into benchmark/reference/<suite>/ (colonbench.benchmark.reference),
+from where colonbench benchmark merges it. Prints the time per suite.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+from colonbench.benchmark import reference, suites
+from colonbench.benchmark.colon_evaluate import ALL_METHODS
+from colonbench.benchmark.registry import DEFAULT_METHODS
+from colonbench.benchmark.runner import run_benchmark
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--suites", default="all")
+    ap.add_argument("--data", help="suite data folder (default: colonbench's cache)")
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--out", default="runs/reference")
+    args = ap.parse_args()
+    for suite in suites.parse(args.suites):
+        t = time.perf_counter()
+        methods = list(ALL_METHODS if suite.task == "colon" else DEFAULT_METHODS)
+        result = run_benchmark(methods, [suite], args.out, data=args.data, workers=args.workers, shipped=False,
+                               figures=False, progress=False)
+        where = reference.publish(result["runs"][suite.id], suite)
+        sec = result["seconds"][suite.id]
+        print(f"{suite.id}: {len(methods)} methods, data {sec['data_seconds']:.0f} s, evaluation "
+              f"{sec['evaluate_seconds']:.0f} s with {args.workers} workers -> {where} "
+              f"({time.perf_counter() - t:.0f} s in all)", flush=True)
+
+
+if __name__ == "__main__":
+    main()

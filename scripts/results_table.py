@@ -1,0 +1,47 @@
+"""The README's results table, made from the shipped reference results (never typed by hand).
+
+    python scripts/results_table.py      # prints the Markdown table; tests/test_docs.py checks the README holds it
+"""
+
+from __future__ import annotations
+
+import math
+
+from colonbench.benchmark import reference, suites
+from colonbench.benchmark.registry import BASELINES
+
+#: The rows of the README's table: the paper's method, its baselines and the constant guess.
+ROWS = ("completion",) + BASELINES + ("constant",)
+
+
+def _maes(suite) -> dict:
+    """``{(method, noise): MAE in points}`` of a suite's shipped results (the in-context track of a whole-colon
+    suite)."""
+    item = reference.load(suite)
+    if item is None:
+        return {}
+    if suite.task == "colon":
+        segs = item[1]
+        segs = segs[segs["track"] == f"context-{max(suite.contexts_mm):g}mm"]
+    else:
+        segs = item[1]
+    return {(m, n): 100 * g["coverage_error"].abs().mean() for (m, n), g in segs.groupby(["method", "noise_mm"])}
+
+
+def tables() -> str:
+    chosen = list(suites.latest().values())
+    maes = {s.id: _maes(s) for s in chosen}
+
+    def cell(sid, m):
+        a, b = maes[sid].get((m, 0.0), math.nan), maes[sid].get((m, 0.5), math.nan)
+        return "—" if math.isnan(a) else f"{a:.1f} / {b:.1f}"
+
+    lines = ["| coverage MAE, points (noiseless / 0.5 mm) | " + " | ".join(s.id for s in chosen) + " |",
+             "|---|" + "---:|" * len(chosen)]
+    for m in ROWS:
+        lines.append(f"| {m} | " + " | ".join(cell(s.id, m) for s in chosen) + " |")
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":
+    print(tables())
