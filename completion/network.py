@@ -1,8 +1,11 @@
-"""The 3D UNet of the paper (MONAI's implementation), its configurations, and saving / loading it.
+"""The 3D UNet of the paper, its configurations, and saving / loading it.
 
+Training builds MONAI's ``UNet``; inference rebuilds the same network in plain
+PyTorch (:mod:`colonbench.completion.unet`: the same weights, the same
+outputs), so that ``colonbench estimate`` starts without importing MONAI.
 PyTorch and MONAI are optional dependencies of colonbench (``pip install
 'colonbench[model]'``): data generation does not need them. Importing this
-module without them raises an ImportError that says how to install them.
+module without PyTorch raises an ImportError that says how to install it.
 
 A saved model is one ``.safetensors`` file: the weights, plus in its metadata
 the network configuration (``colonbench_network``) and what made it
@@ -20,9 +23,8 @@ from colonbench.errors import InputError
 
 try:
     import torch
-    from monai.networks.nets import UNet
 except ImportError as exc:  # pragma: no cover - exercised only without the extra
-    raise ImportError("the completion model needs PyTorch and MONAI: pip install 'colonbench[model]' "
+    raise ImportError("the completion model needs PyTorch: pip install 'colonbench[model]' "
                       f"(CPU: pip install torch==2.13.0 first). Original error: {exc}") from exc
 
 
@@ -84,9 +86,27 @@ def network_config(name_or_config) -> NetworkConfig:
     return NETWORKS[name_or_config]
 
 
-def build_network(config: NetworkConfig) -> "torch.nn.Module":
+def build_network(config: NetworkConfig, plain: bool = False) -> "torch.nn.Module":
     """The UNet; maps (B, C, S, S, S) inputs (C = ``config.in_channels``) to (B, 1, S, S, S) target heatmaps
-    (linear output)."""
+    (linear output).
+
+    Parameters
+    ----------
+    config : NetworkConfig
+    plain : bool
+        False: MONAI's ``UNet`` (training). True: the same network in plain PyTorch
+        (:class:`colonbench.completion.unet.UNet`, inference), which loads the same weights.
+    """
+    if plain and config.num_res_units >= 1:
+        from colonbench.completion.unet import UNet as PlainUNet
+
+        return PlainUNet(config.in_channels, 1, tuple(config.channels), tuple(config.strides), config.num_res_units,
+                         config.norm, config.dropout)
+    try:
+        from monai.networks.nets import UNet
+    except ImportError as exc:  # pragma: no cover - exercised only without the extra
+        raise ImportError("training the completion model needs MONAI: pip install 'colonbench[model]'. "
+                          f"Original error: {exc}") from exc
     return UNet(spatial_dims=3, in_channels=config.in_channels, out_channels=1, channels=tuple(config.channels),
                 strides=tuple(config.strides), num_res_units=config.num_res_units, norm=config.norm,
                 dropout=config.dropout)
@@ -124,8 +144,10 @@ def save_model(path, net: "torch.nn.Module", config: NetworkConfig, meta: dict |
     return path
 
 
-def load_model(path, device: str = "cpu") -> tuple["torch.nn.Module", NetworkConfig, dict]:
+def load_model(path, device: str = "cpu", plain: bool = True) -> tuple["torch.nn.Module", NetworkConfig, dict]:
     """Rebuild a network saved by :func:`save_model`, in eval mode on ``device``.
+
+    ``plain`` (default): the plain-PyTorch network, for inference; False: MONAI's, for training on.
 
     Returns
     -------
@@ -148,7 +170,7 @@ def load_model(path, device: str = "cpu") -> tuple["torch.nn.Module", NetworkCon
     if "colonbench_network" not in md:
         raise InputError(f"{path}: not a colonbench model (no network configuration in its metadata)")
     config = NetworkConfig.from_json(md["colonbench_network"])
-    net = build_network(config)
+    net = build_network(config, plain=plain)
     net.load_state_dict(state)
     net.to(device).eval()
     return net, config, json.loads(md.get("colonbench_meta", "{}"))
