@@ -1,6 +1,6 @@
 """Coverage error on tubes from a generator that shares no code with colonbench.datagen: a generalization probe.
 
-    python scripts/probe_tubes.py --segments 150 --models small,small-0.1 --folds deep --seed 1
+    python scripts/probe_tubes.py --segments 150 --models small,old-model.safetensors --folds deep --seed 1
     python scripts/probe_tubes.py --methods completion,unwrap --models small
 
 The held-out data issue 11 is scored on comes from other generators. This script is one we did not
