@@ -17,11 +17,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from colonbench.completion.centerline import extract_centerline, resample
+from colonbench.completion.heatmap_centerline import extract_centerline
 from colonbench.completion.surface import (END_INSET, HOLE_DISTANCE, hole_vertices, inside_planes, line_between,
                                           segment_planes)
 from colonbench.estimate import Estimate
 from colonbench.grid import Grid
+from colonbench.polyline import resample
 
 #: Voxels below this heatmap value are surface voxels.
 THRESHOLD = 0.1

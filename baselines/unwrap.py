@@ -23,9 +23,9 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
-from colonbench.datagen.centerline import Centerline
 from colonbench.estimate import Estimate
 from colonbench.grid import principal_axes
+from colonbench.polyline import Centerline
 
 #: Raster cell, mm.
 CELL_MM = 1.0

@@ -41,8 +41,8 @@ import numpy as np
 import pandas as pd
 
 from colonbench.benchmark.colon_metrics import END_SEEN, map_metrics
-from colonbench.benchmark.exchange import sample_id
 from colonbench.benchmark.evaluate import checked_arguments, load_methods, noisy, select, suite_of
+from colonbench.benchmark.exchange import sample_id
 from colonbench.benchmark.parallel import run_units
 from colonbench.benchmark.runfolder import RUN_FILE, begin_run, check_run_folder, read_rows, write_csv, write_json
 from colonbench.errors import ColonbenchError, InputError
@@ -95,7 +95,7 @@ def run_colon_unit(data: str, shard_name: str, index: int, sigma: float, noise_s
     dict
         ``{method: (segment rows, colon rows)}`` (lists of dicts, :data:`SEGMENT_COLUMNS`, :data:`COLON_COLUMNS`).
     """
-    from colonbench.mapping.centerline import colon_centerline
+    from colonbench.mapping.reconstruction_centerline import colon_centerline
     from colonbench.mapping.colonmap import map_colon, whole_coverage
 
     shard, truth = _colon(data, shard_name)

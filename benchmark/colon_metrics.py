@@ -33,7 +33,7 @@ def segment_truth(vertices: np.ndarray, faces: np.ndarray, observed: np.ndarray,
     faces : (f, 3) int
     observed : (f,) bool
         Which faces the reconstruction saw.
-    centerline : colonbench.datagen.centerline.Centerline
+    centerline : colonbench.polyline.Centerline
         The true centerline.
     segments : list of dict
         ``segments.json`` rows (``plane_start``, ``plane_end``).
@@ -51,7 +51,7 @@ def segment_truth(vertices: np.ndarray, faces: np.ndarray, observed: np.ndarray,
         ``end_seen`` (the smaller observed share of the two :data:`END_BAND_MM` end bands;
         below :data:`END_SEEN` the segment has an unobserved end).
     """
-    from colonbench.completion.surface import triangle_areas
+    from colonbench.meshes import triangle_areas
 
     tree = cKDTree(centerline.points)
     area = triangle_areas(vertices, faces) if area is None else area
@@ -108,8 +108,8 @@ def map_metrics(segments, coverage: float | None, map_centerline, vertices, face
         ``segment_mae`` (points), ``whole_truth``, ``whole_error`` (points, estimated - true),
         ``centerline_precision``, ``centerline_recall`` (at ``threshold_mm``).
     """
-    from colonbench.completion.centerline import resample
-    from colonbench.completion.surface import triangle_areas
+    from colonbench.polyline import resample
+    from colonbench.meshes import triangle_areas
 
     area = triangle_areas(vertices, faces)
     truth = segment_truth(vertices, faces, observed, centerline, segments, area, face_s)

@@ -167,7 +167,7 @@ def _inputs(suite, data_dir, shard_name, i, sigma, sid):
     if suite.task == "colon":
         from colonbench.benchmark.colon_evaluate import segment_inputs
         from colonbench.errors import ColonbenchError
-        from colonbench.mapping.centerline import colon_centerline
+        from colonbench.mapping.reconstruction_centerline import colon_centerline
         from colonbench.shards.colonshard import ColonShard
 
         sample = ColonShard(Path(data_dir) / shard_name).sample(i)

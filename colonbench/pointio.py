@@ -140,7 +140,7 @@ def _mesh_or_cloud(path: Path, suffix: str, seed: int) -> np.ndarray:
     vertices = np.asarray(vertices, float)
     if faces is None or len(faces) == 0:
         return vertices
-    from colonbench.datagen.holes import sample_surface
+    from colonbench.meshes import sample_surface
 
     faces = np.asarray(faces)
     usable = np.isfinite(vertices[faces]).all(axis=(1, 2))   # a face on a NaN vertex has no area to sample

@@ -8,7 +8,7 @@ Steps and where they live:
    input heatmap (:func:`colonbench.heatmaps.input_from_points`), exactly as the
    training data were made;
 2. the UNet predicts the target heatmap (:mod:`colonbench.completion.network`);
-3. centerline (:mod:`colonbench.completion.centerline`);
+3. centerline (:mod:`colonbench.completion.heatmap_centerline`);
 4. completed mesh, hole vertices and coverage (:mod:`colonbench.completion.surface`);
 5. back to mm in the input's frame.
 
@@ -27,12 +27,13 @@ from pathlib import Path
 
 import numpy as np
 
-from colonbench.completion.centerline import END_LEVEL, extract_centerline, resample
+from colonbench.completion.heatmap_centerline import END_LEVEL, extract_centerline
 from colonbench.completion.surface import SHELL_LEVEL, STEPS_VERSION, cloud_density, complete, line_between
 from colonbench.errors import InputError
 from colonbench.estimate import Estimate
 from colonbench.grid import Grid, check_points, distinct_points, fit_grid, principal_axes
 from colonbench.heatmaps import input_from_points
+from colonbench.polyline import resample
 
 #: Fewest points accepted: below this there is no segment to complete.
 MIN_POINTS = 200

@@ -47,9 +47,10 @@ from scipy import ndimage
 from scipy.spatial import cKDTree
 from skimage.measure import marching_cubes
 
-from colonbench.completion.centerline import resample
 from colonbench.grid import Grid, even_subsample
 from colonbench.heatmaps import distance_to, voxelize_polyline
+from colonbench.meshes import triangle_areas
+from colonbench.polyline import resample
 
 #: Revision of the steps after the network, part of the methods' versions: 1 the paper's, 2 the sparse
 #: clouds' hole distance, 3 the cut rims, 4 the shell level, 5 the wall gaps, 6 the centerline's ends on the
@@ -254,12 +255,6 @@ def clip_to_shell(vertices: np.ndarray, faces: np.ndarray, heatmap: np.ndarray,
         return vertices, faces
     h = ndimage.map_coordinates(np.asarray(heatmap, dtype=np.float32), vertices.T, order=1, mode="nearest")
     return _keep_faces(vertices, faces, (h <= level)[faces].all(axis=1))
-
-
-def triangle_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """(f,) triangle areas."""
-    v = vertices[faces]
-    return 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
 
 
 def sparse_reach(partial_vox: np.ndarray, false_hole_rate: float = FALSE_HOLE_RATE,
@@ -570,7 +565,7 @@ def clip_to_segment(vertices: np.ndarray, faces: np.ndarray, centerline_vox: np.
 
 def line_between(centerline_vox: np.ndarray, planes: list) -> np.ndarray:
     """The centerline's points between the segment's planes (the whole line if fewer than two are): the
-    line's ends follow the lumen (:data:`~colonbench.completion.centerline.END_LEVEL`), which the network
+    line's ends follow the lumen (:data:`~colonbench.completion.heatmap_centerline.END_LEVEL`), which the network
     may continue past a cut, so a method reports its centerline between the planes it clipped at."""
     c = np.asarray(centerline_vox, float)
     inside = c[inside_planes(c, planes)] if len(c) else c

@@ -21,8 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from colonbench.datagen.centerline import perpendicular_basis
 from colonbench.datagen.config import CameraConfig, draw
+from colonbench.polyline import perpendicular_basis
 
 
 class SurfaceScene:

@@ -303,7 +303,7 @@ def video_partial(rng, scene, centerline, surface, config: VideoConfig, spread_m
     info : dict
         The degradation settings, frame counts and trajectory summary.
     """
-    from colonbench.datagen.holes import sample_surface
+    from colonbench.meshes import sample_surface
     from colonbench.datagen.segments import STRETCH_MARGIN_MM, clip_faces
     from colonbench.datagen.video import FrameCaster, Intrinsics, withdrawal
 

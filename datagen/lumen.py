@@ -35,8 +35,8 @@ import numpy as np
 import trimesh
 from scipy import ndimage
 
-from colonbench.datagen.centerline import Centerline, perpendicular_basis
 from colonbench.errors import InputError
+from colonbench.polyline import Centerline, perpendicular_basis
 
 #: Voxel edge of the lumen grid, mm (the faces of the new surface are about this size).
 LUMEN_VOXEL_MM = 1.0

@@ -15,9 +15,9 @@ import trimesh
 from colonbench.datagen import camera as cam
 from colonbench.datagen.config import CameraConfig, SegmentConfig, SphereConfig, VideoConfig
 from colonbench.datagen.config import draw
-from colonbench.datagen.holes import (check_hole_model, inside_spheres, sample_spheres, sample_surface,
-                                      unseen_end)
+from colonbench.datagen.holes import check_hole_model, inside_spheres, sample_spheres, unseen_end
 from colonbench.datagen.segments import SegmentSurface, _components
+from colonbench.meshes import sample_surface
 
 
 #: How many times holes are drawn at most to reach ``SegmentConfig.min_coverage``.

@@ -31,8 +31,8 @@ import trimesh
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from colonbench.datagen.centerline import Centerline, perpendicular_basis
 from colonbench.errors import ColonbenchError
+from colonbench.polyline import Centerline, perpendicular_basis
 
 
 @dataclass

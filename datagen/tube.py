@@ -12,7 +12,7 @@ import numpy as np
 import trimesh
 from scipy.spatial import cKDTree
 
-from colonbench.datagen.centerline import Centerline
+from colonbench.polyline import Centerline
 
 
 def ring_angles(n_around: int) -> np.ndarray:

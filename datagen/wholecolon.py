@@ -24,7 +24,8 @@ import numpy as np
 
 from colonbench import seeding
 from colonbench.datagen.config import WholeConfig
-from colonbench.datagen.holes import inside_spheres, sample_surface
+from colonbench.datagen.holes import inside_spheres
+from colonbench.meshes import sample_surface
 
 
 @dataclass
@@ -109,7 +110,7 @@ def camera_observed(colon, seed: int, config: WholeConfig | None = None, scene=N
     caller has one.
     """
     from colonbench.datagen.camera import Poses, SurfaceScene, visible_faces
-    from colonbench.datagen.centerline import perpendicular_basis
+    from colonbench.polyline import perpendicular_basis
 
     config = config or WholeConfig()
     rng = seeding.rng(seed, "whole", "camera")

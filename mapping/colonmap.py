@@ -1,7 +1,7 @@
 """``colonbench map``: one colon reconstruction in, a per-segment coverage map out.
 
 Steps: the reconstruction's centerline in uninterrupted pieces
-(:mod:`colonbench.mapping.centerline`); oriented from the rectum when a
+(:mod:`colonbench.mapping.reconstruction_centerline`); oriented from the rectum when a
 trajectory says where the withdrawal ended; pieces joined along the
 trajectory where the scope passed a stretch with no reconstruction (that
 stretch counted unobserved); cut into segments of a given arc
@@ -102,7 +102,7 @@ def hole_regions(vertices: np.ndarray, faces: np.ndarray, hole: np.ndarray) -> t
     """
     import trimesh
 
-    from colonbench.completion.surface import triangle_areas
+    from colonbench.meshes import triangle_areas
 
     if len(faces) == 0:
         return 0.0, np.zeros(0)
@@ -149,13 +149,14 @@ def orient(pieces: list, positions: np.ndarray | None) -> tuple[list, str]:
     the pieces are ordered by when the camera passed them, latest first: the
     trajectory, not the pieces' nearness, says which stretch follows which
     (limbs of a colon can touch). "When" is the arc length along the scope's
-    loop-erased path (:class:`colonbench.mapping.centerline.ScopeRoute`) of
+    loop-erased path (:class:`colonbench.mapping.scope_route.ScopeRoute`) of
     each point's nearest place on it, the median over the piece, and over its
     points within reach of the path where it has any: where limbs touch, a
     piece's end can lie nearer to the other limb's stretch of the path than to its own.
     Without a trajectory the chain is kept as found.
     """
-    from colonbench.mapping.centerline import Piece, ScopeRoute, trajectory_reach
+    from colonbench.mapping.lumen_paths import Piece
+    from colonbench.mapping.scope_route import ScopeRoute, trajectory_reach
 
     if positions is None:
         return pieces, "unknown (no trajectory): numbered from one end of the centerline"
@@ -231,16 +232,17 @@ def map_centerline(points: np.ndarray, positions: np.ndarray | None = None, piec
         The reconstruction, mm.
     positions : (k, 3) float, optional
         Camera positions in time order, mm, same frame.
-    pieces : list of colonbench.mapping.centerline.Piece, optional
+    pieces : list of colonbench.mapping.lumen_paths.Piece, optional
         ``colon_centerline(points, positions=positions)`` when the caller has it already.
 
     Returns
     -------
-    pieces : list of colonbench.mapping.centerline.Piece
+    pieces : list of colonbench.mapping.lumen_paths.Piece
         In map order (:func:`orient`), bridged where the trajectory passes between them.
     orientation : str
     """
-    from colonbench.mapping.centerline import bridge_by_trajectory, colon_centerline, split_at_shortcuts
+    from colonbench.mapping.reconstruction_centerline import colon_centerline
+    from colonbench.mapping.scope_route import bridge_by_trajectory, split_at_shortcuts
 
     pieces = colon_centerline(points, positions=positions) if pieces is None else pieces
     pieces, orientation = orient(split_at_shortcuts(pieces, positions), positions)
@@ -332,7 +334,7 @@ def map_colon(points: np.ndarray, method, segment_mm: float = SEGMENT_MM, positi
         faces nearest to the segment's stretch of the centerline before the
         coverage is counted; a method without a completed mesh is then run on
         the segment alone.
-    pieces : list of colonbench.mapping.centerline.Piece, optional
+    pieces : list of colonbench.mapping.lumen_paths.Piece, optional
         ``colon_centerline(points, positions=positions)`` when the caller has it already (several
         methods or tracks mapping the same reconstruction).
 
@@ -437,7 +439,8 @@ def map_colon(points: np.ndarray, method, segment_mm: float = SEGMENT_MM, positi
             continue
         seg.coverage = float(est.coverage)
         if len(faces):
-            from colonbench.completion.surface import mesh_coverage, triangle_areas
+            from colonbench.completion.surface import mesh_coverage
+            from colonbench.meshes import triangle_areas
 
             if faces is not est.mesh_faces:
                 seg.coverage = mesh_coverage(est.mesh_vertices, faces, est.hole_vertices)

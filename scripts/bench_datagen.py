@@ -24,8 +24,8 @@ from colonbench import seeding
 from colonbench.datagen.camera import SurfaceScene
 from colonbench.datagen.generate import GeneratorConfig, procedural_colon
 from colonbench.datagen.sample import hole_areas, observe_covered
-from colonbench.datagen.holes import sample_surface
 from colonbench.datagen.segments import segment_surface, windows
+from colonbench.meshes import sample_surface
 
 
 def main():

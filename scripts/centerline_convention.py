@@ -75,7 +75,7 @@ def lumen_line(vertices: np.ndarray, faces: np.ndarray, centerline: np.ndarray) 
     """(m, 3) the lumen-centred line of a segment, mm, 0.5 mm apart (see the module's description)."""
     import trimesh
 
-    from colonbench.completion.centerline import resample
+    from colonbench.polyline import resample
     from colonbench.datagen.lumen import smooth_along
 
     mesh = trimesh.Trimesh(vertices, faces, process=False)

@@ -36,7 +36,7 @@ def face_arclength(vertices: np.ndarray, faces: np.ndarray, centerline) -> np.nd
     ----------
     vertices : (v, 3) float
     faces : (f, 3) int
-    centerline : colonbench.datagen.centerline.Centerline
+    centerline : colonbench.polyline.Centerline
     """
     from scipy.spatial import cKDTree
 
@@ -57,13 +57,13 @@ def write_colon_shard(path, attrs: dict, vertices, faces, centerline, samples: l
     vertices : (v, 3) float
         The true surface, mm.
     faces : (f, 3) int
-    centerline : colonbench.datagen.centerline.Centerline
+    centerline : colonbench.polyline.Centerline
         The GT centerline, caecum to anus.
     samples : list of dict
         One per sample: ``hole_model`` (name), ``noise_mm``, ``coverage``,
         ``observed_faces`` ((f,) bool), ``points`` ((n, 3) mm), ``positions`` ((k, 3) mm).
     """
-    from colonbench.datagen.centerline import Centerline
+    from colonbench.polyline import Centerline
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -138,7 +138,7 @@ class ColonShard:
 
     def colon(self) -> dict:
         """``vertices`` (v, 3) float64 mm, ``faces`` (f, 3) int64, ``centerline`` (a Centerline), ``face_arclength``."""
-        from colonbench.datagen.centerline import Centerline
+        from colonbench.polyline import Centerline
 
         with h5py.File(self.path, "r") as h5:
             return {"vertices": h5["colon/vertices"][()].astype(float), "faces": h5["colon/faces"][()].astype(np.int64),
@@ -180,7 +180,7 @@ def build_colon_shard(resolved: dict, unit, out_dir) -> dict:
     import time
 
     from colonbench._version import __version__
-    from colonbench.completion.surface import triangle_areas
+    from colonbench.meshes import triangle_areas
     from colonbench.datagen.generate import GeneratorConfig, procedural_colon
     from colonbench.datagen.wholecolon import whole_partial
     from colonbench.shards.build import check_mesh_files, mesh_colon

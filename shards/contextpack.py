@@ -39,8 +39,8 @@ import numpy as np
 
 from colonbench import seeding
 from colonbench._version import __version__
-from colonbench.errors import InputError
 from colonbench.completion.method import MIN_POINTS
+from colonbench.errors import InputError
 from colonbench.heatmaps import voxelize_mesh, voxelize_points, voxelize_polyline
 from colonbench.shards.pack import (GRIDS, PACK_FORMAT, PACK_NAME, PACK_VERSION, SLAB, _pool, dataset_lock,
                                     write_split)
@@ -104,7 +104,7 @@ def context_sample(pts: np.ndarray, slab: Slab, colon: dict, observed: np.ndarra
     coverage : float
         Observed share of the true surface in ``window`` (by area).
     """
-    from colonbench.completion.surface import triangle_areas
+    from colonbench.meshes import triangle_areas
 
     (lo, hi), (a, b) = window, context
     cl = colon["centerline"]

@@ -69,9 +69,9 @@ def surface_sample(rng: np.random.Generator, vertices, faces, n: int) -> np.ndar
     -------
     (n, 3) float32, mm
         Faces drawn in proportion to their area, then a uniform point in each
-        (:func:`colonbench.datagen.holes.sample_surface`); NaN if no area.
+        (:func:`colonbench.meshes.sample_surface`); NaN if no area.
     """
-    from colonbench.datagen.holes import sample_surface
+    from colonbench.meshes import sample_surface
 
     pts = sample_surface(rng, vertices, faces, count=n)
     return pts.astype(np.float32) if len(pts) == n else np.full((n, 3), np.nan, np.float32)

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from colonbench.datagen.centerline import Centerline
+from colonbench.polyline import Centerline
 
 def straight(length=240.0, spacing=0.5):
     """A straight centerline along +z from the origin."""

@@ -6,9 +6,9 @@ import pytest
 from colonbench.baselines.threshold import threshold_coverage
 from colonbench.baselines.unwrap import pca_axis, unwrap_coverage
 from colonbench.datagen.colon import tube_colon
-from colonbench.datagen.holes import sample_surface
 from colonbench.grid import fit_grid
 from colonbench.heatmaps import sample_heatmaps
+from colonbench.meshes import sample_surface
 from shapes import arc, straight
 
 R = 20.0

@@ -1,8 +1,8 @@
 import numpy as np
 import pytest
 
-from colonbench.datagen.centerline import Centerline
 from colonbench.errors import InputError
+from colonbench.polyline import Centerline
 from shapes import arc
 
 

@@ -54,7 +54,7 @@ def colon_dataset(tmp_path_factory):
 
 
 def test_whole_colon_shards_hold_exact_truth(colon_dataset):
-    from colonbench.completion.surface import triangle_areas
+    from colonbench.meshes import triangle_areas
     from colonbench.shards.colonshard import ColonShard
     from colonbench.shards.verify import verify
 
@@ -126,7 +126,7 @@ def test_evaluate_colon_task_and_its_leaderboard(colon_dataset, tmp_path):
     assert np.allclose(const["coverage_error"], guess - const["true_coverage"], equal_nan=True)
     assert segments["true_coverage"].between(0, 1).all()
     # the segments' true regions do not overlap: per map they hold at most the colon's area, and most of it
-    from colonbench.completion.surface import triangle_areas
+    from colonbench.meshes import triangle_areas
 
     truth = shard.colon()
     colon_area = triangle_areas(truth["vertices"], truth["faces"]).sum()

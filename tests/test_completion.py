@@ -10,17 +10,17 @@ pytest.importorskip("torch")
 pytest.importorskip("monai")
 
 from colonbench.cli import main  # noqa: E402
-from colonbench.completion.centerline import extract_centerline  # noqa: E402
+from colonbench.completion.heatmap_centerline import extract_centerline  # noqa: E402
 from colonbench.completion.method import CompletionMethod, check_cloud, from_heatmap  # noqa: E402
 from colonbench.completion.network import build_network, load_model, network_config, save_model  # noqa: E402
-from colonbench.completion.surface import (complete, hole_vertices, mesh_coverage, segment_planes,  # noqa: E402
-                                          triangle_areas, wall_gaps)
+from colonbench.completion.surface import complete, hole_vertices, mesh_coverage, segment_planes, wall_gaps
 from colonbench.completion.train import TrainConfig, train  # noqa: E402
 from colonbench.datagen.colon import tube_colon  # noqa: E402
 from colonbench.datagen.generate import write_points_ply  # noqa: E402
 from colonbench.errors import InputError  # noqa: E402
 from colonbench.grid import Grid, fit_grid  # noqa: E402
 from colonbench.heatmaps import densify_polyline, sample_heatmaps  # noqa: E402
+from colonbench.meshes import triangle_areas
 from colonbench.shards.reader import ShardDataset  # noqa: E402
 from shapes import arc, straight  # noqa: E402
 
@@ -322,7 +322,7 @@ def test_the_wall_gaps_run_on_past_the_line_to_a_pushed_out_plane():
 def test_a_cut_window_in_a_sparse_or_dense_cloud_is_a_hole_of_its_area(density):
     # the same window, the surface sampled uniformly at random at `density` points/mm^2 (a reconstruction's
     # cloud): the paper's fixed distance calls the gaps of a sparse cloud holes; the widened one does not
-    from colonbench.datagen.holes import sample_surface
+    from colonbench.meshes import sample_surface
 
     colon, grid, _, hm = tube_heatmaps(straight(63.0), UNIT)
     mesh = colon.mesh
@@ -343,7 +343,7 @@ def test_dense_clouds_are_thinned_to_the_training_density():
     # come back at 2, the same points each time, in their order; a 2 points/mm^2 cloud comes back as it is
     from colonbench.completion.method import MIN_POINTS, THIN_TO, thin_dense
     from colonbench.completion.surface import cloud_density
-    from colonbench.datagen.holes import sample_surface
+    from colonbench.meshes import sample_surface
 
     colon, grid, _, hm = tube_heatmaps(straight(63.0), UNIT)
     mesh = colon.mesh
@@ -693,7 +693,7 @@ def test_the_estimate_is_the_same_whatever_the_order_of_the_points(density):
     # estimate use): shuffled, and with a fifth of its points repeated, the shipped model must give the same
     # answer (to the rounding of sums over points); at 10 points/mm^2 the cloud is thinned at random first,
     # and that draw depended on the order of the points (steps 10)
-    from colonbench.datagen.holes import sample_surface
+    from colonbench.meshes import sample_surface
     from colonbench.grid import even_subsample
 
     colon = tube_colon(straight(63.0), R, ring_spacing_mm=0.5, n_around=256)
@@ -723,7 +723,7 @@ def test_the_methods_built_on_the_network_share_its_prediction_of_a_dense_cloud(
     from colonbench.baselines.unwrap import UnwrapMethod
     from colonbench.completion.method import method_cloud, shared_predictor
     from colonbench.completion.surface import cloud_density
-    from colonbench.datagen.holes import sample_surface
+    from colonbench.meshes import sample_surface
 
     colon = tube_colon(straight(63.0), R, ring_spacing_mm=0.5, n_around=256)
     pts = sample_surface(np.random.default_rng(4), colon.mesh.vertices, colon.mesh.faces, 10.0)
@@ -750,7 +750,7 @@ def test_the_orientation_probe_cycles_the_grid_axes_and_reproduces_the_method_on
     from pathlib import Path
 
     from colonbench.completion.method import method_cloud
-    from colonbench.datagen.holes import sample_surface
+    from colonbench.meshes import sample_surface
 
     spec = importlib.util.spec_from_file_location(
         "probe_orientation", Path(__file__).resolve().parents[1] / "scripts" / "probe_orientation.py")

@@ -10,13 +10,14 @@ import yaml
 
 from colonbench.datagen.colon import generate_colon, tube_colon
 from colonbench.datagen.config import ColonConfig, SegmentConfig
-from colonbench.datagen.holes import sample_surface, unseen_end
+from colonbench.datagen.holes import unseen_end
 from colonbench.datagen.lumen import import_lumen
 from colonbench.datagen.sample import reconstruction_cloud
 from colonbench.datagen.segments import SegmentSurface
 from colonbench.datagen.tube import self_intersections
 from colonbench.errors import InputError
 from colonbench.grid import fit_grid, principal_axes, tube_axes
+from colonbench.meshes import sample_surface
 from colonbench.shards.manifest import resolve
 from colonbench.shards.schema import sha256_file
 from conftest import MANIFESTS
@@ -335,7 +336,7 @@ def test_real_colon_segments_hold_only_their_own_stretch(gca00060):
 
 def test_curvature_limit_rounds_a_kink_and_leaves_the_rest():
     # two straight legs meeting at a right angle: the re-centring's kink, in a 20 mm lumen
-    from colonbench.datagen.centerline import Centerline
+    from colonbench.polyline import Centerline
     from colonbench.datagen.lumen import MIN_TURN_RATIO, limit_curvature, turning_radius
 
     t = np.arange(0.0, 100.0, 0.5)
@@ -515,7 +516,7 @@ def test_random_bending_moves_a_straight_line_across_itself_by_its_amplitude():
 def test_tortuous_colons_turn_like_real_ones_and_keep_the_self_intersection_check():
     # bends.yaml's ranges: its segments turn more than the same colons drawn without bending, no bend is
     # tighter than the curvature limit allows, and the exact self-intersection check holds
-    from colonbench.datagen.centerline import Centerline
+    from colonbench.polyline import Centerline
 
     raw = yaml.safe_load((MANIFESTS / "bends.yaml").read_text())["config"]["colon"]
     cfg = ColonConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in raw.items()})

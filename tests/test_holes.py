@@ -8,9 +8,10 @@ from colonbench import seeding
 from colonbench.datagen.camera import Poses, SurfaceScene, visible_faces
 from colonbench.datagen.colon import tube_colon
 from colonbench.datagen.config import SphereConfig
-from colonbench.datagen.holes import inside_spheres, sample_surface
+from colonbench.datagen.holes import inside_spheres
 from colonbench.datagen.sample import hole_areas
 from colonbench.datagen.segments import segment_surface
+from colonbench.meshes import sample_surface
 from shapes import straight
 
 R = 20.0

@@ -9,8 +9,8 @@ from shapes import helix, straight
 
 from colonbench.cli import main
 from colonbench.datagen.colon import tube_colon
-from colonbench.datagen.holes import sample_surface
-from colonbench.mapping.centerline import colon_centerline
+from colonbench.mapping.reconstruction_centerline import colon_centerline
+from colonbench.meshes import sample_surface
 
 RADIUS = 15.0
 
@@ -167,7 +167,8 @@ def test_a_trajectory_bridges_a_stretch_with_no_reconstruction():
         assert by_start[start].coverage == pytest.approx(truth, abs=0.1), start
     assert whole_coverage(result["segments"]) == pytest.approx(300 / 360, abs=0.06)
     # pieces apart where the wall is there (a narrow stretch the lumen search lost) are joined, not unseen
-    from colonbench.mapping.centerline import Piece, bridge_by_trajectory
+    from colonbench.mapping.lumen_paths import Piece
+    from colonbench.mapping.scope_route import bridge_by_trajectory
 
     parts = [Piece(line.points[(line.arclength >= a) & (line.arclength <= b)], RADIUS) for a, b in ((0, 150),
                                                                                                     (210, 360))]
@@ -189,7 +190,7 @@ def test_a_trajectory_bridges_a_stretch_with_no_reconstruction():
 
 def u_tube(limb=200.0, bend=16.0, spacing=0.5):
     """A U: two parallel 200 mm limbs 32 mm apart (their 15 mm walls 2 mm apart), joined by a half circle."""
-    from colonbench.datagen.centerline import Centerline
+    from colonbench.polyline import Centerline
 
     z = np.arange(0.0, limb, spacing)
     t = np.arange(0.0, np.pi, spacing / bend)
@@ -232,7 +233,7 @@ def test_pieces_facing_each_other_across_touching_limbs_are_joined_around_the_be
     apart, their walls line the straight line between them, and the colon runs 110 mm around. Without a
     trajectory the ends are bridged straight; with a withdrawal (pushed back in 20 mm in the gap) the
     line goes around with the scope, and the 110 mm is reported as not reconstructed."""
-    from colonbench.mapping.centerline import bridge_by_trajectory, loop_erased
+    from colonbench.mapping.scope_route import bridge_by_trajectory, loop_erased
     from colonbench.mapping.colonmap import orient
 
     line = u_tube()
@@ -425,7 +426,7 @@ def test_the_recorded_trajectory_drifts_off_the_centerline_within_the_wall():
 def test_the_map_clips_at_its_own_planes_not_at_cut_rims():
     # the map splits a reconstruction by arc length, not by planes, so its segments' clouds end in no
     # planar rim: the completion method runs with its rim search off (a copy), the caller's own left as it is
-    from colonbench.completion.centerline import END_LEVEL
+    from colonbench.completion.heatmap_centerline import END_LEVEL
     from colonbench.completion.method import CompletionMethod
     from colonbench.mapping.colonmap import map_colon
 

@@ -12,7 +12,6 @@ from scipy.spatial import cKDTree
 from colonbench.errors import InputError
 from colonbench.shards.pointclouds import (PointCloudDataset, collate_points, fixed_size, resample_polyline,
                                            surface_sample)
-from colonbench.shards.reader import Shard
 
 ALL = ("partial", "complete", "holes", "centerline")
 

@@ -4,12 +4,12 @@ import numpy as np
 import pytest
 import trimesh
 
-from colonbench.datagen.realmesh import check_centerline_inside, import_colon, load_centerline, load_mesh
 from colonbench.datagen.camera import SurfaceScene
-from colonbench.datagen.centerline import Centerline
 from colonbench.datagen.colon import tube_colon
 from colonbench.datagen.generate import GeneratorConfig, colon_samples
+from colonbench.datagen.realmesh import check_centerline_inside, import_colon, load_centerline, load_mesh
 from colonbench.errors import InputError
+from colonbench.polyline import Centerline
 from shapes import straight
 
 MESH = "gca00090_large_intestine_mm.ply"

@@ -5,10 +5,10 @@ import pytest
 import trimesh
 
 from colonbench.datagen.camera import SurfaceScene
-from colonbench.datagen.centerline import Centerline
 from colonbench.datagen.colon import tube_colon
 from colonbench.datagen.segments import segment_surface, windows
 from colonbench.datagen.tube import disk_collisions, self_intersections
+from colonbench.polyline import Centerline
 from shapes import arc, straight
 
 N_AROUND = 256

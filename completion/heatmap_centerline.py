@@ -34,7 +34,7 @@
 from __future__ import annotations
 
 import numpy as np
-from scipy import ndimage, sparse
+from scipy import sparse
 from scipy.sparse.csgraph import connected_components, dijkstra
 
 from colonbench import paths
@@ -256,18 +256,3 @@ def extract_centerline(heatmap: np.ndarray, delta: float = DELTA, smooth_voxels:
     return paths.smooth_path(path, smooth_voxels)
 
 
-def arc_length(polyline: np.ndarray) -> np.ndarray:
-    """(n,) arc length of each vertex of an (n, 3) polyline from its first, same unit (0 first)."""
-    p = np.asarray(polyline, dtype=float).reshape(-1, 3)
-    return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))])
-
-
-def resample(polyline: np.ndarray, spacing: float) -> np.ndarray:
-    """A polyline resampled at a constant arc-length ``spacing`` (same unit), ends kept."""
-    p = np.asarray(polyline, dtype=float)
-    if len(p) < 2:
-        return p
-    s = arc_length(p)
-    n = max(int(np.ceil(s[-1] / spacing)), 1)
-    t = np.linspace(0.0, s[-1], n + 1)
-    return np.stack([np.interp(t, s, p[:, i]) for i in range(3)], axis=1)

@@ -217,3 +217,20 @@ def perpendicular_basis(tangents) -> tuple[np.ndarray, np.ndarray]:
     u = np.cross(t, a)
     u /= np.linalg.norm(u, axis=1, keepdims=True)
     return u, np.cross(t, u)
+
+
+def arc_length(polyline: np.ndarray) -> np.ndarray:
+    """(n,) arc length of each vertex of an (n, 3) polyline from its first, same unit (0 first)."""
+    p = np.asarray(polyline, dtype=float).reshape(-1, 3)
+    return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))])
+
+
+def resample(polyline: np.ndarray, spacing: float) -> np.ndarray:
+    """A polyline resampled at a constant arc-length ``spacing`` (same unit), ends kept."""
+    p = np.asarray(polyline, dtype=float)
+    if len(p) < 2:
+        return p
+    s = arc_length(p)
+    n = max(int(np.ceil(s[-1] / spacing)), 1)
+    t = np.linspace(0.0, s[-1], n + 1)
+    return np.stack([np.interp(t, s, p[:, i]) for i in range(3)], axis=1)
