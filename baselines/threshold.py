@@ -9,7 +9,7 @@ sqrt(2)/2 voxel from every partial point are hole voxels, and
 As the paper notes, such a surface varies in thickness, which is what the
 mesh step fixes. For a fair comparison the surface voxels are cut at the
 same segment end planes as the mesh of the full method
-(:func:`colonbench.completion.surface.segment_planes`), so the two differ only in
+(:func:`colonbench.completion.planes.segment_planes`), so the two differ only in
 the step the paper compares.
 """
 
@@ -18,8 +18,8 @@ from __future__ import annotations
 import numpy as np
 
 from colonbench.completion.heatmap_centerline import extract_centerline
-from colonbench.completion.surface import (END_INSET, HOLE_DISTANCE, hole_vertices, inside_planes, line_between,
-                                          segment_planes)
+from colonbench.completion.planes import END_INSET, inside_planes, line_between, segment_planes
+from colonbench.completion.surface import HOLE_DISTANCE, hole_vertices
 from colonbench.estimate import Estimate
 from colonbench.grid import Grid
 from colonbench.polyline import resample

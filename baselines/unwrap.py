@@ -147,7 +147,7 @@ class UnwrapMethod:
         from colonbench.completion.method import on_prediction
 
         def unwrap_learned(pts, p):
-            from colonbench.completion.surface import line_between, segment_planes
+            from colonbench.completion.planes import line_between, segment_planes
 
             cl = p.centerline_vox
             if len(cl) >= 2:  # the line the completion method reports: between the segment's planes

@@ -28,7 +28,9 @@ from pathlib import Path
 import numpy as np
 
 from colonbench.completion.heatmap_centerline import END_LEVEL, extract_centerline
-from colonbench.completion.surface import SHELL_LEVEL, STEPS_VERSION, cloud_density, complete, line_between
+from colonbench.completion.planes import line_between
+from colonbench.completion.steps import STEPS_VERSION, complete
+from colonbench.completion.surface import SHELL_LEVEL, cloud_density
 from colonbench.errors import InputError
 from colonbench.estimate import Estimate
 from colonbench.grid import Grid, check_points, distinct_points, fit_grid, principal_axes
@@ -434,7 +436,7 @@ def prediction_version(predictor: Predictor) -> str:
 
 def steps_version(shell_level: float | None = SHELL_LEVEL, gaps: bool = True,
                   end_level: float | None = END_LEVEL, thin_above: float | None = THIN_ABOVE) -> str:
-    """``steps=N`` of the steps around the network (:data:`~colonbench.completion.surface.STEPS_VERSION`),
+    """``steps=N`` of the steps around the network (:data:`~colonbench.completion.steps.STEPS_VERSION`),
     with the shell level, the wall gaps, the centerline's end level and the thinning density where they are
     not the default: part of the methods' versions in run folders."""
     return (f"steps={STEPS_VERSION}" + ("" if shell_level == SHELL_LEVEL else f",shell_level={shell_level}")
@@ -462,7 +464,7 @@ def from_heatmap(heatmap: np.ndarray, grid: Grid, points, method: str = "complet
     shell_level : float or None
         :func:`colonbench.completion.surface.clip_to_shell`'s level; None keeps every face.
     gaps : bool
-        Add hole patches where the tube has no wall (:func:`colonbench.completion.surface.wall_gaps`).
+        Add hole patches where the tube has no wall (:func:`colonbench.completion.gaps.wall_gaps`).
     """
     t0 = time.perf_counter()
     cl_vox = extract_centerline(heatmap) if centerline_vox is None else centerline_vox

@@ -52,9 +52,9 @@ import torch
 from colonbench import seeding
 from colonbench._version import __version__
 from colonbench.augment import AugmentConfig
-from colonbench.completion.packdata import PackBatches, apply_flips, apply_transposes, flips, transpose
 from colonbench.completion.network import (NETWORKS, build_network, network_config, resolve_device,
                                            save_model)
+from colonbench.completion.packdata import PackBatches, apply_flips, apply_transposes, flips, transpose
 from colonbench.errors import InputError
 from colonbench.shards.schema import LOCK_NAME
 

@@ -52,3 +52,16 @@ def smoke_pack(smoke_dataset, tmp_path_factory):
     out = tmp_path_factory.mktemp("pack") / "pack"
     info = write_pack(data, out, workers=1, progress=False)
     return data, lock, out, info
+
+
+@pytest.fixture(scope="session")
+def tiny_run(smoke_dataset, tmp_path_factory):
+    """One epoch of the completion network on the smoke dataset: (data, run folder, TrainConfig, result)."""
+    pytest.importorskip("torch")
+    from colonbench.completion.train import TrainConfig, train
+
+    out, _ = smoke_dataset
+    run = tmp_path_factory.mktemp("run")
+    cfg = TrainConfig(epochs=1, batch_size=2, workers=0, augment_prob=0.5)
+    result = train(out, run, cfg, device="cpu", progress=False)
+    return out, run, cfg, result

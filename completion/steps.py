@@ -1,0 +1,74 @@
+"""The steps after the network, in order: the completed surface of a segment from its heatmap, clipped to its planes,
+its holes, the wall gaps put back, and its coverage (voxel units; docs/method.md).
+
+:data:`STEPS_VERSION` is the revision of these steps, part of every method's version built on them."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from colonbench.completion.gaps import wall_gaps
+from colonbench.completion.planes import clip_to_segment, segment_planes
+from colonbench.completion.surface import (HOLE_DISTANCE, SHELL_LEVEL, clip_to_shell, extract_mesh, hole_vertices,
+                                           mesh_coverage, resigned_field)
+
+
+#: Revision of the steps after the network, part of the methods' versions: 1 the paper's, 2 the sparse
+#: clouds' hole distance, 3 the cut rims, 4 the shell level, 5 the wall gaps, 6 the centerline's ends on the
+#: lumen's far ends and the cut rims held where the line runs past them, 7 an end with no cut rim pushed out to
+#: the cloud's extent, 8 the wall gaps' stations run on from the line's ends to planes beyond them, 9 clouds
+#: denser than 3 points/mm^2 thinned to 2 before the method runs (:func:`colonbench.completion.method.thin_dense`),
+#: 10 a cloud taken as its distinct points in lexicographic order before it is thinned (the thinning's draw
+#: depended on the order of the points, and repeated points counted in the cloud's density).
+STEPS_VERSION = "10"
+
+
+@dataclass
+class Completion:
+    """A completed segment in voxel coordinates of its grid.
+
+    Attributes
+    ----------
+    vertices : (v, 3) float
+        Completed mesh vertices, continuous voxel indices.
+    faces : (f, 3) int
+    hole : (v,) bool
+        Vertices farther than the hole distance from the partial cloud.
+    coverage : float
+        Observed area / total area of the completed mesh (NaN if the mesh is empty).
+    planes : list of (point, inward normal)
+        The planes the mesh was clipped at (the segment's ends).
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    hole: np.ndarray
+    coverage: float
+    planes: list = field(default_factory=list)
+
+
+def complete(heatmap: np.ndarray, centerline_vox: np.ndarray, partial_vox: np.ndarray,
+             distance: float | None = None, cut_rims: bool = True,
+             shell_level: float | None = SHELL_LEVEL, gaps: bool = True) -> Completion:
+    """Mesh, holes and coverage of a segment from its target heatmap, centerline and partial cloud (voxels).
+
+    ``distance`` is the hole distance in voxels (default: the paper's sqrt(2)/2). ``cut_rims``: clip
+    at the cloud's cut rims where they are found (:func:`rim_planes`), else at the centerline's ends.
+    ``shell_level``: drop the faces where the heatmap is above it (:func:`clip_to_shell`); None keeps
+    every face, as before version 4 of the steps. ``gaps``: add hole patches where the tube has no wall
+    (:func:`wall_gaps`), as from version 5.
+    """
+    verts, faces = extract_mesh(*resigned_field(heatmap, centerline_vox))
+    if shell_level is not None:
+        verts, faces = clip_to_shell(verts, faces, heatmap, shell_level)
+    planes = segment_planes(centerline_vox, partial_vox, cut_rims)
+    verts, faces = clip_to_segment(verts, faces, centerline_vox, planes=planes)
+    hole = hole_vertices(verts, partial_vox, HOLE_DISTANCE if distance is None else distance)
+    if gaps and len(faces):
+        gap_v, gap_f = wall_gaps(heatmap, centerline_vox, planes)
+        faces = np.concatenate([faces, gap_f + len(verts)])
+        verts = np.concatenate([verts, gap_v])
+        hole = np.concatenate([hole, np.ones(len(gap_v), bool)])
+    return Completion(verts, faces, hole, mesh_coverage(verts, faces, hole), planes)
