@@ -96,3 +96,9 @@ def publish(run_dir, suite) -> Path:
             write_json(out / "results" / name, summary)
     write_json(out / RUN_FILE, run)
     return out
+
+
+def shipped_items(suite, exclude=()) -> list:
+    """The shipped results of ``suite`` as extra runs for a leaderboard (an empty list when there are none)."""
+    item = load(suite, exclude)
+    return [item] if item is not None else []

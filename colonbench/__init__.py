@@ -24,11 +24,51 @@ Geometry is in millimetres everywhere a user sees it. Importing colonbench
 loads nothing heavy; each name below is imported when first used.
 """
 
+import sys
+import types
+
 from colonbench._version import __version__
+import colonbench.benchmark as _benchmark_package  # its __init__ imports nothing: this stays cheap
 from colonbench.errors import ColonbenchError, InputError
 
 __all__ = ["__version__", "ColonbenchError", "InputError", "Estimate", "Method", "load_method", "benchmark",
            "suites"]
+
+
+class _CallableBenchmark(types.ModuleType):
+    """The subpackage ``colonbench.benchmark``, callable as the function ``colonbench.benchmark(...)``."""
+
+    def __call__(self, methods=(), suites="demo-v1", out=None, **options) -> dict:
+        """Evaluate methods (names, specs or objects with ``name`` and ``estimate(points)``) on named suites.
+
+        Parameters
+        ----------
+        methods : str, object or list of them
+        suites : str or list of str
+            Suite ids or names, or ``"all"``.
+        out : path, optional
+            The benchmark folder (default: a new temporary folder).
+        **options
+            As :func:`colonbench.pipeline.run_benchmark` (``data``, ``workers``, ``progress``, ...).
+
+        Returns
+        -------
+        dict
+            ``summary`` (a DataFrame: suite, noise, method, MAE and its interval, ...), ``markdown``, ``paths``,
+            ``runs``, ``seconds`` and ``out``.
+        """
+        import tempfile
+
+        from colonbench.pipeline import run_benchmark
+
+        out = out if out is not None else tempfile.mkdtemp(prefix="colonbench-benchmark-")
+        result = run_benchmark(methods, suites, out, **options)
+        result["out"] = out
+        return result
+
+
+_benchmark_package.__class__ = _CallableBenchmark
+benchmark = sys.modules["colonbench.benchmark"]
 
 
 def suites():
@@ -47,8 +87,4 @@ def __getattr__(name):
         from colonbench.benchmark.registry import load_method
 
         return load_method
-    if name == "benchmark":  # the subpackage, callable: cb.benchmark(method, "real-v1")
-        import importlib
-
-        return importlib.import_module("colonbench.benchmark")
     raise AttributeError(f"module 'colonbench' has no attribute {name!r}")

@@ -26,22 +26,22 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from colonbench.datagen.config import _p, draw
 from colonbench.grid import Grid, fit_grid, grid_axes
 from colonbench.heatmaps import Heatmaps, sample_heatmaps
+from colonbench.params import draw, param
 
 
 @dataclass(frozen=True)
 class AugmentConfig:
     """Ranges of the on-the-fly training augmentations (set a range to a single value to fix it)."""
 
-    scale: tuple = _p((0.95, 1.15), 0.5, 2.0, "factor", "voxel size multiplier (> 1 shrinks the segment in the grid)")
-    rotation_deg: float = _p(30.0, 0.0, 180.0, "degree",
+    scale: tuple = param((0.95, 1.15), 0.5, 2.0, "factor", "voxel size multiplier (> 1 shrinks the segment in the grid)")
+    rotation_deg: float = param(30.0, 0.0, 180.0, "degree",
                              "largest rotation of the grid axes away from the principal axes (180 = any orientation)")
-    deform_mm: tuple = _p((0.0, 2.0), 0.0, 10.0, "mm", "amplitude of the smooth displacement field")
-    deform_wavelength_mm: tuple = _p((30.0, 80.0), 5.0, 500.0, "mm", "wavelength of its Fourier modes")
-    deform_modes: int = _p(4, 0, 64, "count", "Fourier modes summed per displacement field")
-    noise_mm: tuple = _p((0.0, 0.5), 0.0, 5.0, "mm", "Gaussian noise sigma on the partial points")
+    deform_mm: tuple = param((0.0, 2.0), 0.0, 10.0, "mm", "amplitude of the smooth displacement field")
+    deform_wavelength_mm: tuple = param((30.0, 80.0), 5.0, 500.0, "mm", "wavelength of its Fourier modes")
+    deform_modes: int = param(4, 0, 64, "count", "Fourier modes summed per displacement field")
+    noise_mm: tuple = param((0.0, 0.5), 0.0, 5.0, "mm", "Gaussian noise sigma on the partial points")
 
 
 def random_rotation(rng, max_deg: float) -> np.ndarray:

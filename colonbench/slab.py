@@ -15,7 +15,7 @@ with ``s(v)`` the arc length of the centerline point nearest to voxel ``v``
 fall outside), the same rule by which the map clips a completed surface to
 its segment (:func:`colonbench.mapping.colonmap.clip_between`) and by which
 the whole-colon truth assigns faces to a stretch of colon. Training data
-(:mod:`colonbench.shards.contextpack`) and inference
+(:mod:`colonbench.mapping.contextpack`) and inference
 (:class:`colonbench.completion.method.Predictor`) both call :func:`context_grid`
 and :func:`slab_occupancy`, so the two see the same thing.
 """

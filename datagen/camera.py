@@ -21,7 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from colonbench.datagen.config import CameraConfig, draw
+from colonbench.datagen.config import CameraConfig
+from colonbench.params import draw
 from colonbench.polyline import perpendicular_basis
 
 

@@ -32,9 +32,10 @@ from scipy.interpolate import CubicSpline, PchipInterpolator
 from scipy.ndimage import gaussian_filter, gaussian_filter1d
 
 from colonbench import seeding
-from colonbench.datagen.config import ColonConfig, draw, validate
+from colonbench.datagen.config import ColonConfig, validate
 from colonbench.datagen.tube import ring_angles, self_intersections, sweep
 from colonbench.errors import ColonbenchError
+from colonbench.params import draw
 from colonbench.polyline import Centerline
 
 #: Anatomical template (mm, patient frame), before jitter and scaling. Each row

@@ -44,8 +44,9 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from colonbench.datagen.config import VideoConfig, draw
+from colonbench.datagen.config import VideoConfig
 from colonbench.errors import InputError
+from colonbench.params import draw
 
 
 def smooth_depth(depth, sigma_px: float) -> np.ndarray:

@@ -21,9 +21,10 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from colonbench.datagen import HOLE_MODELS
-from colonbench.datagen.config import SphereConfig, draw
+from colonbench.datagen.config import SphereConfig
 from colonbench.errors import InputError
 from colonbench.meshes import sample_surface
+from colonbench.params import draw
 
 
 def check_hole_model(name: str) -> tuple[str, ...]:

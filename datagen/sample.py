@@ -14,10 +14,10 @@ import trimesh
 
 from colonbench.datagen import camera as cam
 from colonbench.datagen.config import CameraConfig, SegmentConfig, SphereConfig, VideoConfig
-from colonbench.datagen.config import draw
 from colonbench.datagen.holes import check_hole_model, inside_spheres, sample_spheres, unseen_end
 from colonbench.datagen.segments import SegmentSurface, _components
 from colonbench.meshes import sample_surface
+from colonbench.params import draw
 
 
 #: How many times holes are drawn at most to reach ``SegmentConfig.min_coverage``.

@@ -36,7 +36,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from colonbench.datagen.config import VideoConfig, draw
+from colonbench.datagen.config import VideoConfig
+from colonbench.params import draw
 
 
 @dataclass(frozen=True)

@@ -14,10 +14,8 @@ estimated by a method on its own points alone; results written.
 from __future__ import annotations
 
 import copy
-import json
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
@@ -29,8 +27,6 @@ from colonbench.slab import point_at
 MIN_POINTS = 200
 #: Hole regions smaller than this are not counted in ``holes`` (specks between the cloud's points), mm^2.
 MIN_HOLE_MM2 = 10.0
-#: Coverage at or below this is red, 1 green (the paper's supplementary map).
-RED_AT = 0.5
 
 
 @dataclass
@@ -77,14 +73,14 @@ class Segment:
         """The JSON / CSV row."""
         return {"index": self.index, "piece": self.piece, "start_mm": round(self.start_mm, 2),
                 "end_mm": round(self.end_mm, 2), "plane_start": self.plane_start, "plane_end": self.plane_end,
-                "points": self.points, "coverage": _round(self.coverage, 4),
-                "hole_area_mm2": _round(self.hole_area_mm2, 1), "holes": self.holes,
-                "largest_hole_mm2": _round(self.largest_hole_mm2, 1), "area_mm2": _round(self.area_mm2, 1),
+                "points": self.points, "coverage": round_or_none(self.coverage, 4),
+                "hole_area_mm2": round_or_none(self.hole_area_mm2, 1), "holes": self.holes,
+                "largest_hole_mm2": round_or_none(self.largest_hole_mm2, 1), "area_mm2": round_or_none(self.area_mm2, 1),
                 "unreconstructed_mm": round(self.unreconstructed_mm, 1), "seconds": round(self.seconds, 3),
                 "error": self.error}
 
 
-def _round(x, nd):
+def round_or_none(x, nd):
     return None if x is None or not np.isfinite(x) else round(float(x), nd)
 
 
@@ -490,62 +486,3 @@ def whole_coverage(segments: list[Segment]) -> float | None:
     return float(np.sum(length * [s.coverage for s in done]) / length.sum())
 
 
-def write_map(result: dict, out, method_name: str, model: str | None, threshold: float = RED_AT,
-              figure: bool = True) -> tuple[list[Path], dict]:
-    """Write ``segments.json``/``.csv``, ``centerline.npy``, ``summary.json``, ``map.ply``/``.glb``, ``map.png``.
-
-    Returns
-    -------
-    written : list of Path
-    summary : dict
-        What ``summary.json`` holds.
-    """
-    import pandas as pd
-
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    rows = [s.row() for s in result["segments"]]
-    written = []
-    doc = {"segments": rows, "method": method_name, "model": model}
-    (out / "segments.json").write_text(json.dumps(doc, indent=1) + "\n")
-    flat = []
-    for r in rows:
-        f = {k: v for k, v in r.items() if k not in ("plane_start", "plane_end")}
-        for name in ("plane_start", "plane_end"):
-            for part in ("point", "normal"):
-                for axis, v in zip("xyz", r[name][part]):
-                    f[f"{name}_{part}_{axis}"] = v
-        flat.append(f)
-    pd.DataFrame(flat).to_csv(out / "segments.csv", index=False)
-    np.save(out / "centerline.npy", np.asarray(result["centerline"], np.float64))
-    written += [out / "segments.json", out / "segments.csv", out / "centerline.npy"]
-    segs = result["segments"]
-    seconds = {k: round(v, 3) for k, v in result["seconds"].items()}
-    if any(s.mesh for s in segs):
-        from colonbench.reports.coverage_map import map_mesh, render_map
-
-        mesh = map_mesh(segs, red_at=threshold)
-        mesh.export(out / "map.ply")
-        mesh.export(out / "map.glb")
-        written += [out / "map.ply", out / "map.glb"]
-        if figure:
-            t = time.perf_counter()
-            written.append(render_map(mesh, out / "map.png", red_at=threshold))
-            seconds["figure"] = round(time.perf_counter() - t, 3)
-    summary = {
-        "coverage": _round(whole_coverage(segs), 4),
-        "segments": len(segs),
-        "estimated": sum(s.coverage is not None for s in segs),
-        "below_threshold": {"threshold": threshold,
-                            "segments": [s.index for s in segs if s.coverage is not None and s.coverage < threshold]},
-        "centerline_mm": round(float(result["arclength"][-1]), 1),
-        "interruptions": result["interruptions"],
-        "unreconstructed": result.get("unreconstructed", []),
-        "orientation": result["orientation"],
-        "context_mm": result.get("context_mm", 0.0),
-        "method": method_name, "model": model,
-        "seconds": seconds,
-    }
-    (out / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
-    written.append(out / "summary.json")
-    return written, summary

@@ -20,8 +20,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from colonbench.datagen.render import _axes, _equal, draw_surface
 from colonbench.grid import principal_axes
+from colonbench.reports.pictures import axes_3d, set_equal, draw_surface
 
 COLORS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e")
 
@@ -138,21 +138,21 @@ def triplets(example_files, path, title: str = "") -> Path:
         hole_face = hole[faces].sum(axis=1) >= 2 if len(faces) else np.zeros(0, bool)
         label = f"{Path(f).stem.rpartition('-noise')[0]}\ntrue {float(e['true_coverage']):.1%}, " \
                 f"estimated {float(e['coverage']):.1%}"
-        ax = _axes(fig, (len(files), 3, 3 * r + 1), f"input cloud, {label}")
+        ax = axes_3d(fig, (len(files), 3, 3 * r + 1), f"input cloud, {label}")
         ax.scatter(*p[::2].T, s=0.3, color="#555555")
-        _equal(ax, p)
-        ax = _axes(fig, (len(files), 3, 3 * r + 2), "completed mesh, holes red")
+        set_equal(ax, p)
+        ax = axes_3d(fig, (len(files), 3, 3 * r + 2), "completed mesh, holes red")
         draw_surface(ax, v, faces[~hole_face], (0.78, 0.78, 0.8), 20000)
         draw_surface(ax, v, faces[hole_face], (0.9, 0.1, 0.1), 20000)
-        _equal(ax, p)  # the input cloud sets the scale of all three panels
-        ax = _axes(fig, (len(files), 3, 3 * r + 3), "completed mesh, centerline red (GT black)")
+        set_equal(ax, p)  # the input cloud sets the scale of all three panels
+        ax = axes_3d(fig, (len(files), 3, 3 * r + 3), "completed mesh, centerline red (GT black)")
         draw_surface(ax, v, faces, (0.8, 0.8, 0.82), 20000, alpha=0.25)
         gt, cl = frame(e["true_centerline"]), frame(e["centerline"])
         if len(gt):
             ax.plot(*gt.T, color="k", lw=1.2, ls="--")
         if len(cl):
             ax.plot(*cl.T, color="#d62728", lw=2)
-        _equal(ax, p)  # the input cloud sets the scale of all three panels
+        set_equal(ax, p)  # the input cloud sets the scale of all three panels
     if title:
         fig.suptitle(title, fontsize=10)
     fig.tight_layout()

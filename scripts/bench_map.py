@@ -42,7 +42,7 @@ def main() -> None:
     from colonbench.datagen.colon import generate_colon
     from colonbench.datagen.wholecolon import whole_partial
     from colonbench.mapping.colonmap import map_colon, whole_coverage
-    from colonbench.reports.coverage_map import map_mesh, render_map
+    from colonbench.mapping.mapfiles import map_mesh, render_map
 
     torch.set_num_threads(args.threads)
     method = load_method("completion", model=args.model, context_model=args.context_model)

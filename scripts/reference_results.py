@@ -17,7 +17,7 @@ import time
 from colonbench.benchmark import reference, suites
 from colonbench.benchmark.colon_evaluate import ALL_METHODS
 from colonbench.benchmark.registry import DEFAULT_METHODS
-from colonbench.benchmark.runner import run_benchmark
+from colonbench.pipeline import run_benchmark
 
 
 def main() -> None:

@@ -54,7 +54,7 @@ PACK_FORMAT = "colonbench-pack"
 PACK_VERSION = 1
 #: The occupancy grids a pack stores per sample, in this order.
 GRIDS = ("s0", "s1", "c")
-#: The fourth grid of a context pack (:mod:`colonbench.shards.contextpack`): the segment's slab
+#: The fourth grid of a context pack (:mod:`colonbench.mapping.contextpack`): the segment's slab
 #: (:func:`colonbench.slab.slab_occupancy`), the in-context model's second input channel.
 SLAB = "slab"
 #: Largest difference between a stored (float16) heatmap and the one recomputed from the occupancies.
@@ -183,7 +183,7 @@ def write_pack(data_dir, out_dir, splits=("train", "validation"), workers: int =
                 worst[0] = max(worst[0], diff)
                 yield rows
 
-        with _pool(workers) as pool:
+        with process_pool(workers) as pool:
             entry = write_split(out, split, size, n, GRIDS, checked(files, pool.map(_pack_shard, files)), progress)
         info["splits"][split] = {**entry, "max_heatmap_difference": worst[0]}
     tmp = out / (PACK_NAME + ".tmp")
@@ -252,7 +252,8 @@ class _Serial:
         return False
 
 
-def _pool(workers: int):
+def process_pool(workers: int):
+    """A context manager with ``map(fn, items)``: this process for ``workers`` <= 1, else that many spawned processes."""
     if workers <= 1:
         return _Serial()
     import multiprocessing

@@ -122,7 +122,7 @@ def test_a_widened_segment_model_computes_what_it_did_until_trained():
 @pytest.fixture(scope="module")
 def context_pack(tmp_path_factory):
     """Two short procedural colons (train, validation), one whole partial each, and their context pack."""
-    from colonbench.shards.contextpack import write_context_pack
+    from colonbench.mapping.contextpack import write_context_pack
     from colonbench.shards.dataset import generate
 
     manifest = {"name": "context-smoke", "seed": 5, "task": "colon",
@@ -140,7 +140,7 @@ def context_pack(tmp_path_factory):
 
 def test_a_context_pack_holds_each_segment_with_its_slab(context_pack):
     from colonbench.completion.packdata import PackSplit
-    from colonbench.shards.contextpack import write_context_pack
+    from colonbench.mapping.contextpack import write_context_pack
     from colonbench.shards.pack import read_pack
 
     root, info = context_pack
@@ -171,7 +171,7 @@ def test_a_context_pack_cut_along_the_maps_centerline_keeps_each_window_on_its_t
     from scipy.spatial import cKDTree
 
     from colonbench.shards.colonshard import ColonShard
-    from colonbench.shards.contextpack import _map_line_samples, write_context_pack
+    from colonbench.mapping.contextpack import _map_line_samples, write_context_pack
 
     root, truth = context_pack
     shard = ColonShard(root / "data" / "train" / "colon-00000.h5")
@@ -198,7 +198,7 @@ def test_a_context_pack_cut_along_the_maps_centerline_keeps_each_window_on_its_t
 
 def test_context_packs_need_a_whole_colon_dataset_and_train_alone(context_pack, smoke_dataset, tmp_path):
     from colonbench.completion.packdata import PackSplit
-    from colonbench.shards.contextpack import write_context_pack
+    from colonbench.mapping.contextpack import write_context_pack
     from colonbench.shards.pack import write_pack
 
     root, _ = context_pack

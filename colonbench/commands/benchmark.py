@@ -91,7 +91,7 @@ def cmd_suites(args):
 
 def cmd_benchmark(args):
     """Evaluate methods on named suites (data made where missing) and write the cross-suite leaderboard."""
-    from colonbench.benchmark.runner import run_benchmark
+    from colonbench.pipeline import run_benchmark
 
     t = time.perf_counter()
     methods = parse_methods(args.methods)
@@ -112,7 +112,7 @@ def cmd_benchmark(args):
 
 def cmd_export(args):
     """Write a suite's inputs (one PLY per cloud, noise added, and index.csv; no truth) for offline methods."""
-    from colonbench.benchmark.runner import export_suite
+    from colonbench.pipeline import export_suite
 
     info = export_suite(args.suite, args.out, data=args.data, workers=args.workers, scheduler=args.scheduler,
                         allow_unverified=args.allow_unverified, progress=not args.quiet)
@@ -124,7 +124,7 @@ def cmd_export(args):
 def cmd_score(args):
     """Score a folder of predictions (<sample_id>.json) on a suite into a run folder."""
     from colonbench.benchmark.evaluate import load_results
-    from colonbench.benchmark.runner import score_suite
+    from colonbench.pipeline import score_suite
     from colonbench.benchmark.summary import summarize
 
     run = score_suite(args.suite, args.predictions, args.out, name=args.name, data=args.data, workers=args.workers,

@@ -27,7 +27,7 @@ def cmd_colon(args):
         {"seed": args.seed, "colon_id": args.colon_id, "length_mm": colon.centerline.length,
          "faces": int(len(colon.mesh.faces)), "area_mm2": float(colon.mesh.area), **colon.info}, indent=1))
     if args.picture:
-        from colonbench.datagen.render import colon_picture
+        from colonbench.reports.pictures import colon_picture
 
         colon_picture(colon, out / f"{stem}.png", title=f"{stem}: {colon.centerline.length:.0f} mm")
     print(f"{stem}: {colon.centerline.length:.0f} mm, {len(colon.mesh.faces)} faces, "
@@ -57,7 +57,7 @@ def cmd_segments(args):
         write_sample_folder(sample, folder, {"seed": args.seed, "colon_id": args.colon_id, "segment_id": k,
                                              "permutation": p, "length_mm": args.length})
         if args.picture:
-            from colonbench.datagen.render import segment_picture
+            from colonbench.reports.pictures import segment_picture
 
             segment_picture(sample, folder / "picture.png")
         written += 1
@@ -71,14 +71,14 @@ def cmd_picture(args):
     config = generator_config(args)
     colon = colon_from_args(args, config)
     if args.segment is None:
-        from colonbench.datagen.render import colon_picture
+        from colonbench.reports.pictures import colon_picture
         from colonbench.datagen.segments import windows
 
         wins = windows(colon.centerline.length, args.length, config.segments.end_margin_mm)
         colon_picture(colon, args.out, segments=wins)
     else:
         from colonbench.datagen.generate import colon_samples
-        from colonbench.datagen.render import segment_picture
+        from colonbench.reports.pictures import segment_picture
 
         _, _, sample = next(colon_samples(colon, config, args.seed, args.colon_id, args.length, 1,
                                           args.hole_model, [args.segment]))
@@ -121,7 +121,7 @@ def cmd_verify(args):
 
 def cmd_pack(args):
     """Write a dataset's samples as compact voxel occupancies (a pack) for training on another machine."""
-    from colonbench.shards.contextpack import write_context_pack
+    from colonbench.mapping.contextpack import write_context_pack
     from colonbench.shards.pack import write_pack
 
     splits = [s.strip() for s in args.splits.split(",") if s.strip()]

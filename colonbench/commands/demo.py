@@ -55,7 +55,8 @@ def demo_map(out: Path, model=None, progress: bool = True) -> None:
     from colonbench.datagen.colon import generate_colon
     from colonbench.datagen.wholecolon import whole_partial
     from colonbench.mapping import CONTEXT_MM
-    from colonbench.mapping.colonmap import map_colon, write_map
+    from colonbench.mapping.colonmap import map_colon
+    from colonbench.mapping.mapfiles import write_map
 
     t0 = time.perf_counter()
     colon = generate_colon(seed=0, colon_id=0)

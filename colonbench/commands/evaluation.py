@@ -83,7 +83,7 @@ def _shipped_for(run_dirs) -> list:
     """The shipped results of the suite the runs evaluated, less the methods they hold."""
     from colonbench.benchmark import suites
     from colonbench.benchmark.runfolder import read_run
-    from colonbench.benchmark.runner import shipped_items
+    from colonbench.benchmark.reference import shipped_items
 
     runs = [read_run(r) for r in run_dirs]
     rec = runs[0].get("suite") if runs else None

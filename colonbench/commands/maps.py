@@ -13,7 +13,8 @@ def cmd_map(args):
     """A whole reconstruction's coverage map: centerline, segments, each segment's coverage, map files."""
     from colonbench.benchmark.registry import load_method
     from colonbench.completion.method import DEFAULT_MODEL
-    from colonbench.mapping.colonmap import map_colon, write_map
+    from colonbench.mapping.colonmap import map_colon
+    from colonbench.mapping.mapfiles import write_map
     from colonbench.mapping.inputs import check_trajectory, read_reconstruction, read_trajectory
 
     t0 = time.perf_counter()

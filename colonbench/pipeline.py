@@ -1,4 +1,7 @@
-"""The benchmark in one call: suites made where missing, methods evaluated, shipped results merged, tables written.
+"""The benchmark's pipelines, across the layers: one command from suite data to leaderboards, export and score.
+
+This module sits above the data-flow packages (as the command line does) because a benchmark run generates
+data (``shards``), evaluates (``benchmark``) and writes reports (``reports``).
 
 :func:`run_benchmark` is ``colonbench benchmark`` (and ``colonbench.benchmark(...)`` from Python):
 
@@ -25,7 +28,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from colonbench.benchmark import reference, suites
+from colonbench.benchmark import suites
 from colonbench.errors import InputError
 
 
@@ -207,7 +210,3 @@ def score_suite(suite, predictions, out, name: str | None = None, data=None, wor
     return Path(out)
 
 
-def shipped_items(suite, exclude=()) -> list:
-    """The shipped results of ``suite`` as extra runs for a leaderboard (an empty list when there are none)."""
-    item = reference.load(suite, exclude)
-    return [item] if item is not None else []

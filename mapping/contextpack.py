@@ -42,7 +42,7 @@ from colonbench._version import __version__
 from colonbench.completion.method import MIN_POINTS
 from colonbench.errors import InputError
 from colonbench.heatmaps import voxelize_mesh, voxelize_points, voxelize_polyline
-from colonbench.shards.pack import (GRIDS, PACK_FORMAT, PACK_NAME, PACK_VERSION, SLAB, _pool, dataset_lock,
+from colonbench.shards.pack import (GRIDS, PACK_FORMAT, PACK_NAME, PACK_VERSION, SLAB, process_pool, dataset_lock,
                                     write_split)
 from colonbench.slab import Slab, context_grid, slab_occupancy
 
@@ -256,7 +256,7 @@ def write_context_pack(data_dir, out_dir, splits=("train", "validation"), worker
         files = sorted(str(data_dir / name) for name in lock["shards"] if name.startswith(f"{split}/"))
         if not files:
             raise InputError(f"{data_dir}: split {split} has no shards")
-        with _pool(workers) as pool:
+        with process_pool(workers) as pool:
             made = list(pool.map(_pack_colon_shard, [(f, seed, grid_options, line) for f in files]))
         n = sum(len(rows["s0"]) for rows, _, _ in made)
         if n == 0:

@@ -32,7 +32,8 @@ def _shade(vertices, faces, color, light=(0.4, -0.5, 0.75)):
     return np.concatenate([base * lam[:, None], np.full((len(faces), 1), 1.0)], axis=1)
 
 
-def _axes(fig, pos=111, title=None):
+def axes_3d(fig, pos=111, title=None):
+    """A 3D axes of ``fig`` at subplot ``pos`` (an int such as 111 or a (rows, columns, index) tuple), in mm."""
     ax = fig.add_subplot(*pos, projection="3d") if isinstance(pos, tuple) else fig.add_subplot(pos, projection="3d")
     ax.set_xlabel("x (mm)")
     ax.set_ylabel("y (mm)")
@@ -42,7 +43,8 @@ def _axes(fig, pos=111, title=None):
     return ax
 
 
-def _equal(ax, points):
+def set_equal(ax, points):
+    """Equal scales on the three axes of ``ax``, a cube around ``points`` ((n, 3) mm), so shapes keep their form."""
     lo, hi = points.min(axis=0), points.max(axis=0)
     c, r = (lo + hi) / 2, (hi - lo).max() / 2
     ax.set_xlim(c[0] - r, c[0] + r)
@@ -80,11 +82,11 @@ def colon_picture(colon, path, segments=None, title=None, max_faces=40000, dpi=1
     import matplotlib.pyplot as plt
 
     fig = plt.figure(figsize=(11, 5.5))
-    ax = _axes(fig, 121, "surface")
+    ax = axes_3d(fig, 121, "surface")
     draw_surface(ax, colon.mesh.vertices, colon.mesh.faces, (0.86, 0.62, 0.55), max_faces)
-    _equal(ax, colon.mesh.vertices)
+    set_equal(ax, colon.mesh.vertices)
     ax.view_init(elev=10, azim=-80)
-    ax2 = _axes(fig, 122, "centerline" + (" and segments" if segments else ""))
+    ax2 = axes_3d(fig, 122, "centerline" + (" and segments" if segments else ""))
     cl = colon.centerline
     ax2.plot(*cl.points.T, color="k", lw=1)
     if segments:
@@ -92,7 +94,7 @@ def colon_picture(colon, path, segments=None, title=None, max_faces=40000, dpi=1
         for i, (a, b) in enumerate(segments):
             w = cl.window(a, b)
             ax2.plot(*w.T, color=cmap(i % 10), lw=3)
-    _equal(ax2, colon.mesh.vertices)
+    set_equal(ax2, colon.mesh.vertices)
     ax2.view_init(elev=10, azim=-80)
     if title:
         fig.suptitle(title, fontsize=10)
@@ -119,13 +121,13 @@ def segment_picture(segment, path, title=None, max_faces=25000, dpi=110):
     fig = plt.figure(figsize=(11, 5.5))
     views = [(20, -60), (20, 120)]
     for i, (elev, azim) in enumerate(views):
-        ax = _axes(fig, 121 + i)
+        ax = axes_3d(fig, 121 + i)
         m = segment.complete
         obs = segment.observed_faces
         draw_surface(ax, m.vertices, m.faces[obs], (0.75, 0.75, 0.78), max_faces)
         draw_surface(ax, m.vertices, m.faces[~obs], (0.9, 0.1, 0.1), max_faces)
         ax.plot(*segment.centerline.T, color="k", lw=2)
-        _equal(ax, m.vertices)
+        set_equal(ax, m.vertices)
         ax.view_init(elev=elev, azim=azim)
     fig.suptitle(title or f"coverage {segment.coverage:.1%} (holes in red)", fontsize=10)
     fig.tight_layout()
