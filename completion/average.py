@@ -106,13 +106,13 @@ def pack_batches(packs, repeat=(), samples: int = BN_SAMPLES, seed: int = 0, bat
                  in_channels: int | None = None):
     """Input batches of training samples drawn from packs, for :func:`recompute_batchnorm`.
 
-    ``samples`` epoch slots (:func:`colonbench.completion.train.epoch_slots`,
+    ``samples`` epoch slots (:func:`colonbench.completion.epochs.epoch_slots`,
     each pack's samples ``repeat`` times, as the models were trained) are drawn
     without replacement with ``seed``, in ``batch_size`` batches. ``in_channels``, when given, is the
     network's: segment packs give 1 channel, context packs 2 (the in-context model's).
     """
     from colonbench.completion.packdata import PackSplit
-    from colonbench.completion.train import epoch_slots, per_dataset
+    from colonbench.completion.epochs import epoch_slots, per_dataset
 
     per_dataset(repeat, len(packs))  # before any pack is read
     split = PackSplit(list(packs), "train", "cpu", cache=False)
@@ -140,7 +140,7 @@ def average_models(paths, out, packs, repeat=(), samples: int = BN_SAMPLES, seed
     Path
         ``out``, a model file like those ``colonbench train`` writes.
     """
-    from colonbench.completion.train import data_locks, per_dataset
+    from colonbench.completion.epochs import data_locks, per_dataset
 
     per_dataset(repeat, len(packs))  # before any model or pack is read
     state, config, meta = average_states(paths)

@@ -362,11 +362,11 @@ def lumen_centred_line(rings: Centerline, frames, rho: np.ndarray, theta: np.nda
     """The centre of the lumen at each ring of a swept tube, mm; (K, 3).
 
     Each ring is the tube's cross-section square to its axis; its centre is the
-    centroid of its core (:func:`colonbench.datagen.lumen.outline_core_centre`),
+    centroid of its core (:func:`colonbench.datagen.lumen_midline.outline_core_centre`),
     the definition imported colons are re-centred by. Sections are taken every
     ``every_mm``, interpolated between, and their offsets from the axis are
     median-filtered and smoothed along it as in
-    :func:`colonbench.datagen.lumen.recentre` (a fold or a polyp moves one
+    :func:`colonbench.datagen.lumen_midline.recentre` (a fold or a polyp moves one
     section's core, not the line), and kept within half the ring's smallest radius.
 
     Parameters
@@ -382,7 +382,7 @@ def lumen_centred_line(rings: Centerline, frames, rho: np.ndarray, theta: np.nda
     every_mm : float
         Spacing of the sections, mm.
     """
-    from colonbench.datagen.lumen import SMOOTH_MM, outline_core_centre, smooth_along
+    from colonbench.datagen.lumen_midline import SMOOTH_MM, outline_core_centre, smooth_along
 
     s = rings.arclength
     spacing = s[1] - s[0]

@@ -16,6 +16,7 @@ from colonbench.datagen import camera as cam
 from colonbench.datagen.config import CameraConfig, SegmentConfig, SphereConfig, VideoConfig
 from colonbench.datagen.holes import check_hole_model, inside_spheres, sample_spheres, unseen_end
 from colonbench.datagen.segments import SegmentSurface, _components
+from colonbench.errors import InputError
 from colonbench.meshes import sample_surface
 from colonbench.params import draw
 
@@ -153,16 +154,30 @@ def _until_covered(draw, areas, min_coverage: float, max_draws: int, usable=None
 #: How many times a ``video`` withdrawal is drawn at most to reach ``SegmentConfig.min_coverage`` (each costs
 #: a rendered and fused video).
 MAX_VIDEO_DRAWS = 3
+#: Hole models whose partial surface a later package makes, by name: ``video`` is registered by
+#: :mod:`colonbench.video` when it is imported (:func:`register_partial_maker`).
+PARTIAL_MAKERS: dict = {}
+
+
+def register_partial_maker(name: str, maker) -> None:
+    """Let a package make the partial surface of hole model ``name``.
+
+    ``maker(rng, scene, centerline, surface, config, spread_mm, point_density)`` returns ``(observed faces,
+    partial points, info)`` (:func:`colonbench.video.fusion.video_partial`).
+    """
+    PARTIAL_MAKERS[name] = maker
 
 
 def _video_covered(rng, scene, centerline, surface: SegmentSurface, camera: CameraConfig,
                    segments: SegmentConfig, video: VideoConfig):
-    """The ``video`` hole model (:func:`colonbench.datagen.fusion.video_partial`), redrawn up to
-    ``MAX_VIDEO_DRAWS`` times until the coverage reaches ``segments.min_coverage``."""
-    from colonbench.datagen.fusion import video_partial
-
+    """The ``video`` hole model (registered by :mod:`colonbench.video`), redrawn up to ``MAX_VIDEO_DRAWS`` times
+    until the coverage reaches ``segments.min_coverage``."""
+    maker = PARTIAL_MAKERS.get("video")
+    if maker is None:
+        raise InputError("the video hole model is made by colonbench.video: import colonbench.video first "
+                         "(colonbench generate and colonbench segments do)")
     (observed, partial, info), coverage, draws = _until_covered(
-        lambda: video_partial(rng, scene, centerline, surface, video, camera.spread_mm, segments.point_density),
+        lambda: maker(rng, scene, centerline, surface, video, camera.spread_mm, segments.point_density),
         surface.mesh.area_faces, segments.min_coverage, MAX_VIDEO_DRAWS, usable=lambda r: len(r[1]) > 0)
     return observed, coverage, partial, {"video": info, "hole_draws": draws}
 

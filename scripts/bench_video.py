@@ -5,11 +5,11 @@ Usage::
     python scripts/bench_video.py [--frames 60] [--size 256] [--segments 6]
 
 1. Frames: a withdrawal through the default generator's colon 0 (seed 0), 300 mm
-   onwards, written as a frame dataset (``colonbench.datagen.framedata``) into a
+   onwards, written as a frame dataset (``colonbench.video.framedata``) into a
    temporary folder; prints frames/s and milliseconds per frame for depth and
    face ids (Embree), visibility, RGB (pyrender) and writing the PNGs.
 2. Partials: ``--segments`` 60 mm segments of the same colon made with the
-   ``video`` hole model (render, degrade, fuse, cut; ``colonbench.datagen.fusion``)
+   ``video`` hole model (render, degrade, fuse, cut; ``colonbench.video.fusion``)
    and with the ``camera`` hole model; prints seconds per segment, frames fused,
    coverage, and the fused points' distance to the true surface.
 
@@ -35,7 +35,7 @@ def main() -> None:
 
     from colonbench import seeding
     from colonbench.datagen.camera import SurfaceScene
-    from colonbench.datagen.framedata import write_video
+    from colonbench.video.framedata import write_video
     from colonbench.datagen.generate import GeneratorConfig, PreparedColon, procedural_colon
     from colonbench.datagen.sample import make_sample
 

@@ -14,7 +14,7 @@ precision / recall at 2 mm against each of the two.
 
 Whole colon (second form): a procedural colon of the manifest's generator is
 drawn, its lumen voxelised and its axis re-centred by
-``colonbench.datagen.lumen.recentre``, as an imported colon's midline is;
+``colonbench.datagen.lumen_midline.recentre``, as an imported colon's midline is;
 ``--plain`` draws the colon of the same id without ellipticity and flattening
 (its other draws then differ too: another shape of the same generator). Printed:
 the distances from the generator's axis to the re-centred line. Prints figures
@@ -51,7 +51,7 @@ def section_centre(mesh, point: np.ndarray, tangent: np.ndarray) -> np.ndarray |
     """
     from matplotlib.path import Path as Outline
 
-    from colonbench.datagen.lumen import outline_core_centre
+    from colonbench.datagen.lumen_midline import outline_core_centre
 
     sec = mesh.section(plane_origin=point, plane_normal=tangent)
     if sec is None:
@@ -76,7 +76,7 @@ def lumen_line(vertices: np.ndarray, faces: np.ndarray, centerline: np.ndarray) 
     import trimesh
 
     from colonbench.polyline import resample
-    from colonbench.datagen.lumen import smooth_along
+    from colonbench.datagen.lumen_midline import smooth_along
 
     mesh = trimesh.Trimesh(vertices, faces, process=False)
     cl = np.asarray(centerline, float)
@@ -132,7 +132,8 @@ def whole_colon(args) -> None:
 
     from colonbench.datagen.colon import generate_colon
     from colonbench.datagen.generate import GeneratorConfig
-    from colonbench.datagen.lumen import extract_lumen, recentre
+    from colonbench.datagen.lumen import extract_lumen
+    from colonbench.datagen.lumen_midline import recentre
     from colonbench.shards.manifest import load
 
     manifest = load(args.manifest)

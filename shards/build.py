@@ -31,6 +31,7 @@ from colonbench.shards import schema
 from colonbench.shards.manifest import Unit, config_hash, draw_mix, manifest_hash, pick_segments
 from colonbench.shards.schema import sha256_file
 from colonbench.shards.writer import ShardWriter
+import colonbench.video  # noqa: F401 - registers the video hole model with the generator
 
 _COLON_CACHE: dict = {}
 

@@ -31,9 +31,9 @@ from colonbench.errors import ColonbenchError, InputError
 from colonbench.folderlock import folder_lock
 from colonbench.shards import schema, stats
 from colonbench.shards.build import build_shard
-from colonbench.shards.writer import TMP_SUFFIX
 from colonbench.shards.manifest import SPLITS, config_hash, dumps, load, manifest_hash, resolve, task, units
 from colonbench.shards.schema import LOCK_NAME, sha256_file
+from colonbench.shards.writer import TMP_SUFFIX
 
 MANIFEST_NAME = "manifest.yaml"
 STATS_NAME = "stats.png"

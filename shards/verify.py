@@ -8,9 +8,9 @@ from pathlib import Path
 import h5py
 
 from colonbench.shards import schema
-from colonbench.shards.writer import TMP_SUFFIX
 from colonbench.shards.dataset import LOCK_FORMAT, LOCK_NAME
 from colonbench.shards.schema import sha256_file
+from colonbench.shards.writer import TMP_SUFFIX
 
 
 def check_shard(path) -> list[str]:

@@ -10,10 +10,10 @@ import pytest
 from colonbench.benchmark.evaluate import evaluate, load_results, noisy, read_rows, result_columns
 from colonbench.benchmark.metrics import precision_recall, segment_metrics
 from colonbench.benchmark.registry import DEFAULT_METHODS, available, load_method
-from colonbench.estimate import as_estimate
 from colonbench.benchmark.summary import metric_columns, summarize
 from colonbench.cli import main
 from colonbench.errors import InputError
+from colonbench.estimate import as_estimate
 from colonbench.reports.leaderboard import merge_runs, write_leaderboard
 
 

@@ -132,7 +132,7 @@ def test_real_colon_segments_hold_only_their_own_stretch(gca00060):
 def test_curvature_limit_rounds_a_kink_and_leaves_the_rest():
     # two straight legs meeting at a right angle: the re-centring's kink, in a 20 mm lumen
     from colonbench.polyline import Centerline
-    from colonbench.datagen.lumen import MIN_TURN_RATIO, limit_curvature, turning_radius
+    from colonbench.datagen.lumen_midline import MIN_TURN_RATIO, limit_curvature, turning_radius
 
     t = np.arange(0.0, 100.0, 0.5)
     corner = Centerline.from_points(np.concatenate([np.stack([t, 0 * t, 0 * t], 1),
@@ -150,7 +150,7 @@ def test_curvature_limit_rounds_a_kink_and_leaves_the_rest():
 
 
 def test_moved_points_that_step_back_are_dropped():
-    from colonbench.datagen.lumen import _unfold
+    from colonbench.datagen.lumen_midline import _unfold
 
     pts = np.array([[0.0, 0, 0], [2, 0, 0], [4, 1, 0], [3, 3, 0], [6, 0, 0], [8, 0, 0]])
     tangent = np.tile([1.0, 0, 0], (len(pts), 1))
@@ -161,7 +161,7 @@ def test_moved_points_that_step_back_are_dropped():
 def test_real_colon_centerline_has_no_kinks(gca00060):
     # gca00060's re-centred line had folded back on itself (a 172 degree turn within 3 mm at 873 mm) and
     # kinked at two more places; the segments cut there had planes at random angles
-    from colonbench.datagen.lumen import MIN_TURN_RATIO, turning_radius
+    from colonbench.datagen.lumen_midline import MIN_TURN_RATIO, turning_radius
 
     inner = gca00060.radius > 0
     ratio = turning_radius(gca00060.centerline)[inner] / gca00060.radius[inner]

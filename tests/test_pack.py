@@ -12,7 +12,8 @@ pytest.importorskip("monai")
 from colonbench.cli import main  # noqa: E402
 from colonbench.completion import packdata  # noqa: E402
 from colonbench.completion.network import build_network, load_model, network_config  # noqa: E402
-from colonbench.completion.train import TrainConfig, epoch_slots, evaluate_l2, train  # noqa: E402
+from colonbench.completion.train import TrainConfig, evaluate_l2, train
+from colonbench.completion.epochs import epoch_slots  # noqa: E402
 from colonbench.errors import InputError  # noqa: E402
 from colonbench.heatmaps import distance_to as distance_np  # noqa: E402
 from colonbench.shards.pack import read_pack  # noqa: E402

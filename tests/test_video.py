@@ -9,8 +9,8 @@ from shapes import straight
 
 from colonbench.datagen.camera import SurfaceScene
 from colonbench.datagen.colon import tube_colon
-from colonbench.datagen.fusion import apply_drift, degrade_depth, tsdf_fuse
-from colonbench.datagen.video import FrameCaster, Intrinsics, tum_to_poses
+from colonbench.video.fusion import apply_drift, degrade_depth, tsdf_fuse
+from colonbench.video.withdrawal import FrameCaster, Intrinsics, tum_to_poses
 
 RADIUS = 20.0
 
@@ -110,7 +110,7 @@ def test_drift_moves_the_fused_surface_by_the_expected_amount(tube):
 
 
 def test_colour_frames_line_up_with_the_depth_frames(tube):
-    from colonbench.datagen.mucosa import ColourRenderer
+    from colonbench.video.mucosa import ColourRenderer
 
     colon, scene = tube
     v, f = colon.mesh.vertices, colon.mesh.faces
@@ -134,7 +134,7 @@ def test_colour_frames_line_up_with_the_depth_frames(tube):
 
 def test_frame_dataset_reprojects_surface_points_onto_their_pixels(tube, tmp_path):
     from colonbench.datagen.config import VideoConfig
-    from colonbench.datagen.framedata import png_to_depth, write_video
+    from colonbench.video.framedata import png_to_depth, write_video
 
     colon, scene = tube
     config = VideoConfig(speed_mm_s=(10.0, 10.0), push_back_per_100mm=0.0)
@@ -243,7 +243,7 @@ def test_video_command_writes_a_dataset_and_refuses_bad_input(tmp_path, capsys):
 
 
 def test_fused_meshes_come_out_in_one_order_whatever_order_open3d_gives():
-    from colonbench.datagen.fusion import canonical_mesh
+    from colonbench.video.fusion import canonical_mesh
 
     rng = np.random.default_rng(0)
     colon = tube_colon(straight(20.0), RADIUS, ring_spacing_mm=1.0, n_around=32)

@@ -36,6 +36,7 @@ def cmd_colon(args):
 
 def cmd_segments(args):
     """Cut a colon into segments, draw hole permutations and write one folder per sample."""
+    import colonbench.video  # noqa: F401 - registers the video hole model
     from colonbench.datagen.generate import colon_samples, write_sample_folder
 
     config = generator_config(args)

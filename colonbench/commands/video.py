@@ -47,7 +47,7 @@ def _video_colon(args):
 
 def cmd_video(args):
     """Render a colonoscopy withdrawal through a colon into a frame dataset."""
-    from colonbench.datagen.framedata import write_video
+    from colonbench.video.framedata import write_video
 
     colon, config, seed, source = _video_colon(args)
     meta = write_video(colon, args.out, seed=seed, start_mm=args.start_mm, end_mm=args.end_mm, config=config.video,

@@ -1,6 +1,6 @@
 """A rendered colonoscopy: the camera model, a withdrawal trajectory and what each frame sees.
 
-Conventions (the frame dataset of :mod:`colonbench.datagen.framedata` keeps them)
+Conventions (the frame dataset of :mod:`colonbench.video.framedata` keeps them)
 -------------------------------------------------------------------------------
 - Units: millimetres and seconds; the world frame is the colon mesh's frame.
 - Camera axes as in OpenCV: x to the right of the image, y down, z forward
@@ -21,7 +21,7 @@ by a frame when its centroid projects inside the image, lies between
 ``max_incidence_deg`` (90 by default: any), and the ray to it meets no other
 surface first: the rule of the ``camera`` hole model, with the pinhole's
 rectangular field of view instead of a cone. The colour image comes from
-:mod:`colonbench.datagen.mucosa` (pyrender).
+:mod:`colonbench.video.mucosa` (pyrender).
 
 The trajectory is a withdrawal from the caecum (arc length 0) towards the
 rectum at a drawn speed, pushed back in now and then, looking up the colon

@@ -3,7 +3,7 @@
 This is the ``video`` hole model. For one segment:
 
 1. a withdrawal through the segment and ``camera.spread_mm`` beyond both ends
-   is rendered as depth frames (:mod:`colonbench.datagen.video`);
+   is rendered as depth frames (:mod:`colonbench.video.withdrawal`);
 2. frames taken while the tip moves faster than ``skip_mm_s`` or turns faster
    than ``skip_deg_s`` are dropped (motion blur makes them useless), and so are
    those of tracking losses: a Poisson number of them
@@ -35,7 +35,7 @@ This is the ``video`` hole model. For one segment:
    config's ``point_density``: the partial points.
 
 The ground truth stays exact: a face of the segment is observed when a kept
-frame sees it (:meth:`colonbench.datagen.video.FrameCaster.seen`), whatever the
+frame sees it (:meth:`colonbench.video.withdrawal.FrameCaster.seen`), whatever the
 degradation did to the fused surface.
 """
 
@@ -306,7 +306,7 @@ def video_partial(rng, scene, centerline, surface, config: VideoConfig, spread_m
     """
     from colonbench.meshes import sample_surface
     from colonbench.datagen.segments import STRETCH_MARGIN_MM, clip_faces
-    from colonbench.datagen.video import FrameCaster, Intrinsics, withdrawal
+    from colonbench.video.withdrawal import FrameCaster, Intrinsics, withdrawal
 
     margin_mm = STRETCH_MARGIN_MM if margin_mm is None else margin_mm
     s0, s1 = surface.window

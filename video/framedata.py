@@ -3,7 +3,7 @@
 Layout of a dataset folder (``colonbench video``)
 -------------------------------------------------
 ``rgb/NNNNNN.png``
-    8-bit RGB frames (:mod:`colonbench.datagen.mucosa`).
+    8-bit RGB frames (:mod:`colonbench.video.mucosa`).
 ``depth/NNNNNN.png``
     16-bit grey PNG, depth in steps of :data:`DEPTH_UNIT_MM` (0.1 mm): value
     ``v`` is a z-depth of ``v / 10`` mm; 0 where no surface is seen. Depths
@@ -21,7 +21,7 @@ Layout of a dataset folder (``colonbench video``)
 ``visibility.npz``
     ``offsets`` (frames + 1,) int64 and ``faces`` int32: the faces frame ``i``
     sees are ``faces[offsets[i]:offsets[i + 1]]``, indices into ``colon.ply``
-    (the rule of :class:`colonbench.datagen.video.FrameCaster`).
+    (the rule of :class:`colonbench.video.withdrawal.FrameCaster`).
 ``colon.ply``, ``centerline.npy``
     The colon surface and its centerline (arc length 0 at the caecum), mm, the
     world frame of the poses.
@@ -148,8 +148,8 @@ def write_video(colon, out, seed: int = 0, start_mm: float | None = None, end_mm
     from tqdm import tqdm
 
     from colonbench.datagen.camera import SurfaceScene
-    from colonbench.datagen.mucosa import ColourRenderer, mucosa_colours
-    from colonbench.datagen.video import FrameCaster, Intrinsics, pose_to_tum, withdrawal
+    from colonbench.video.mucosa import ColourRenderer, mucosa_colours
+    from colonbench.video.withdrawal import FrameCaster, Intrinsics, pose_to_tum, withdrawal
 
     config = config or VideoConfig()
     length = colon.centerline.length
