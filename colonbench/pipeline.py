@@ -11,7 +11,7 @@ data (``shards``), evaluates (``benchmark``) and writes reports (``reports``).
 2. the methods are evaluated on it into ``RUN/runs/<suite id>/`` (a run
    folder of ``colonbench evaluate``: resumable, in parallel or on Dask);
 3. the shipped reference results of the built-in methods
-   (:mod:`colonbench.benchmark.reference`) join them, except for methods the
+   (:mod:`colonbench.benchmark.shipped`) join them, except for methods the
    user evaluated themselves;
 4. per suite ``RUN/suites/<suite id>/leaderboard.md`` (and ``.csv``, ``.json``,
    breakdowns, figures), and across suites ``RUN/leaderboard.md``, ``.csv``

@@ -58,7 +58,7 @@ THIN_ABOVE = 3.0
 THIN_TO = 2.0
 
 
-#: The default of the shipped models (``colonbench/completion/models/<name>.safetensors``).
+#: The shipped model (``completion/models/small.safetensors`` in the package); only the current one ships.
 DEFAULT_MODEL = "small"
 
 
@@ -212,8 +212,8 @@ class Predictor:
     Parameters
     ----------
     model : path, optional
-        A ``.safetensors`` model from ``colonbench train``, or the name of a shipped model
-        (:func:`shipped_models`; default: ``small``).
+        A ``.safetensors`` model from ``colonbench train`` (an earlier shipped model's file, CHANGELOG.md), or
+        ``small``, the shipped model (the default).
     device : str
         ``cpu``, ``cuda``, ``auto``.
     """
@@ -336,8 +336,8 @@ class CompletionMethod:
     Parameters
     ----------
     model : path, optional
-        A ``.safetensors`` model from ``colonbench train``, or the name of a shipped model
-        (:func:`shipped_models`; default: ``small``).
+        A ``.safetensors`` model from ``colonbench train`` (an earlier shipped model's file, CHANGELOG.md), or
+        ``small``, the shipped model (the default).
     device : str
         ``cpu``, ``cuda``, ``auto``.
     hole_distance : float, optional

@@ -72,7 +72,7 @@ def write_report(out, chosen, runs: dict, shipped: bool = True, figures: bool = 
         ``summary`` (DataFrame, :data:`SUMMARY_COLUMNS`), ``markdown``, ``paths``.
     """
     from colonbench.benchmark.runfolder import read_run
-    from colonbench.benchmark.reference import shipped_items
+    from colonbench.benchmark.shipped import shipped_items
     from colonbench.reports.leaderboard import write_leaderboard
 
     out = Path(out)

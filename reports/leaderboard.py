@@ -41,7 +41,7 @@ def merge_runs(run_dirs, extra=()) -> tuple[dict, pd.DataFrame]:
     run_dirs : list of path
         Finished run folders.
     extra : iterable of (run record, results DataFrame, label)
-        Runs already loaded (the shipped reference results, :mod:`colonbench.benchmark.reference`).
+        Runs already loaded (the shipped reference results, :mod:`colonbench.benchmark.shipped`).
 
     Returns
     -------

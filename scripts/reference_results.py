@@ -5,7 +5,7 @@
 Each suite's data is generated where missing (and checked against its
 published hash), the built-in methods are evaluated into OUT/runs/<suite>/ by
 colonbench benchmark (resumable: rerun to finish), and the finished run is
-copied into benchmark/reference/<suite>/ (colonbench.benchmark.reference),
+copied into benchmark/shipped_results/<suite>/ (colonbench.benchmark.shipped),
 from where colonbench benchmark merges it. Prints the time per suite.
 """
 
@@ -14,7 +14,7 @@ from __future__ import annotations
 import argparse
 import time
 
-from colonbench.benchmark import reference, suites
+from colonbench.benchmark import shipped, suites
 from colonbench.benchmark.colon_evaluate import ALL_METHODS
 from colonbench.benchmark.registry import DEFAULT_METHODS
 from colonbench.pipeline import run_benchmark
@@ -32,7 +32,7 @@ def main() -> None:
         methods = list(ALL_METHODS if suite.task == "colon" else DEFAULT_METHODS)
         result = run_benchmark(methods, [suite], args.out, data=args.data, workers=args.workers, shipped=False,
                                figures=False, progress=False)
-        where = reference.publish(result["runs"][suite.id], suite)
+        where = shipped.publish(result["runs"][suite.id], suite)
         sec = result["seconds"][suite.id]
         print(f"{suite.id}: {len(methods)} methods, data {sec['data_seconds']:.0f} s, evaluation "
               f"{sec['evaluate_seconds']:.0f} s with {args.workers} workers -> {where} "

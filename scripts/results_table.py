@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 
-from colonbench.benchmark import reference, suites
+from colonbench.benchmark import shipped, suites
 from colonbench.benchmark.registry import BASELINES
 
 #: The rows of the README's table: the paper's method, its baselines and the constant guess.
@@ -17,7 +17,7 @@ ROWS = ("completion",) + BASELINES + ("constant",)
 def _maes(suite) -> dict:
     """``{(method, noise): MAE in points}`` of a suite's shipped results (the in-context track of a whole-colon
     suite)."""
-    item = reference.load(suite)
+    item = shipped.load(suite)
     if item is None:
         return {}
     if suite.task == "colon":

@@ -14,15 +14,13 @@ with any number of workers; PyTorch is imported only by :func:`collate_points`
 
 from __future__ import annotations
 
-import os
-from pathlib import Path
 
 import numpy as np
 
 from colonbench import seeding
 from colonbench.errors import InputError
 from colonbench.shards import schema
-from colonbench.shards.reader import Shard, dataset_files, ragged_row
+from colonbench.shards.reader import ShardSamples, ragged_row
 
 #: The point sets an item can hold (``fields`` of :class:`PointCloudDataset`).
 FIELDS = ("partial", "complete", "holes", "centerline")
@@ -111,7 +109,7 @@ def _count(name: str, value, default=None) -> int:
     return int(value)
 
 
-class PointCloudDataset:
+class PointCloudDataset(ShardSamples):
     """A map-style dataset over shards: ``ds[k]`` is one sample as fixed-size point sets.
 
     Parameters
@@ -164,31 +162,8 @@ class PointCloudDataset:
         self.sizes = {"complete": _count("complete_points", complete_points, self.points),
                       "holes": _count("hole_points", hole_points, self.points),
                       "centerline": _count("centerline_points", centerline_points, 256)}
-        if isinstance(source, (str, os.PathLike)) and Path(source).is_dir():
-            files = dataset_files(source, split)
-        else:
-            files = [Path(source)] if isinstance(source, (str, os.PathLike)) else [Path(p) for p in source]
-        self.shards = [Shard(f) for f in files]
-        self.offsets = np.concatenate([[0], np.cumsum([len(s) for s in self.shards])]).astype(np.int64)
+        super().__init__(source, split)
         self.seed = int(seed)
-        self.epoch = 0
-
-    def __len__(self) -> int:
-        return int(self.offsets[-1])
-
-    def set_epoch(self, epoch: int):
-        """Choose the draws of this epoch (a non-negative integer)."""
-        if int(epoch) < 0:
-            raise InputError(f"PointCloudDataset: epoch must be non-negative, got {epoch}")
-        self.epoch = int(epoch)
-
-    def locate(self, k: int) -> tuple[Shard, int]:
-        """The shard and local index of item ``k``."""
-        if not -len(self) <= k < len(self):
-            raise IndexError(f"item {k} out of range ({len(self)} items)")
-        k %= len(self)
-        s = int(np.searchsorted(self.offsets, k, side="right") - 1)
-        return self.shards[s], int(k - self.offsets[s])
 
     def __getitem__(self, k: int) -> dict:
         shard, i = self.locate(k)
@@ -212,10 +187,6 @@ class PointCloudDataset:
         if "centerline" in self.fields:
             item["centerline"] = resample_polyline(shard.centerline(i), self.sizes["centerline"])
         return item
-
-    def close(self):
-        for s in self.shards:
-            s.close()
 
 
 def collate_points(items) -> dict:

@@ -163,7 +163,52 @@ def dataset_files(root, split=None) -> list[Path]:
     return files
 
 
-class ShardDataset:
+class ShardSamples:
+    """The samples of a dataset folder (or of shard files) as one sequence: ``len``, ``locate(k)`` and the epoch.
+
+    The base of :class:`ShardDataset` (heatmaps) and
+    :class:`colonbench.shards.pointclouds.PointCloudDataset` (point clouds).
+
+    Parameters
+    ----------
+    source : path or list of paths
+        A dataset folder (its lock lists the shards) or shard files.
+    split : str, optional
+        Only this split of a dataset folder.
+    """
+
+    def __init__(self, source, split=None):
+        if isinstance(source, (str, os.PathLike)) and Path(source).is_dir():
+            files = dataset_files(source, split)
+        else:
+            files = [Path(source)] if isinstance(source, (str, os.PathLike)) else [Path(p) for p in source]
+        self.shards = [Shard(f) for f in files]
+        self.offsets = np.concatenate([[0], np.cumsum([len(s) for s in self.shards])]).astype(np.int64)
+        self.epoch = 0
+
+    def __len__(self) -> int:
+        return int(self.offsets[-1])
+
+    def set_epoch(self, epoch: int):
+        """Choose the random draws of this epoch (a non-negative whole number)."""
+        if int(epoch) < 0:
+            raise InputError(f"{type(self).__name__}: epoch must be non-negative, got {epoch}")
+        self.epoch = int(epoch)
+
+    def locate(self, k: int) -> tuple[Shard, int]:
+        """The shard and local index of item ``k``."""
+        if not -len(self) <= k < len(self):
+            raise IndexError(f"item {k} out of range ({len(self)} items)")
+        k %= len(self)
+        s = int(np.searchsorted(self.offsets, k, side="right") - 1)
+        return self.shards[s], int(k - self.offsets[s])
+
+    def close(self):
+        for s in self.shards:
+            s.close()
+
+
+class ShardDataset(ShardSamples):
     """A map-style dataset over shards: ``ds[k]`` is one sample's heatmaps (and optionally its geometry).
 
     Parameters
@@ -195,32 +240,11 @@ class ShardDataset:
 
     def __init__(self, source, split=None, geometry: bool = False, augment=None, seed: int = 0,
                  augment_prob: float = 1.0):
-        if isinstance(source, (str, os.PathLike)) and Path(source).is_dir():
-            files = dataset_files(source, split)
-        else:
-            files = [Path(source)] if isinstance(source, (str, os.PathLike)) else [Path(p) for p in source]
-        self.shards = [Shard(f) for f in files]
-        self.offsets = np.concatenate([[0], np.cumsum([len(s) for s in self.shards])]).astype(np.int64)
+        super().__init__(source, split)
         self.geometry = geometry
         self.augment = augment
         self.seed = int(seed)
         self.augment_prob = float(augment_prob)
-        self.epoch = 0
-
-    def __len__(self) -> int:
-        return int(self.offsets[-1])
-
-    def set_epoch(self, epoch: int):
-        """Choose the augmentation draws of this epoch."""
-        self.epoch = int(epoch)
-
-    def locate(self, k: int) -> tuple[Shard, int]:
-        """The shard and local index of item ``k``."""
-        if not -len(self) <= k < len(self):
-            raise IndexError(f"item {k} out of range ({len(self)} items)")
-        k %= len(self)
-        s = int(np.searchsorted(self.offsets, k, side="right") - 1)
-        return self.shards[s], int(k - self.offsets[s])
 
     def __getitem__(self, k: int) -> dict:
         shard, i = self.locate(k)
@@ -242,7 +266,3 @@ class ShardDataset:
         if self.geometry:
             item.update({k: v for k, v in geo.items() if k not in item})
         return item
-
-    def close(self):
-        for s in self.shards:
-            s.close()

@@ -4,6 +4,16 @@ import numpy as np
 
 from colonbench.polyline import Centerline
 
+
+def distance_to_polyline(points, polyline):
+    """Distance of each point (n, 3) to a polyline densified at 0.05 mm, mm."""
+    from scipy.spatial import cKDTree
+
+    from colonbench.heatmaps import densify_polyline
+
+    d, _ = cKDTree(densify_polyline(polyline, 0.05)).query(points)
+    return d
+
 def straight(length=240.0, spacing=0.5):
     """A straight centerline along +z from the origin."""
     return Centerline.from_function(lambda t: np.stack([0 * t, 0 * t, t], 1), 0.0, length, spacing)

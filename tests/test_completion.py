@@ -16,10 +16,10 @@ from colonbench.completion.steps import complete
 from colonbench.completion.surface import hole_vertices, mesh_coverage
 from colonbench.datagen.colon import tube_colon  # noqa: E402
 from colonbench.grid import Grid, fit_grid  # noqa: E402
-from colonbench.heatmaps import densify_polyline, sample_heatmaps  # noqa: E402
+from colonbench.heatmaps import sample_heatmaps
 from colonbench.meshes import triangle_areas
 from colonbench.shards.reader import ShardDataset  # noqa: E402
-from shapes import arc, straight  # noqa: E402
+from shapes import arc, distance_to_polyline, straight  # noqa: E402
 
 R = 20.0
 UNIT = Grid(np.array([[1, 0, 0, -32], [0, 1, 0, -32], [0, 0, 1, 0], [0, 0, 0, 1]], float))
@@ -40,11 +40,6 @@ def half_pipe():
     f = f[(v[f][:, :, 0] > 0).all(axis=1)]
     pts = v[v[:, 0] > 0][::2]
     return pts, sample_heatmaps(UNIT, pts, v, f, colon.centerline.points)
-
-
-def distance_to_polyline(points, polyline):
-    d, _ = cKDTree(densify_polyline(polyline, 0.05)).query(points)
-    return d
 
 
 @pytest.mark.parametrize("shape", ["straight", "curved"])

@@ -4,7 +4,6 @@ import json
 
 import numpy as np
 import pytest
-from scipy.spatial import cKDTree
 
 pytest.importorskip("torch")
 pytest.importorskip("monai")
@@ -14,35 +13,10 @@ from colonbench.completion.method import CompletionMethod, check_cloud  # noqa: 
 from colonbench.datagen.colon import tube_colon  # noqa: E402
 from colonbench.datagen.generate import write_points_ply  # noqa: E402
 from colonbench.errors import InputError  # noqa: E402
-from colonbench.grid import Grid, fit_grid  # noqa: E402
-from colonbench.heatmaps import densify_polyline, sample_heatmaps  # noqa: E402
 from colonbench.shards.reader import ShardDataset  # noqa: E402
 from shapes import straight  # noqa: E402
 
 R = 20.0
-UNIT = Grid(np.array([[1, 0, 0, -32], [0, 1, 0, -32], [0, 0, 1, 0], [0, 0, 0, 1]], float))
-
-
-def tube_heatmaps(centerline, grid=None, radius=R):
-    colon = tube_colon(centerline, radius, ring_spacing_mm=0.5, n_around=256)
-    pts = colon.mesh.vertices[::2]
-    grid = grid or fit_grid(pts)
-    return colon, grid, pts, sample_heatmaps(grid, pts, colon.mesh.vertices, colon.mesh.faces,
-                                             colon.centerline.points)
-
-
-def half_pipe():
-    """Points and heatmaps of the half (x > 0) of a straight tube of radius R along z."""
-    colon = tube_colon(straight(63.0), R, ring_spacing_mm=0.5, n_around=256)
-    v, f = colon.mesh.vertices, colon.mesh.faces
-    f = f[(v[f][:, :, 0] > 0).all(axis=1)]
-    pts = v[v[:, 0] > 0][::2]
-    return pts, sample_heatmaps(UNIT, pts, v, f, colon.centerline.points)
-
-
-def distance_to_polyline(points, polyline):
-    d, _ = cKDTree(densify_polyline(polyline, 0.05)).query(points)
-    return d
 
 
 @pytest.mark.parametrize("cloud, message", [

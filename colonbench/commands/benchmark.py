@@ -6,6 +6,8 @@ import argparse
 import sys
 import time
 
+from colonbench.commands.common import add_suite_check_args
+
 
 def parse_methods(values) -> list[str]:
     """Method specs from ``--methods`` values: comma-separated names, except that a value holding ``exec:`` is one
@@ -52,11 +54,7 @@ def _add_data_args(p) -> None:
     p.add_argument("--data", help="where suite data is cached (default $COLONBENCH_DATA, else "
                    "~/.cache/colonbench/suites): one folder per suite, made where missing")
     p.add_argument("--workers", type=_positive_int, default=1, help="local processes (default 1)")
-    p.add_argument("--scheduler", help="Dask scheduler address (tcp://host:8786): generate and evaluate on its "
-                   "workers, which must see the data and output folders at the same paths")
-    p.add_argument("--allow-unverified", action="store_true",
-                   help="evaluate suite data whose content hash is not the published one (development; results "
-                        "then say 'unverified' and the shipped results stay out)")
+    add_suite_check_args(p)
     p.add_argument("--quiet", action="store_true", help="no progress bars")
 
 

@@ -120,3 +120,13 @@ def method_list(values) -> list[str]:
     from colonbench.commands.benchmark import parse_methods
 
     return parse_methods(values or ["all"])
+
+
+def add_suite_check_args(p, where: str = "the data and output folders") -> None:
+    """``--scheduler`` (Dask) and ``--allow-unverified`` (suite data whose hash is not the published one)."""
+    p.add_argument("--scheduler", help=f"Dask scheduler address (tcp://host:8786): run on its workers, which must see "
+                                       f"{where} at the same paths")
+    p.add_argument("--allow-unverified", action="store_true",
+                   help="evaluate data that is a named suite's by manifest and selection but not by its published "
+                        "content hash (development; the results then say unverified and the shipped results stay "
+                        "out)")

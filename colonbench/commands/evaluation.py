@@ -6,7 +6,7 @@ import sys
 import time
 
 from colonbench.commands import benchmark as benchmark_verbs
-from colonbench.commands.common import add_model_args, finite, floats, method_list, positive
+from colonbench.commands.common import add_model_args, add_suite_check_args, finite, floats, method_list, positive
 from colonbench.errors import ColonbenchError
 from colonbench.mapping import CONTEXT_MM, SEGMENT_MM
 
@@ -83,7 +83,7 @@ def _shipped_for(run_dirs) -> list:
     """The shipped results of the suite the runs evaluated, less the methods they hold."""
     from colonbench.benchmark import suites
     from colonbench.benchmark.runfolder import read_run
-    from colonbench.benchmark.reference import shipped_items
+    from colonbench.benchmark.shipped import shipped_items
 
     runs = [read_run(r) for r in run_dirs]
     rec = runs[0].get("suite") if runs else None
@@ -124,11 +124,7 @@ def add_parsers(sub) -> None:
                        "(default: small)")
     p.add_argument("--examples", type=int, default=3, help="segments whose meshes are kept for figures (default 3)")
     p.add_argument("--noise-seed", type=int, default=0, help="root seed of the input noise (default 0)")
-    p.add_argument("--scheduler", help="Dask scheduler address (tcp://host:8786): evaluate on its workers, which "
-                                       "must see the data and run folders at the same paths")
-    p.add_argument("--allow-unverified", action="store_true",
-                   help="evaluate data that is a named suite's by manifest and selection but not by its published "
-                        "content hash (the run then says unverified)")
+    add_suite_check_args(p, "the data and run folders")
     benchmark_verbs.add_external_args(p)
     p.add_argument("--task", choices=["segments", "colon"],
                    help="segments (the paper's protocol) or colon (whole-colon maps, docs/mapping.md); "

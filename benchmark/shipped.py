@@ -1,6 +1,6 @@
 """The built-in methods' reference results on every suite, shipped with colonbench.
 
-``benchmark/reference/<suite id>/`` is a run folder without its working
+``benchmark/shipped_results/<suite id>/`` is a run folder without its working
 files: ``run.json`` (suite, content hash, methods with their versions,
 package versions, how long it took) and ``results/`` (segment suites:
 ``<method>.csv`` per segment and ``<method>.json`` summary; the whole-colon
@@ -25,14 +25,14 @@ from colonbench.benchmark.runfolder import RUN_FILE, read_rows, read_run, write_
 from colonbench.errors import InputError
 
 #: Where the shipped results live in the package.
-REFERENCE_DIR = Path(__file__).resolve().parent / "reference"
+SHIPPED_DIR = Path(__file__).resolve().parent / "shipped_results"
 #: Significant digits kept of each float in a shipped CSV.
 DIGITS = 10
 
 
 def folder(suite) -> Path:
     """The shipped results folder of a suite."""
-    return REFERENCE_DIR / suite.id
+    return SHIPPED_DIR / suite.id
 
 
 def load(suite, exclude=()) -> tuple | None:
