@@ -33,3 +33,18 @@ def test_the_plugin_example_in_the_docs_runs_through_evaluate(smoke_dataset, tmp
     meta, res = load_results(run)
     assert meta["methods"]["coarse-unwrap"]["version"] == "0.1"
     assert (res["error"] == "").all() and res["coverage"].between(0, 1).all()
+
+
+def test_the_results_tables_are_the_shipped_results():
+    spec = importlib.util.spec_from_file_location("results_table", ROOT / "scripts" / "results_table.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    for page in ("README.md", "docs/benchmark.md"):
+        assert mod.tables().strip() in (ROOT / page).read_text(), \
+            f"regenerate {page}'s results table with: python scripts/results_table.py"
+
+
+def test_the_readme_stays_a_front_door():
+    lines = (ROOT / "README.md").read_text().splitlines()
+    assert len(lines) <= 160, f"README.md has {len(lines)} lines; move the detail into docs/"
+    assert max(len(x) for x in lines) <= 400
