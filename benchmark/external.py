@@ -19,6 +19,7 @@ from __future__ import annotations
 import hashlib
 import os
 import shlex
+import shutil
 import signal
 import subprocess
 import tempfile
@@ -114,6 +115,10 @@ class ExecMethod(PredictionMethod):
         Folder its outputs go to (``<run>/predictions``); this method's own subfolder is made in it.
     name : str, optional
         Default: the program's file stem (after an interpreter such as ``python``).
+
+    Its version is a hash of the command line and of the files it names (:func:`command_version`): editing the
+    script makes another version, which a run folder refuses to mix with the old one. Changes it cannot see
+    (a package the script imports) need a new run folder.
     timeout : float
         Seconds allowed per input file; a call gets that times its number of files.
     batch : int
@@ -130,11 +135,13 @@ class ExecMethod(PredictionMethod):
             raise InputError("exec: needs a program, e.g. exec:python my_method.py")
         if timeout <= 0 or batch < 1:
             raise InputError(f"exec: timeout must be positive and batch at least 1, got {timeout} and {batch}")
+        if shutil.which(self.argv[0]) is None:
+            raise InputError(f"exec:{command}: no program {self.argv[0]!r} here (not an executable file, not on PATH)")
         self.command, self.timeout, self.batch = command, float(timeout), int(batch)
         self._lock = threading.Lock()
         name = name or default_name(self.argv)
         root = Path(predictions) if predictions is not None else Path(tempfile.mkdtemp(prefix="colonbench-exec-"))
-        super().__init__(root / name, name, "command:" + hashlib.sha256(command.encode()).hexdigest()[:12])
+        super().__init__(root / name, name, command_version(self.argv))
 
     def missing(self, sids) -> list[str]:
         """The ids among ``sids`` with neither a prediction nor a recorded failure."""
@@ -198,6 +205,17 @@ def _run_program(argv: list[str], limit: float, files: int) -> str:
     tail = " ".join(err.decode(errors="replace").strip().splitlines()[-2:])[-300:]
     return f"the program exited with status {proc.returncode} after {time.perf_counter() - t:.1f} s" + (
         f": {tail}" if tail else "")
+
+
+def command_version(argv: list[str]) -> str:
+    """``command:<12 hex>``: a sha256 of the command line and of the contents of the files it names (a script, a
+    model), so that an edited script is another version (a run refuses to mix two)."""
+    h = hashlib.sha256(shlex.join(argv).encode())
+    for word in argv[1:]:
+        path = Path(word)
+        if path.is_file():
+            h.update(hashlib.sha256(path.read_bytes()).digest())
+    return "command:" + h.hexdigest()[:12]
 
 
 def default_name(argv: list[str]) -> str:

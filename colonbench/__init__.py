@@ -61,8 +61,16 @@ class _CallableBenchmark(types.ModuleType):
 
         from colonbench.pipeline import run_benchmark
 
-        out = out if out is not None else tempfile.mkdtemp(prefix="colonbench-benchmark-")
-        result = run_benchmark(methods, suites, out, **options)
+        made = out is None
+        out = tempfile.mkdtemp(prefix="colonbench-benchmark-") if made else out
+        try:
+            result = run_benchmark(methods, suites, out, **options)
+        except BaseException:
+            if made:
+                import shutil
+
+                shutil.rmtree(out, ignore_errors=True)
+            raise
         result["out"] = out
         return result
 

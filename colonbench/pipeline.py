@@ -203,10 +203,35 @@ def score_suite(suite, predictions, out, name: str | None = None, data=None, wor
     if not any(folder.glob("*.json")):
         raise InputError(f"{folder}: no <sample_id>.json predictions in it (docs/formats.md)")
     data_dir = suites.ensure_data(suite, data, workers=workers, scheduler=scheduler, progress=progress)
+    check_prediction_names(suite, data_dir, folder)
     spec = f"{name or folder.resolve().name}=predictions:{folder}"
     _evaluate(suite, data_dir, [spec], Path(out), workers=workers, scheduler=scheduler, progress=progress,
               allow_unverified=allow_unverified)
     _check_suite_run(Path(out), suite)
     return Path(out)
 
+
+def check_prediction_names(suite, data_dir, folder: Path) -> tuple[int, int]:
+    """How many of a folder's ``.json`` files are named by a sample id of ``suite``, and how many are not.
+
+    Raises
+    ------
+    InputError
+        None is: the files are named otherwise than ``colonbench export`` names the inputs.
+    """
+    from colonbench.benchmark.evaluate import select
+    from colonbench.benchmark.exchange import sample_id
+
+    _, picks = select(data_dir, suite.split, suite.limit)
+    ids = {sample_id(n, i, s) for n, idx in picks for i in idx for s in suite.noise_mm}
+    stems = [p.stem for p in Path(folder).glob("*.json")]
+    if suite.task == "colon":   # a map's segments: <sample id>_seg<k>
+        ok = [x for x in stems if x.rpartition("_seg")[0] in ids]
+    else:
+        ok = [x for x in stems if x in ids]
+    if not ok:
+        example = sorted(ids)[0] + ("_seg000" if suite.task == "colon" else "")
+        raise InputError(f"{folder}: none of its {len(stems)} .json files is named by a sample id of {suite.id} "
+                         f"(such as {example}.json): name each prediction as colonbench export names its input")
+    return len(ok), len(stems) - len(ok)
 

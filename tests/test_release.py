@@ -300,3 +300,33 @@ def test_cli_lists_suites_and_says_what_each_verb_does(capsys):
         assert lines[2].startswith(f"usage: colonbench {verb}"), verb
     assert main(["benchmark", "--suites", "paper-v7", "--out", "x"]) == 2
     assert "unknown suite" in capsys.readouterr().err
+
+
+def test_programs_that_cannot_run_and_predictions_that_match_nothing_say_so(demo_data, tmp_path, capsys):
+    data = ["--suites", "demo-v1", "--data", str(demo_data), "--quiet", "--no-figures"]
+    assert main(["benchmark", "--methods", "exec:no-such-program --fast", "--out", str(tmp_path / "a"), *data]) == 2
+    assert "no program 'no-such-program'" in capsys.readouterr().err
+    # a program that starts and fails on every input: its rows say why, and the command fails
+    assert main(["benchmark", "--methods", f"exec:{sys.executable} {tmp_path / 'missing.py'}",
+                 "--out", str(tmp_path / "b"), *data]) == 2
+    err = capsys.readouterr().err
+    assert "failed on every sample" in err and "exited with status 2" in err
+    # predictions named otherwise than the export names its inputs
+    preds = tmp_path / "preds"
+    preds.mkdir()
+    (preds / "segment1.json").write_text('{"coverage": 0.5}')
+    assert main(["score", "demo-v1", str(preds), "--out", str(tmp_path / "c"), "--data", str(demo_data),
+                 "--quiet"]) == 2
+    assert "none of its 1 .json files is named by a sample id of demo-v1" in capsys.readouterr().err
+
+
+def test_an_edited_script_is_another_version(demo_data, tmp_path):
+    from colonbench.benchmark.evaluate import RunMismatch, evaluate
+
+    script = tmp_path / "mine.py"
+    script.write_text(EXAMPLE.read_text())
+    data = suites.data_dir(suites.get("demo-v1"), demo_data)
+    evaluate(data, [f"exec:{sys.executable} {script}"], tmp_path / "run", noise=[0], limit=2, progress=False)
+    script.write_text(EXAMPLE.read_text().replace('"coverage": 0.8', '"coverage": 0.7'))
+    with pytest.raises(RunMismatch, match="method 'mine' was evaluated as version"):
+        evaluate(data, [f"exec:{sys.executable} {script}"], tmp_path / "run", noise=[0], limit=2, progress=False)

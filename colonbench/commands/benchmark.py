@@ -5,8 +5,10 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from pathlib import Path
 
 from colonbench.commands.common import add_suite_check_args
+from colonbench.errors import ColonbenchError
 
 
 def parse_methods(values) -> list[str]:
@@ -52,7 +54,8 @@ def add_external_args(p) -> None:
 
 def _add_data_args(p) -> None:
     p.add_argument("--data", help="where suite data is cached (default $COLONBENCH_DATA, else "
-                   "~/.cache/colonbench/suites): one folder per suite, made where missing")
+                   "$XDG_CACHE_HOME/colonbench/suites, else ~/.cache/colonbench/suites): one folder per suite, "
+                   "made where missing")
     p.add_argument("--workers", type=_positive_int, default=1, help="local processes (default 1)")
     add_suite_check_args(p)
     p.add_argument("--quiet", action="store_true", help="no progress bars")
@@ -100,12 +103,18 @@ def cmd_benchmark(args):
     print(result["markdown"])
     for suite, sec in result["seconds"].items():
         print(f"{suite}: data {sec['data_seconds']:.0f} s, evaluation {sec['evaluate_seconds']:.0f} s")
-    failed = result["summary"][result["summary"]["failed"] > 0]
-    for _, r in failed.iterrows():
+    summary = result["summary"]
+    mine = summary[summary["source"] != "shipped"]
+    for _, r in mine[mine["failed"] > 0].iterrows():
+        where = Path(args.out) / "runs" / r["suite"] / "results"
         print(f"colonbench: warning: {r['method']} failed on {r['failed']} of {r['segments']} samples of "
-              f"{r['suite']} at noise {r['noise_mm']:g} mm (the error of each is in runs/{r['suite']}/results)",
-              file=sys.stderr)
+              f"{r['suite']} at noise {r['noise_mm']:g} mm; first: {_first_error(where, r['method'])} (every "
+              f"one is in {where})", file=sys.stderr)
     print(f"wrote {args.out}/leaderboard.md (.csv, .json) and suites/<suite>/ in {time.perf_counter() - t:.0f} s")
+    dead = sorted({m for m, g in mine.groupby("method") if (g["failed"] >= g["segments"]).all()})
+    if dead:
+        raise ColonbenchError(f"{', '.join(dead)} failed on every sample (see the warnings above); the tables hold "
+                              "no estimate of it")
 
 
 def cmd_export(args):
@@ -116,7 +125,7 @@ def cmd_export(args):
                         allow_unverified=args.allow_unverified, progress=not args.quiet)
     print(f"wrote {info['inputs']} inputs of {info['suite']['id']} (hash {info['suite']['sha256'][:16]}...) to "
           f"{args.out}; predict PRED_DIR/<sample_id>.json for each, then colonbench score {info['suite']['id']} "
-          "PRED_DIR --out RUN")
+          f"PRED_DIR --out RUN{_data_flag(args)}")
 
 
 def cmd_score(args):
@@ -135,9 +144,27 @@ def cmd_score(args):
             failed = f", {r['failed']} without a valid prediction" if r["failed"] else ""
             print(f"noise {r['noise_mm']:g} mm  {r['method']}: MAE {r['coverage_mae']:.2f} points over "
                   f"{r['segments'] - r['coverage_undefined']} of {r['segments']} segments{failed}")
-    print(f"wrote {run}; the leaderboard with the shipped results: colonbench benchmark --suites "
-          f"{args.suite} --methods predictions:{args.predictions} --out DIR, or colonbench leaderboard {run} "
-          "--out DIR --shipped")
+    print(f"wrote {run}; the leaderboard with the shipped results: colonbench leaderboard {run} --out DIR "
+          f"--shipped, or colonbench benchmark --suites {args.suite} --methods predictions:{args.predictions} "
+          f"--out DIR{_data_flag(args)}")
+
+
+def _first_error(results: Path, method: str) -> str:
+    """The first error message of a method's rows in a run's results folder (segment or whole-colon run)."""
+    from colonbench.benchmark.runfolder import read_rows
+
+    for name in (f"{method}.csv", "colons.csv", "segments.csv"):
+        if (results / name).is_file():
+            rows = read_rows(results / name)
+            errors = rows[(rows.get("method", method) == method) & (rows["error"] != "")]["error"]
+            if len(errors):
+                return errors.iloc[0]
+    return "?"
+
+
+def _data_flag(args) -> str:
+    """`` --data DIR`` when the command was given one (for the next command it suggests)."""
+    return f" --data {args.data}" if args.data else ""
 
 
 def add_parsers(sub) -> None:
