@@ -15,7 +15,7 @@ The result is an ordinary model file; its metadata is the last model's, with
 the data description (manifests, mean training coverage) of the packs the
 statistics were made on, and ``average``: each model's path and sha256, and
 how the statistics were made, so a model card can say exactly how it was made
-(docs/method.md, The shipped model).
+(docs/training.md).
 """
 
 from __future__ import annotations

@@ -69,7 +69,7 @@ class NetworkConfig:
 
 
 #: Named configurations: ``small`` trains on a CPU in hours (0.6 M parameters,
-#: about 0.04 s per sample per training step (docs/method.md, Training) and 0.09 s per inference on one
+#: about 0.04 s per sample per training step (docs/training.md) and 0.09 s per inference on one
 #: 2-core CPU); ``large`` is for a GPU (19 M parameters, one more level).
 NETWORKS = {
     "small": NetworkConfig(),

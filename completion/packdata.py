@@ -28,14 +28,14 @@ only geometric augmentations a pack allows. Transposes answer a bias of the
 networks trained without them: the grid's first axis is always the tube's
 (:func:`colonbench.grid.tube_axes`), and they learn to draw the tube along it
 whatever the cloud says; where a bent segment's tube runs along another axis
-they draw it across the colon (docs/method.md, Training).
+they draw it across the colon (docs/training.md).
 
 Erasing (``colonbench train --erase P``) takes 1-3 ball-shaped patches out of a
 share of the samples' partial surfaces before their input heatmaps are made
 (:func:`erase_patches`): the same colon with larger or more holes. The target
 does not depend on the partial surface, so it stays exact. It trains the
 completion of the large unobserved areas that camera holes leave on real
-colons, where the network's surface fades (docs/method.md, Training).
+colons, where the network's surface fades (docs/training.md).
 """
 
 from __future__ import annotations

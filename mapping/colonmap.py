@@ -198,10 +198,10 @@ def for_mapping(method, context_mm: float = 0.0):
     The map splits the reconstruction by the arc length of each point's nearest centerline point, not
     by planes, so a segment's cloud does not end in a planar rim, and the map clips the completed
     surface at its own planes. On the whole-colon benchmark the rims, searched for anyway, cost the
-    real colon's segments 1.8-3.0 points (docs/mapping.md). Without rims nothing holds a centerline
+    real colon's segments 1.8-3.0 points (docs/decisions/0202-map-does-not-search-for-cut-rims.md). Without rims nothing holds a centerline
     that follows the lumen's core past the segment's ends (docs/method.md step 3), and on a segment
     alone the mesh is not clipped to the segment's stretch either: there the line's ends on the core
-    cost the segment-only track 3 points (docs/mapping.md), while in context, clipped to the stretch,
+    cost the segment-only track 3 points (docs/decisions/0204-method-steps-4-5-6-on-the-map-tracks.md), while in context, clipped to the stretch,
     they gained. An in-context model (``needs_slab``) is always clipped to its segment's stretch, so it keeps its
     ends on the core. Such a method comes back as a shallow copy (sharing its loaded model); the caller's
     object is left as it is.

@@ -8,7 +8,7 @@ whatever the cloud says, and a bent segment, whose tube runs along several axes,
 across the colon. This script runs the completion method on every chosen cloud three times: with the
 grid as fitted (the tube along axis 0), and with its rows cycled once and twice (the same cube, the tube
 along axis 2, then axis 1). An orientation-free network errs the same in the three; the gap is the bias.
-``colonbench train --transposes P`` trains against it (docs/method.md, Training).
+``colonbench train --transposes P`` trains against it (docs/training.md).
 
 Prints per axis order the coverage MAE and bias (points) and the centerline precision / recall at 2 mm,
 over the chosen samples and noise levels (the harness's noise draws, ``colonbench.benchmark.evaluate``).

@@ -12,12 +12,12 @@
 #   mkdir -p PARTS_DIR/wide PARTS_DIR/train-real PARTS_DIR/bends; cp packs/wide/{pack.json,validation.h5} PARTS_DIR/wide/
 #   split -b 30M packs/wide/train.h5 PARTS_DIR/wide/train.h5.part-; cp packs/train-real/* PARTS_DIR/train-real/
 #   cp packs/bends/* PARTS_DIR/bends/
-# and, when monai or edt is missing there, their wheels in PARTS_DIR/wheels (README.md, Train).
+# and, when monai or edt is missing there, their wheels in PARTS_DIR/wheels (docs/training.md).
 # Each pack's train.h5.part-* pieces are joined into train.h5; pack.json's sha256 refuses a wrong join.
 # Rerun with the same RUN_DIR to resume (colonbench train resumes from RUN_DIR/last.pt); it stops cleanly
-# after MINUTES. The run's settings are those of docs/method.md (Training): the shipped small network's
+# after MINUTES. The run's settings are those of docs/training.md: the shipped small network's
 # weights as the start, the real colons 4 times per epoch, flips, transposes (a third of the samples with their
-# grid axes exchanged: docs/method.md, Training, "The tube along the first axis") and erasure, every epoch kept.
+# grid axes exchanged: docs/training.md and docs/decisions/0135-transposes.md) and erasure, every epoch kept.
 # A PARTS_DIR without bends/ trains on wide and train-real alone, as planned before bends.yaml.
 set -euo pipefail
 parts=${1:?PARTS_DIR}; run=${2:?RUN_DIR}; minutes=${3:?MINUTES}; device=${4:-cuda}
