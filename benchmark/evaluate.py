@@ -232,12 +232,17 @@ def checked_arguments(workers: int, noise, methods) -> tuple[list[float], list]:
     sigmas = sorted({float(s) for s in noise})
     if not sigmas or any(s < 0 or not np.isfinite(s) for s in sigmas):
         raise InputError(f"noise levels must be non-negative mm, got {list(noise)}")
-    if isinstance(methods, str) or not isinstance(methods, (list, tuple)):
-        methods = [methods]
-    specs = [s.strip() if isinstance(s, str) else s for s in methods if not isinstance(s, str) or s.strip()]
+    specs = method_list(methods)
     if not specs:
         raise InputError("no methods given")
     return sigmas, specs
+
+
+def method_list(methods) -> list:
+    """Methods as a list: one spec or object, or several; specs stripped, empty ones left out."""
+    if isinstance(methods, str) or not isinstance(methods, (list, tuple)):
+        methods = [methods]
+    return [m.strip() if isinstance(m, str) else m for m in methods if not isinstance(m, str) or m.strip()]
 
 
 def load_methods(specs: list, options: dict, refuse_truth: str | None = None) -> dict:
@@ -344,13 +349,14 @@ def _run_programs(out, data, units, loaded, noise_seed, workers, progress) -> No
     for name, (_, m) in loaded.items():
         if not isinstance(m, ExecMethod):
             continue
-        wanted = [(u, sample_id(u[0], i, u[2]), i) for u in units if name in u[3] for i in u[1]]
-        missing = set(m.missing([sid for _, sid, _ in wanted]))
         items = []
-        for u, sid, i in wanted:
-            if sid in missing:
-                with Shard(Path(data) / u[0]) as shard:
-                    items.append((sid, noisy(shard.geometry(i)["partial_points"], u[2], noise_seed, u[0], i)))
+        for shard_name, indices, sigma, todo, *_ in units:
+            ids = {sample_id(shard_name, i, sigma): i for i in indices} if name in todo else {}
+            pending = m.missing(ids)
+            if pending:
+                with Shard(Path(data) / shard_name) as shard:  # opened once for its samples
+                    items += [(sid, noisy(shard.geometry(ids[sid])["partial_points"], sigma, noise_seed, shard_name,
+                                          ids[sid])) for sid in pending]
         if items:
             with tqdm(total=len(items), unit="input", desc=f"run {name}", disable=None if progress else True,
                       dynamic_ncols=True) as bar:

@@ -69,6 +69,7 @@ class PredictionMethod:
         self.name = name
         self.version = version if version is not None else f"files:{_folder_digest(self.folder)}"
         self.lookup: dict[str, str] = {}
+        self._timing: dict[str, float] = {}
 
     def predicted(self, sid: str):
         """The checked estimate of sample ``sid`` (:func:`colonbench.benchmark.exchange.read_prediction`), with
@@ -83,17 +84,18 @@ class PredictionMethod:
         if failure.is_file() and not (self.folder / f"{sid}.json").is_file():
             raise InputError(failure.read_text().strip())
         est = read_prediction(self.folder / f"{sid}.json", self.name)
-        seconds = self._seconds().get(sid)
+        seconds = self._seconds(sid)
         if seconds is not None:
             est.seconds = {"program": seconds}
         return est
 
-    def _seconds(self) -> dict:
+    def _seconds(self, sid: str) -> float | None:
+        """The program's time per input of ``sid``'s call, read again when a later call has timed ``sid``."""
         timing = self.folder / SECONDS_NAME
-        if not hasattr(self, "_timing") and timing.is_file():
+        if sid not in self._timing and timing.is_file():
             rows = (line.split(",") for line in timing.read_text().splitlines() if "," in line)
-            self._timing = {sid: float(s) for sid, s in rows}
-        return getattr(self, "_timing", {})
+            self._timing = {k: float(v) for k, v in rows}
+        return self._timing.get(sid)
 
     def estimate(self, points):
         """The prediction of a cloud the benchmark wrote under a sample id (:attr:`lookup`)."""

@@ -81,6 +81,16 @@ class Suite:
         """``<name>-v<version>``."""
         return f"{self.name}-v{self.version}"
 
+    @property
+    def headline_track(self) -> str | None:
+        """A whole-colon suite's track in cross-suite tables: the widest context (what ``colonbench map``
+        reports); None for a segment suite."""
+        if self.task != "colon":
+            return None
+        from colonbench.benchmark.colon_evaluate import track_name
+
+        return track_name(max(self.contexts_mm))
+
     def record(self, sha256: str, verified: bool) -> dict:
         """What a run stores of the suite it evaluated: id, name, version, the hash found and the published one."""
         return {"id": self.id, "name": self.name, "version": self.version, "sha256": sha256,
@@ -125,14 +135,16 @@ def latest() -> dict[str, Suite]:
     return out
 
 
-def get(name: str) -> Suite:
-    """A suite by id (``paper-v1``) or name (``paper``: its newest version).
+def get(name) -> Suite:
+    """A suite by id (``paper-v1``) or name (``paper``: its newest version); a :class:`Suite` as it is.
 
     Raises
     ------
     InputError
         No such suite (the message lists them).
     """
+    if isinstance(name, Suite):
+        return name
     name = name.strip()
     for s in SUITES:
         if name in (s.id,):
@@ -142,9 +154,10 @@ def get(name: str) -> Suite:
     raise InputError(f"unknown suite {name!r}; the suites are {', '.join(s.id for s in SUITES)} (or all)")
 
 
-def parse(text: str) -> list[Suite]:
-    """``all`` (every newest suite) or comma-separated ids/names, in the order given, each once."""
-    names = [n.strip() for n in text.split(",") if n.strip()]
+def parse(text) -> list[Suite]:
+    """``all`` (every newest suite), comma-separated ids/names, or a list of ids, names or suites; in the order
+    given, each once."""
+    names = [n.strip() for n in text.split(",") if n.strip()] if isinstance(text, str) else list(text)
     if not names:
         raise InputError("no suites given")
     if names == ["all"]:

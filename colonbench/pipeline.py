@@ -37,7 +37,6 @@ def _evaluate(suite, data, methods, run_dir, **kw) -> Path:
     from colonbench.benchmark.evaluate import evaluate
 
     if suite.task == "colon":
-        kw.pop("examples", None)
         return evaluate_colons(data, methods, run_dir, noise=suite.noise_mm, contexts=suite.contexts_mm,
                                segment_mm=suite.segment_mm, split=suite.split, limit=suite.limit,
                                noise_seed=suite.noise_seed, **kw)
@@ -92,10 +91,10 @@ def run_benchmark(methods=(), suites_=("demo-v1",), out="runs/benchmark", data=N
     """
     from colonbench.reports.benchmark_report import write_report
 
-    chosen = suites.parse(suites_) if isinstance(suites_, str) else \
-        [s if isinstance(s, suites.Suite) else suites.get(s) for s in suites_]
-    methods = [methods] if isinstance(methods, str) or not isinstance(methods, (list, tuple)) else list(methods)
-    methods = [m.strip() if isinstance(m, str) else m for m in methods if not isinstance(m, str) or m.strip()]
+    from colonbench.benchmark.evaluate import method_list
+
+    chosen = suites.parse(suites_)
+    methods = method_list(methods)
     if not methods and not shipped:
         raise InputError("no methods to evaluate and --no-shipped: nothing to show")
     out = Path(out)
@@ -136,7 +135,7 @@ def export_suite(suite, out, data=None, workers: int = 1, scheduler=None, allow_
     from colonbench.benchmark.evaluate import select
     from colonbench.benchmark.runfolder import write_json
 
-    suite = suite if isinstance(suite, suites.Suite) else suites.get(suite)
+    suite = suites.get(suite)
     out = Path(out)
     if out.exists() and any(p for p in out.iterdir() if p.name != exchange.EXPORT_NAME and p.suffix != ".ply"
                             and p.name != exchange.INDEX_NAME):
@@ -196,7 +195,7 @@ def score_suite(suite, predictions, out, name: str | None = None, data=None, wor
         The run folder (``colonbench leaderboard RUN`` merges it with the shipped results' run folders, or
         ``colonbench benchmark --methods predictions:DIR`` does all at once).
     """
-    suite = suite if isinstance(suite, suites.Suite) else suites.get(suite)
+    suite = suites.get(suite)
     folder = Path(predictions)
     if not folder.is_dir():
         raise InputError(f"{folder}: no such folder of predictions")

@@ -37,8 +37,7 @@ def _rows(suite, folder: Path) -> tuple[list[dict], dict]:
     methods = lb["methods"]
     rows = []
     if suite.task == "colon":
-        track = f"context-{max(suite.contexts_mm):g}mm" if max(suite.contexts_mm) > 0 else "segment-only"
-        tab = tab[tab["track"] == track]
+        tab = tab[tab["track"] == suite.headline_track]
         for _, r in tab.iterrows():
             rows.append({"noise_mm": r["noise_mm"], "method": r["method"], "mae": r["segment_mae"],
                          "mae_lo": r["segment_mae_lo"], "mae_hi": r["segment_mae_hi"], "segments": r["segments"],

@@ -20,11 +20,9 @@ def _maes(suite) -> dict:
     item = shipped.load(suite)
     if item is None:
         return {}
-    if suite.task == "colon":
-        segs = item[1]
-        segs = segs[segs["track"] == f"context-{max(suite.contexts_mm):g}mm"]
-    else:
-        segs = item[1]
+    segs = item[1]
+    if suite.headline_track is not None:
+        segs = segs[segs["track"] == suite.headline_track]
     return {(m, n): 100 * g["coverage_error"].abs().mean() for (m, n), g in segs.groupby(["method", "noise_mm"])}
 
 

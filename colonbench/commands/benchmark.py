@@ -66,9 +66,8 @@ def cmd_suites(args):
     from colonbench.benchmark import suites
 
     rows = suites.SUITES if args.all_versions else tuple(suites.latest().values())
-    cached = suites.default_data_root() if args.data is None else args.data
     for s in rows:
-        here = suites.data_dir(s, cached)
+        here = suites.data_dir(s, args.data)
         state = "cached" if (here / "dataset.lock.json").is_file() else "not generated"
         what = "whole-colon reconstructions" if s.task == "colon" else "segments"
         noise = ", ".join(f"{n:g}" for n in s.noise_mm)
@@ -78,7 +77,7 @@ def cmd_suites(args):
     if args.check:
         failed = 0
         for s in rows:
-            here = suites.data_dir(s, cached)
+            here = suites.data_dir(s, args.data)
             if not (here / "dataset.lock.json").is_file():
                 continue
             t = time.perf_counter()
