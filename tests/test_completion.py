@@ -13,7 +13,7 @@ from colonbench.completion.heatmap_centerline import extract_centerline  # noqa:
 from colonbench.completion.method import from_heatmap  # noqa: E402
 from colonbench.completion.planes import segment_planes
 from colonbench.completion.steps import complete
-from colonbench.completion.surface import hole_vertices, mesh_coverage
+from colonbench.completion.surface import hole_vertices, mesh_coverage, wall_thickness
 from colonbench.datagen.colon import tube_colon  # noqa: E402
 from colonbench.grid import Grid, fit_grid  # noqa: E402
 from colonbench.heatmaps import sample_heatmaps
@@ -389,3 +389,24 @@ def torch_equal(a, b):
     import torch
 
     return torch.equal(a, b)
+
+
+def test_wall_thickness_is_the_spread_across_the_wall():
+    rng = np.random.default_rng(0)
+    flat = np.c_[rng.uniform(0, 40, (4000, 2)), np.zeros(4000)]
+    assert np.median(wall_thickness(flat)) < 1e-9
+    noisy = flat + np.c_[np.zeros((4000, 2)), rng.normal(0, 0.3, 4000)]
+    assert np.median(wall_thickness(noisy)) == pytest.approx(0.3, rel=0.25)
+    doubled = np.r_[flat[:2000], flat[2000:] + [0, 0, 1.0]]      # two layers 1 apart: half the gap
+    assert 0.3 < np.median(wall_thickness(doubled)) <= 0.5      # up to half the gap, as neighbours mix the layers
+
+
+def test_a_vertex_between_two_layers_is_observed_once_the_thickness_counts():
+    rng = np.random.default_rng(0)
+    flat = np.c_[rng.uniform(0, 40, (4000, 2)), np.zeros(4000)]
+    doubled = np.r_[flat[:2000], flat[2000:] + [0, 0, 2.0]]
+    mid = np.array([[20.0, 20.0, 1.0]])                             # 1 from each layer
+    assert hole_vertices(mid, doubled, distance=0.7, false_hole_rate=None)[0]
+    assert not hole_vertices(mid, doubled, distance=0.7, false_hole_rate=None, thickness=1.0)[0]
+    far = np.array([[20.0, 20.0, 5.0]])                             # 3 off the nearer layer: a hole either way
+    assert hole_vertices(far, doubled, distance=0.7, false_hole_rate=None, thickness=2.0)[0]
