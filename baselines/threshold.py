@@ -69,14 +69,19 @@ class ThresholdMethod:
     device : str
     threshold : float
         Voxels of the predicted heatmap below this are surface voxels.
+    cut_rims : bool
+        Cut at the cloud's cut rims where found, as the full method does.
+    tta : int
+        Symmetries the shared prediction is averaged over (:mod:`colonbench.completion.symmetry`).
     """
 
     name = "thresholding"
 
-    def __init__(self, model=None, device: str = "cpu", threshold: float = THRESHOLD, cut_rims: bool = True):
+    def __init__(self, model=None, device: str = "cpu", threshold: float = THRESHOLD, cut_rims: bool = True,
+                 tta: int = 1):
         from colonbench.completion.method import prediction_version, shared_predictor
 
-        self.predictor = shared_predictor(model, device)
+        self.predictor = shared_predictor(model, device, tta)
         self.threshold = float(threshold)
         self.cut_rims = cut_rims
         self.version = f"{prediction_version(self.predictor)},threshold={self.threshold:g}"

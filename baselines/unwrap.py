@@ -132,14 +132,16 @@ class UnwrapMethod:
         Model of the prediction (default: the shipped one); shared with the
         other methods built on it in the same process.
     device : str
+    tta : int
+        Symmetries the shared prediction is averaged over (:mod:`colonbench.completion.symmetry`).
     """
 
     name = "unwrap"
 
-    def __init__(self, model=None, device: str = "cpu"):
+    def __init__(self, model=None, device: str = "cpu", tta: int = 1):
         from colonbench.completion.method import prediction_version, shared_predictor
 
-        self.predictor = shared_predictor(model, device)
+        self.predictor = shared_predictor(model, device, tta)
         self.version = f"{prediction_version(self.predictor)},cell={CELL_MM:g}mm"
 
     def estimate(self, points) -> Estimate:

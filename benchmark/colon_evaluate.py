@@ -45,6 +45,7 @@ from colonbench.benchmark.evaluate import checked_arguments, load_methods, noisy
 from colonbench.benchmark.exchange import sample_id
 from colonbench.benchmark.parallel import run_units
 from colonbench.benchmark.runfolder import RUN_FILE, begin_run, check_run_folder, read_rows, write_csv, write_json
+from colonbench.completion.symmetry import check_tta
 from colonbench.errors import ColonbenchError, InputError
 from colonbench.folderlock import folder_lock
 from colonbench.mapping import CONTEXT_MM, SEGMENT_MM
@@ -237,7 +238,7 @@ def evaluate_colons(data, methods, out, noise=(0.0, 0.5), contexts=CONTEXTS_MM, 
                     split: str = "test", limit: int | None = None, workers: int = 1, model=None,
                     device: str = "cpu", noise_seed: int = 0, progress: bool = True, context_model=None,
                     scheduler=None, allow_unverified: bool = False, timeout: float | None = None,
-                    batch: int | None = None) -> Path:
+                    batch: int | None = None, tta: int = 1) -> Path:
     """Map every whole-colon sample of a split with every method and track; write (or finish) a run folder.
 
     Parameters
@@ -254,7 +255,7 @@ def evaluate_colons(data, methods, out, noise=(0.0, 0.5), contexts=CONTEXTS_MM, 
         Context margins, one track each, mm (0 = segment-only).
     segment_mm : float
         Segment arc length, mm.
-    split, limit, workers, model, device, noise_seed, progress, scheduler, allow_unverified, timeout, batch
+    split, limit, workers, model, device, noise_seed, progress, scheduler, allow_unverified, timeout, batch, tta
         As for :func:`colonbench.benchmark.evaluate.evaluate`; an ``exec:`` program is called once per map
         with the clouds of the segments it estimates.
     context_model : path or str, optional
@@ -278,7 +279,7 @@ def evaluate_colons(data, methods, out, noise=(0.0, 0.5), contexts=CONTEXTS_MM, 
     identity, picks = select(data, split, limit)
     ColonShard(data / picks[0][0])  # a clear error for a segment dataset
     suite = suite_of(identity, sigmas, noise_seed, "colon", data, allow_unverified)
-    options = {"model": str(model) if model is not None else None, "device": device,
+    options = {"model": str(model) if model is not None else None, "device": device, "tta": check_tta(tta),
                "context_model": str(context_model) if context_model is not None else None,
                "predictions": str(out / "predictions"), "timeout": timeout, "batch": batch}
     t0 = time.perf_counter()

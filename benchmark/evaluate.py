@@ -43,6 +43,7 @@ from colonbench.estimate import as_estimate
 from colonbench.benchmark.runfolder import (RUN_FILE, RunMismatch, begin_run, check_run_folder, read_rows, read_run,
                                             write_csv, write_json)
 from colonbench.benchmark.summary import metric_columns, summarize
+from colonbench.completion.symmetry import check_tta
 from colonbench.errors import ColonbenchError, InputError
 from colonbench.folderlock import folder_lock
 
@@ -276,7 +277,7 @@ def suite_of(identity: dict, sigmas, noise_seed: int, task: str, data, allow_unv
 def evaluate(data, methods, out, noise=(0.0, 0.5), split: str = "test", limit: int | None = None,
              workers: int = 1, model=None, device: str = "cpu", examples: int = 3, noise_seed: int = 0,
              progress: bool = True, scheduler=None, allow_unverified: bool = False, timeout: float | None = None,
-             batch: int | None = None) -> Path:
+             batch: int | None = None, tta: int = 1) -> Path:
     """Evaluate methods on a dataset split; write (or finish) a run folder.
 
     Parameters
@@ -311,6 +312,9 @@ def evaluate(data, methods, out, noise=(0.0, 0.5), split: str = "test", limit: i
         then records ``verified: false``).
     timeout, batch
         ``exec:`` methods: seconds per input, inputs per call.
+    tta : int
+        Passed to the methods on the network that take it: their prediction averaged over this many symmetries
+        of the grid (:mod:`colonbench.completion.symmetry`; default 1, the network once).
 
     Returns
     -------
@@ -326,7 +330,7 @@ def evaluate(data, methods, out, noise=(0.0, 0.5), split: str = "test", limit: i
     sigmas, specs = checked_arguments(workers, noise, methods)
     identity, picks = select(data, split, limit)
     suite = suite_of(identity, sigmas, noise_seed, "segments", data, allow_unverified)
-    options = {"model": str(model) if model is not None else None, "device": device,
+    options = {"model": str(model) if model is not None else None, "device": device, "tta": check_tta(tta),
                "predictions": str(out / "predictions"), "timeout": timeout, "batch": batch}
     t0 = time.perf_counter()
     loaded = load_methods(specs, options)

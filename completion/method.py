@@ -216,12 +216,18 @@ class Predictor:
         ``small``, the shipped model (the default).
     device : str
         ``cpu``, ``cuda``, ``auto``.
+    tta : int
+        Average the prediction over this many symmetries of the grid (:mod:`colonbench.completion.symmetry`);
+        1, the default, runs the network once.
     """
 
     CACHE = 4
 
-    def __init__(self, model=None, device: str = "cpu"):
+    def __init__(self, model=None, device: str = "cpu", tta: int = 1):
         from colonbench.completion.network import load_model, resolve_device
+        from colonbench.completion.symmetry import check_tta
+
+        self.tta = check_tta(tta)
 
         path = model_path(model)
         if not path.is_file():
@@ -233,7 +239,7 @@ class Predictor:
         self._forward: dict = {}     # grid size -> the network made fast for inputs of that size
         self._seen: set = set()      # grid sizes predicted once (with the eager network)
         self.path = path
-        self.version = f"{path.stem}@{self.meta.get('steps', '?')}"
+        self.version = f"{path.stem}@{self.meta.get('steps', '?')}" + (f",tta={self.tta}" if self.tta > 1 else "")
         self.grid_options = self.meta.get("grid_options", {})
         self._cache: OrderedDict[bytes, Prediction] = OrderedDict()
 
@@ -280,9 +286,11 @@ class Predictor:
 
             self._forward[grid.size] = for_inference(self.net, grid.size, self.device)
         self._seen.add(grid.size)
+        from colonbench.completion.symmetry import averaged
+
         with torch.inference_mode():
             x = torch.from_numpy(x_np).to(self.device)
-            pred = self._forward.get(grid.size, self.net)(x)[0, 0].float().cpu().numpy()
+            pred = averaged(self._forward.get(grid.size, self.net), x, self.tta)[0, 0].float().cpu().numpy()
         out = Prediction(grid, h_in, np.clip(pred, 0.0, 1.0), {"network": time.perf_counter() - t})
         self._cache[key] = out
         while len(self._cache) > self.CACHE:
@@ -293,11 +301,13 @@ class Predictor:
 _PREDICTORS: dict = {}
 
 
-def shared_predictor(model=None, device: str = "cpu") -> Predictor:
-    """The process's one :class:`Predictor` for ``(model, device)``: loaded once, shared by methods."""
-    key = (str(Path(model).resolve()) if model is not None else None, str(device))
+def shared_predictor(model=None, device: str = "cpu", tta: int = 1) -> Predictor:
+    """The process's one :class:`Predictor` for ``(model, device, tta)``: loaded once, shared by methods."""
+    from colonbench.completion.symmetry import check_tta
+
+    key = (str(Path(model).resolve()) if model is not None else None, str(device), check_tta(tta))
     if key not in _PREDICTORS:
-        _PREDICTORS[key] = Predictor(model, device)
+        _PREDICTORS[key] = Predictor(model, device, key[2])
     return _PREDICTORS[key]
 
 
@@ -360,6 +370,9 @@ class CompletionMethod:
     context_model : path, optional
         An in-context model (``colonbench train`` on a context pack, docs/mapping.md): it estimates the
         segments given with their slab (``colonbench map`` with a context margin); ``model`` estimates the rest.
+    tta : int
+        Average the network's heatmap over this many symmetries of the grid (1, 2, 4, 8 or 16;
+        :mod:`colonbench.completion.symmetry`); 1, the default, runs it once.
 
     The model is loaded once (and shared with the other methods built on the
     same model in this process); call :meth:`estimate` on as many clouds as
@@ -370,9 +383,9 @@ class CompletionMethod:
 
     def __init__(self, model=None, device: str = "cpu", hole_distance: float | None = None, cut_rims: bool = True,
                  shell_level: float | None = SHELL_LEVEL, gaps: bool = True, end_level: float | None = END_LEVEL,
-                 thin_above: float | None = THIN_ABOVE, context_model=None):
-        self.predictor = shared_predictor(model, device)
-        self.context_predictor = shared_predictor(context_model, device) if context_model is not None else None
+                 thin_above: float | None = THIN_ABOVE, context_model=None, tta: int = 1):
+        self.predictor = shared_predictor(model, device, tta)
+        self.context_predictor = shared_predictor(context_model, device, tta) if context_model is not None else None
         if self.context_predictor is not None and not self.context_predictor.in_context:
             raise InputError(f"--context-model {context_model}: a segment model (one input channel), not an "
                              "in-context model (colonbench train on a context pack, docs/mapping.md)")

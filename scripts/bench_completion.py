@@ -2,6 +2,8 @@
 
     python scripts/bench_completion.py data/paper --split test --limit 200 --model runs/small-cpu/best.safetensors
     python scripts/bench_completion.py data/paper --gt      # the GT target heatmap as prediction
+    python scripts/bench_completion.py data/paper --tta 4   # the prediction averaged over 4 symmetries
+    python scripts/bench_completion.py data/paper --method poisson   # any registered method
 
 Noise (``--noise 0.5``) is added to the partial points from a seeded stream
 per sample. One process, one torch thread (the "one CPU core" of the speed
@@ -31,12 +33,16 @@ def main(argv=None):
     ap.add_argument("--limit", type=int, default=100, help="samples, spread evenly over the split")
     ap.add_argument("--model", help="model file (default: the shipped one)")
     ap.add_argument("--gt", action="store_true", help="feed the GT target heatmap instead of the network's")
+    ap.add_argument("--tta", type=int, default=1, help="symmetries the network's prediction is averaged over")
+    ap.add_argument("--method", default="completion", help="a registered method (colonbench methods)")
     ap.add_argument("--noise", type=float, default=0.0, help="Gaussian noise sigma on the inputs, mm")
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--constant", type=float, help="also report the MAE of this constant guess (e.g. the mean "
                     "training coverage)")
     ap.add_argument("--json", help="also write the figures to this JSON file (for the model card)")
     args = ap.parse_args(argv)
+    if args.gt and (args.method != "completion" or args.tta != 1):
+        ap.error("--gt runs the steps on the exact heatmap: it takes neither --method nor --tta")
 
     import torch
 
@@ -45,7 +51,14 @@ def main(argv=None):
 
     ds = ShardDataset(args.data, split=args.split, geometry=True)
     picks = np.unique(np.linspace(0, len(ds) - 1, min(args.limit, len(ds))).astype(int))
-    method = None if args.gt else CompletionMethod(args.model)
+    if args.gt:
+        method = None
+    elif args.method == "completion":
+        method = CompletionMethod(args.model, tta=args.tta)
+    else:
+        from colonbench.benchmark.registry import load_method
+
+        method = load_method(args.method, model=args.model, tta=args.tta)
     rows, stages, true = [], {}, []
     setup = None
     if method is not None:

@@ -170,3 +170,55 @@ def test_the_orientation_probe_cycles_the_grid_axes_and_reproduces_the_method_on
     assert fitted.coverage == pytest.approx(method.estimate(pts).coverage, abs=1e-3)
     assert 1 - fitted.coverage == pytest.approx(R * 1.0 * 20.0 / (2 * np.pi * R * 63.0), abs=0.03)  # the window
     assert all(0.0 <= probe.estimate_on_cycled_grid(method, pts, k).coverage <= 1.0 for k in (1, 2))
+
+
+def test_symmetries_keep_the_tube_axis_and_come_back_exactly():
+    import torch
+
+    from colonbench.completion.symmetry import SYMMETRIES, averaged, transform
+
+    x = torch.arange(4 * 5 * 5, dtype=torch.float32).reshape(1, 1, 4, 5, 5)   # a different length along the axis
+    moved = [transform(x, s) for s in SYMMETRIES]
+    assert all(m.shape == x.shape for m in moved)                  # the first (tube) axis stays the first
+    assert len({m.numpy().tobytes() for m in moved}) == 16         # 16 distinct symmetries
+    assert all(torch.equal(transform(m, s, inverse=True), x) for m, s in zip(moved, SYMMETRIES))
+    assert torch.equal(averaged(lambda t: t + 1, x, 8), x + 1)     # an equivariant map is its own average
+    w = torch.rand(1, 1, 4, 5, 5)                                  # one that is not: a fixed weight grid
+    # K = 2 adds the half turn about the axis, flip(x, (3, 4)): the mean of x w and x flip(w, (3, 4))
+    assert torch.allclose(averaged(lambda t: t * w, x, 2), x * (w + torch.flip(w, dims=(3, 4))) / 2)
+    # K = 4 the quarter turns: w averaged over the four rotations of its cross-section
+    rotations = sum(torch.rot90(w, r, dims=(3, 4)) for r in range(4)) / 4
+    assert torch.allclose(averaged(lambda t: t * w, x, 4), x * rotations)
+
+
+def test_the_prediction_averaged_over_symmetries_is_the_mean_of_the_moved_predictions():
+    import torch
+
+    from colonbench.completion.method import Predictor
+    from colonbench.completion.symmetry import SYMMETRIES, transform
+    from colonbench.heatmaps import input_from_points
+
+    colon = tube_colon(straight(50.0), R, ring_spacing_mm=1.0, n_around=96)
+    pts = check_cloud(colon.mesh.vertices[colon.mesh.vertices[:, 0] > -10])    # a wall seen mostly from one side
+    four = Predictor(tta=4)
+    assert four.version.endswith(",tta=4") and Predictor().version == four.version[: -len(",tta=4")]
+    p = four(pts)
+    x = torch.from_numpy(input_from_points(p.grid, pts)[0][None, None])
+    with torch.inference_mode():
+        mean = sum(transform(four.net(transform(x, s)), s, inverse=True) for s in SYMMETRIES[:4]) / 4
+    np.testing.assert_allclose(p.heatmap, np.clip(mean[0, 0].numpy(), 0, 1), atol=1e-5)
+    assert not np.allclose(p.heatmap, Predictor()(pts).heatmap, atol=1e-3)    # the network is not equivariant
+    assert "tta=4" in CompletionMethod(tta=4).version
+    for bad in (3, 0, 4.5, True, "4"):
+        with pytest.raises(InputError, match="tta must be one of 1, 2, 4, 8, 16"):
+            CompletionMethod(tta=bad)
+
+
+def test_the_methods_on_the_network_share_the_averaged_prediction():
+    from colonbench.benchmark.registry import load_method
+
+    averaged = load_method("thresholding", tta=4)
+    assert averaged.predictor is CompletionMethod(tta=4.0).predictor is load_method("unwrap", tta=4).predictor
+    assert averaged.predictor is not CompletionMethod().predictor
+    assert "tta=4" in averaged.version and "tta" not in load_method("thresholding").version
+    assert load_method("poisson", tta=4).version == load_method("poisson").version   # no network: not offered

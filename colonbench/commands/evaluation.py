@@ -32,7 +32,7 @@ def cmd_evaluate(args):
                    limit=args.limit, workers=args.workers, model=args.model, device=args.device,
                    examples=args.examples, noise_seed=args.noise_seed, progress=not args.quiet,
                    scheduler=args.scheduler, allow_unverified=args.allow_unverified, timeout=args.timeout,
-                   batch=args.batch)
+                   batch=args.batch, tta=args.tta)
     meta, results = load_results(run)
     s = summarize(results)
     for _, r in s.iterrows():
@@ -60,7 +60,8 @@ def _evaluate_colons(args):
                           segment_mm=args.segment_length, split=args.split, limit=args.limit, workers=args.workers,
                           model=args.model, device=args.device, noise_seed=args.noise_seed,
                           progress=not args.quiet, context_model=args.context_model, scheduler=args.scheduler,
-                          allow_unverified=args.allow_unverified, timeout=args.timeout, batch=args.batch)
+                          allow_unverified=args.allow_unverified, timeout=args.timeout, batch=args.batch,
+                          tta=args.tta)
     meta, segments, colons = load_colon_results(run)
     tab = colon_table(segments, colons)
     for _, r in tab.iterrows():

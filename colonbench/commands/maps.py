@@ -24,7 +24,8 @@ def cmd_map(args):
     if args.trajectory:
         positions = read_trajectory(args.trajectory)
         check_trajectory(positions, points, str(args.trajectory))
-    method = load_method(args.method, model=args.model, device=args.device, context_model=args.context_model)
+    method = load_method(args.method, model=args.model, device=args.device, context_model=args.context_model,
+                         tta=args.tta)
     if getattr(method, "uses_truth", False):
         raise ColonbenchError(f"method {method.name!r} is a reference that needs ground truth; it runs only in "
                               "colonbench evaluate")

@@ -76,7 +76,7 @@ def cmd_estimate(args):
     if clash:
         raise ColonbenchError(f"several inputs would write the same output name(s) {clash}; "
                               "call estimate separately for them")
-    method = load_method(args.method, model=args.model, device=args.device)  # loaded once for every file
+    method = load_method(args.method, model=args.model, device=args.device, tta=args.tta)  # loaded once for every file
     if getattr(method, "uses_truth", False):
         raise ColonbenchError(f"method {method.name!r} is a reference that needs ground truth; it runs only in "
                               "colonbench evaluate")
