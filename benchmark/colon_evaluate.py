@@ -54,7 +54,7 @@ from colonbench.mapping import CONTEXT_MM, SEGMENT_MM
 CONTEXTS_MM = (0.0, CONTEXT_MM)
 #: The methods ``--methods all`` maps with: registry.DEFAULT_METHODS less those given ground truth (they cannot
 #: map) and ``unwrap-pca`` (the segment benchmark's ablation of unwrap's centerline).
-ALL_METHODS = ("completion", "thresholding", "unwrap", "constant")
+ALL_METHODS = ("completion", "thresholding", "unwrap", "poisson", "constant")
 #: Per-segment columns of ``results/segments.csv``.
 SEGMENT_COLUMNS = ["method", "track", "context_mm", "shard", "colon", "index", "hole_model", "noise_mm", "segment",
                    "piece", "start_mm", "end_mm", "true_start_mm", "true_end_mm", "points", "true_coverage",

@@ -44,8 +44,9 @@ GROUP = "colonbench.methods"
 #: Options a method's class is offered (those it takes): the model file, the torch device, the in-context model
 #: and the symmetries the network's prediction is averaged over.
 CLASS_OPTIONS = ("model", "device", "context_model", "tta")
-#: What ``--methods all`` runs: the paper's method, its baselines and the reference rows.
-DEFAULT_METHODS = ("completion", "thresholding", "unwrap", "unwrap-pca", "gt-heatmap", "unwrap-gt", "constant")
+#: What ``--methods all`` runs: the paper's method, its baselines, the classical reference and the reference rows.
+DEFAULT_METHODS = ("completion", "thresholding", "unwrap", "unwrap-pca", "poisson", "gt-heatmap", "unwrap-gt",
+                   "constant")
 #: The paper's baselines: a leaderboard compares every method with the best of them (paired, per segment).
 BASELINES = ("thresholding", "unwrap", "unwrap-pca")
 

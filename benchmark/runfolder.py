@@ -72,7 +72,7 @@ def versions() -> dict:
     from importlib.metadata import PackageNotFoundError, version
 
     out = {"colonbench": __version__, "python": platform.python_version()}
-    for pkg in ("numpy", "scipy", "scikit-image", "scikit-fmm", "edt", "torch", "monai", "h5py"):
+    for pkg in ("numpy", "scipy", "scikit-image", "scikit-fmm", "edt", "torch", "monai", "h5py", "open3d"):
         try:
             out[pkg] = version(pkg)
         except PackageNotFoundError:

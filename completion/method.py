@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from colonbench.completion.gaps import GAP_VALLEY
 from colonbench.completion.heatmap_centerline import END_LEVEL, extract_centerline
 from colonbench.completion.planes import line_between
 from colonbench.completion.steps import STEPS_VERSION, complete
@@ -459,7 +460,8 @@ def steps_version(shell_level: float | None = SHELL_LEVEL, gaps: bool = True,
 
 def from_heatmap(heatmap: np.ndarray, grid: Grid, points, method: str = "completion",
                  hole_distance: float | None = None, centerline_vox: np.ndarray | None = None,
-                 cut_rims: bool = True, shell_level: float | None = SHELL_LEVEL, gaps: bool = True) -> Estimate:
+                 cut_rims: bool = True, shell_level: float | None = SHELL_LEVEL, gaps: bool = True,
+                 valley: float = GAP_VALLEY) -> Estimate:
     """Steps after the network: centerline, completed mesh, holes and coverage of a target heatmap.
 
     Parameters
@@ -477,13 +479,15 @@ def from_heatmap(heatmap: np.ndarray, grid: Grid, points, method: str = "complet
     shell_level : float or None
         :func:`colonbench.completion.surface.clip_to_shell`'s level; None keeps every face.
     gaps : bool
-        Add hole patches where the tube has no wall (:func:`colonbench.completion.gaps.wall_gaps`).
+        Add hole patches where the tube has no wall (:func:`colonbench.completion.gaps.wall_gaps`) ...
+    valley : float
+        ... along rays where the heatmap falls below this (:func:`colonbench.completion.steps.complete`).
     """
     t0 = time.perf_counter()
     cl_vox = extract_centerline(heatmap) if centerline_vox is None else centerline_vox
     t1 = time.perf_counter()
     pts = np.asarray(points, dtype=float)
-    comp = complete(heatmap, cl_vox, grid.to_voxel(pts), hole_distance, cut_rims, shell_level, gaps)
+    comp = complete(heatmap, cl_vox, grid.to_voxel(pts), hole_distance, cut_rims, shell_level, gaps, valley)
     t2 = time.perf_counter()
     verts = grid.to_mm(comp.vertices) if len(comp.vertices) else np.zeros((0, 3))
     inside = line_between(cl_vox, comp.planes)

@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from colonbench.completion.gaps import wall_gaps
+from colonbench.completion.gaps import GAP_VALLEY, wall_gaps
 from colonbench.completion.planes import clip_to_segment, segment_planes
 from colonbench.completion.surface import (HOLE_DISTANCE, SHELL_LEVEL, clip_to_shell, extract_mesh, hole_vertices,
                                            mesh_coverage, resigned_field)
@@ -51,14 +51,16 @@ class Completion:
 
 def complete(heatmap: np.ndarray, centerline_vox: np.ndarray, partial_vox: np.ndarray,
              distance: float | None = None, cut_rims: bool = True,
-             shell_level: float | None = SHELL_LEVEL, gaps: bool = True) -> Completion:
+             shell_level: float | None = SHELL_LEVEL, gaps: bool = True, valley: float = GAP_VALLEY) -> Completion:
     """Mesh, holes and coverage of a segment from its target heatmap, centerline and partial cloud (voxels).
 
     ``distance`` is the hole distance in voxels (default: the paper's sqrt(2)/2). ``cut_rims``: clip
     at the cloud's cut rims where they are found (:func:`rim_planes`), else at the centerline's ends.
     ``shell_level``: drop the faces where the heatmap is above it (:func:`clip_to_shell`); None keeps
     every face, as before version 4 of the steps. ``gaps``: add hole patches where the tube has no wall
-    (:func:`wall_gaps`), as from version 5.
+    (:func:`wall_gaps`), as from version 5; ``valley``: where the heatmap along such a ray falls below this
+    (``inf``: every ray that meets no wall, for a surface without faint walls, such as a classical
+    reconstruction's).
     """
     verts, faces = extract_mesh(*resigned_field(heatmap, centerline_vox))
     if shell_level is not None:
@@ -67,7 +69,7 @@ def complete(heatmap: np.ndarray, centerline_vox: np.ndarray, partial_vox: np.nd
     verts, faces = clip_to_segment(verts, faces, centerline_vox, planes=planes)
     hole = hole_vertices(verts, partial_vox, HOLE_DISTANCE if distance is None else distance)
     if gaps and len(faces):
-        gap_v, gap_f = wall_gaps(heatmap, centerline_vox, planes)
+        gap_v, gap_f = wall_gaps(heatmap, centerline_vox, planes, valley=valley)
         faces = np.concatenate([faces, gap_f + len(verts)])
         verts = np.concatenate([verts, gap_v])
         hole = np.concatenate([hole, np.ones(len(gap_v), bool)])

@@ -269,6 +269,8 @@ def hole_vertices(vertices: np.ndarray, partial_vox: np.ndarray, distance: float
     tree = cKDTree(partial_vox)
     if false_hole_rate is not None:
         distance = max(distance, sparse_reach(partial_vox, false_hole_rate, tree=tree))
+    if not (np.isfinite(thickness) and thickness >= 0):
+        raise ValueError(f"thickness must be a finite number >= 0, got {thickness!r}")
     if not thickness:
         d, _ = tree.query(vertices, k=1, distance_upper_bound=distance * 1.0001)
         return ~(d <= distance)

@@ -248,7 +248,8 @@ def test_dask_gives_the_single_process_results(demo_data, tmp_path):
 
 
 def test_shipped_results_are_of_the_published_suites_and_todays_methods():
-    from colonbench.benchmark.registry import load_method
+    from colonbench.benchmark.colon_evaluate import ALL_METHODS
+    from colonbench.benchmark.registry import DEFAULT_METHODS, load_method
 
     versions = {}
     for suite in suites.SUITES:
@@ -257,6 +258,8 @@ def test_shipped_results_are_of_the_published_suites_and_todays_methods():
         run = item[0]
         assert run["suite"]["sha256"] == suite.sha256 and run["suite"]["verified"]
         assert "data_path" not in run
+        built_in = set(ALL_METHODS if suite.task == "colon" else DEFAULT_METHODS)
+        assert built_in <= set(run["methods"]), f"{suite.id}: no shipped rows of {built_in - set(run['methods'])}"
         for name, rec in run["methods"].items():
             if name not in versions:
                 versions[name] = load_method(name).version
@@ -270,7 +273,7 @@ def test_shipped_demo_results_reproduce(demo_data, tmp_path):
     from colonbench.benchmark.evaluate import evaluate
 
     suite = suites.get("demo-v1")
-    methods = ["completion", "thresholding", "unwrap-pca", "constant"]
+    methods = ["completion", "thresholding", "unwrap-pca", "poisson", "constant"]
     run = evaluate(suites.data_dir(suite, demo_data), methods, tmp_path / "run", progress=False, workers=2,
                    examples=0)
     rows = shipped.load(suite)[1]
