@@ -67,6 +67,18 @@ GAP_VALLEY = np.inf
 LUMEN_WINDOW = 15
 
 
+def _stations(points: np.ndarray, station: float) -> tuple[list, np.ndarray]:
+    """Per station along the first axis, in order, the points within a station of it; and each point's station."""
+    stations = np.round(points[:, 0] / station).astype(int)
+    keys, of_point = np.unique(stations, return_inverse=True)
+    return [points[np.abs(stations - s) <= 1] for s in keys], of_point
+
+
+def _box_middles(groups: list) -> np.ndarray:
+    """(k, 3) centres of the boxes of k groups of points."""
+    return np.array([(g.min(axis=0) + g.max(axis=0)) / 2 for g in groups])
+
+
 def station_middles(points: np.ndarray, station: float = STATION_VOXELS) -> tuple[np.ndarray, np.ndarray]:
     """The middle of a partial tube's cross-section in stations along the grid's first axis.
 
@@ -87,13 +99,8 @@ def station_middles(points: np.ndarray, station: float = STATION_VOXELS) -> tupl
     of_point : (n,) int
         The station (row of ``middles``) of each point.
     """
-    stations = np.round(points[:, 0] / station).astype(int)
-    keys, of_point = np.unique(stations, return_inverse=True)
-    middles = np.empty((len(keys), 3))
-    for row, s in enumerate(keys):
-        near = np.abs(stations - s) <= 1
-        middles[row] = (points[near].min(axis=0) + points[near].max(axis=0)) / 2
-    return middles, of_point
+    groups, of_point = _stations(points, station)
+    return _box_middles(groups), of_point
 
 
 def oriented_normals(points: np.ndarray, neighbours: int = NORMAL_NEIGHBOURS,
@@ -168,7 +175,7 @@ def enclosed(wall: np.ndarray) -> np.ndarray:
     return inside & ~wall
 
 
-def lumen_centerline(wall: np.ndarray, kept: np.ndarray | None = None, window: int = LUMEN_WINDOW,
+def lumen_centerline(wall: np.ndarray, kept_distance: np.ndarray | None = None, window: int = LUMEN_WINDOW,
                      end_level: float | None = END_LEVEL, dropped: np.ndarray | None = None) -> np.ndarray:
     """The centerline of the lumen a reconstructed wall encloses, voxels.
 
@@ -176,9 +183,10 @@ def lumen_centerline(wall: np.ndarray, kept: np.ndarray | None = None, window: i
     ----------
     wall : (S, S, S) bool
         Voxels the whole reconstructed surface passes through: it bounds the lumen.
-    kept : (S, S, S) bool, optional
-        Voxels of the surface kept near the data (default: ``wall``): the lumen's distance is measured to it, so
-        that the caps Poisson closes a tube's open ends with, far from any point, do not pull the line's ends in.
+    kept_distance : (S, S, S) float, optional
+        Distance to the voxels of the surface kept near the data (:func:`colonbench.heatmaps.distance_to`;
+        default: to ``wall``), voxels: the lumen's distance is measured to that surface, so that the caps
+        Poisson closes a tube's open ends with, far from any point, do not pull the line's ends in.
     window : int
         :data:`LUMEN_WINDOW`.
     end_level : float or None
@@ -195,10 +203,9 @@ def lumen_centerline(wall: np.ndarray, kept: np.ndarray | None = None, window: i
         kept surface divided by its largest value nearby; empty when the wall encloses nothing.
     """
     lumen = enclosed(ndimage.binary_closing(wall) | wall)
-    kept = wall if kept is None else kept
-    if not lumen.any() or not kept.any():
+    if not lumen.any():
         return np.zeros((0, 3))
-    d_kept = distance_to(kept)
+    d_kept = distance_to(wall) if kept_distance is None else kept_distance
     if dropped is not None and dropped.any():
         lumen &= d_kept <= distance_to(dropped)
     d = np.where(lumen, d_kept, 0.0)
@@ -227,12 +234,11 @@ def middle_line(points: np.ndarray, station: float = STATION_VOXELS) -> np.ndarr
     (k, 3) float
         One point per station, in order along the first axis; fewer than two when the cloud spans one station.
     """
-    middles, _ = station_middles(points, station)
-    stations = np.round(points[:, 0] / station).astype(int)
+    groups, _ = _stations(points, station)
     limit = np.ptp(points, axis=0).max() + 1.0
-    centres = middles.copy()
-    for row, s in enumerate(np.unique(stations)):
-        across = points[np.abs(stations - s) <= 1][:, 1:]
+    centres = _box_middles(groups)
+    for row, near in enumerate(groups):
+        across = near[:, 1:]
         if len(across) < 10:
             continue
         a = np.c_[2.0 * across, np.ones(len(across))]
@@ -278,14 +284,17 @@ def poisson_heatmap(points_vox: np.ndarray, size: int, depth: int = DEPTH, far: 
     near, _ = cKDTree(points_vox).query(vertices, distance_upper_bound=far * 1.0001)
     close = (near[faces] <= far).all(axis=1)
     kept, _ = voxelize_mesh(box, vertices, faces[close])
+    if not kept.any():
+        return np.full(kept.shape, 0.5, np.float32), np.zeros((0, 3))
+    d_kept = distance_to(kept)
     dropped, _ = voxelize_mesh(box, vertices, faces[~close])
-    centerline = lumen_centerline(wall, kept, end_level=end_level, dropped=dropped) if line == "lumen" else []
+    centerline = lumen_centerline(wall, d_kept, end_level=end_level, dropped=dropped) if line == "lumen" else []
     if len(centerline) < 2:      # the wall encloses no lumen (a wall seen from one side): fitted circles' centres
         centerline = middle_line(points_vox)
-    if not kept.any() or len(centerline) < 2:
+    if len(centerline) < 2:
         return np.full(kept.shape, 0.5, np.float32), np.zeros((0, 3))
     line, _ = voxelize_polyline(box, centerline)
-    return target_heatmap(distance_to(kept), distance_to(line)).astype(np.float32), centerline
+    return target_heatmap(d_kept, distance_to(line)).astype(np.float32), centerline
 
 
 class PoissonMethod:

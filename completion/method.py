@@ -31,6 +31,7 @@ from colonbench.completion.gaps import GAP_VALLEY
 from colonbench.completion.heatmap_centerline import END_LEVEL, extract_centerline
 from colonbench.completion.planes import line_between
 from colonbench.completion.steps import STEPS_VERSION, complete
+from colonbench.completion.symmetry import averaged, check_tta
 from colonbench.completion.surface import SHELL_LEVEL, cloud_density
 from colonbench.errors import InputError
 from colonbench.estimate import Estimate
@@ -226,7 +227,6 @@ class Predictor:
 
     def __init__(self, model=None, device: str = "cpu", tta: int = 1):
         from colonbench.completion.network import load_model, resolve_device
-        from colonbench.completion.symmetry import check_tta
 
         self.tta = check_tta(tta)
 
@@ -287,8 +287,6 @@ class Predictor:
 
             self._forward[grid.size] = for_inference(self.net, grid.size, self.device)
         self._seen.add(grid.size)
-        from colonbench.completion.symmetry import averaged
-
         with torch.inference_mode():
             x = torch.from_numpy(x_np).to(self.device)
             pred = averaged(self._forward.get(grid.size, self.net), x, self.tta)[0, 0].float().cpu().numpy()
@@ -304,8 +302,6 @@ _PREDICTORS: dict = {}
 
 def shared_predictor(model=None, device: str = "cpu", tta: int = 1) -> Predictor:
     """The process's one :class:`Predictor` for ``(model, device, tta)``: loaded once, shared by methods."""
-    from colonbench.completion.symmetry import check_tta
-
     key = (str(Path(model).resolve()) if model is not None else None, str(device), check_tta(tta))
     if key not in _PREDICTORS:
         _PREDICTORS[key] = Predictor(model, device, key[2])

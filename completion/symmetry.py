@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from colonbench.errors import InputError
+
 #: (quarter turns about the first axis, reverse the tube, mirror across the second axis), in the order
 #: ``tta=K`` takes them: K = 2 adds the half turn, K = 4 the quarter turns, K = 8 the reversed tube, K = 16
 #: the mirror images.
@@ -31,8 +33,6 @@ def check_tta(k) -> int:
     -------
     int
     """
-    from colonbench.errors import InputError
-
     ok = not isinstance(k, bool) and isinstance(k, (int, float, np.integer, np.floating)) and float(k) in TTA_CHOICES
     if not ok:
         raise InputError(f"tta must be one of {', '.join(map(str, TTA_CHOICES))} (symmetries averaged over), "

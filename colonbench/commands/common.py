@@ -73,9 +73,12 @@ def positive(kind):
 def add_model_args(p, model_help):
     p.add_argument("--model", help=model_help)
     p.add_argument("--device", default="cpu", help="cpu, cuda, auto (default cpu)")
-    p.add_argument("--tta", type=int, default=1, choices=(1, 2, 4, 8, 16), metavar="K",
+    from colonbench.completion.symmetry import TTA_CHOICES
+
+    p.add_argument("--tta", type=int, default=1, choices=TTA_CHOICES, metavar="K",
                    help="average the network's heatmap over K symmetries of the grid that keep the tube's axis: "
-                        "1, 2, 4, 8 or 16 (default 1, the network once; K times its time; docs/method.md)")
+                        f"{', '.join(map(str, TTA_CHOICES))} (default 1, the network once; K times its time; "
+                        "docs/method.md)")
 
 
 def add_segment_args(p, segment_help):
