@@ -305,6 +305,20 @@ def test_cli_lists_suites_and_says_what_each_verb_does(capsys):
     assert "unknown suite" in capsys.readouterr().err
 
 
+def test_every_data_option_names_where_the_code_caches_suites(capsys, monkeypatch, tmp_path):
+    """The --data help of every verb that reads suite data names the places default_data_root looks, in its order."""
+    monkeypatch.delenv("COLONBENCH_DATA", raising=False)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    assert suites.default_data_root() == tmp_path / "colonbench" / "suites"
+    for verb in ("suites", "benchmark", "export", "score"):
+        with pytest.raises(SystemExit):
+            main([verb, "--help"])
+        text = " ".join(capsys.readouterr().out.split())
+        places = [text.find(p) for p in ("$COLONBENCH_DATA", "$XDG_CACHE_HOME/colonbench/suites",
+                                         "~/.cache/colonbench/suites")]
+        assert -1 not in places and places == sorted(places), verb
+
+
 def test_programs_that_cannot_run_and_predictions_that_match_nothing_say_so(demo_data, tmp_path, capsys):
     data = ["--suites", "demo-v1", "--data", str(demo_data), "--quiet", "--no-figures"]
     assert main(["benchmark", "--methods", "exec:no-such-program --fast", "--out", str(tmp_path / "a"), *data]) == 2

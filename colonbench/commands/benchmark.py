@@ -171,8 +171,8 @@ def add_parsers(sub) -> None:
     p = sub.add_parser("suites", help="list the named, versioned suites: size, what each tests, content hash",
                        description="List the benchmark's named, versioned suites: what each tests, its size, its "
                                    "published content hash and the time to generate it.")
-    p.add_argument("--data", help="suite data folder to report on (default $COLONBENCH_DATA or "
-                                  "~/.cache/colonbench/suites)")
+    p.add_argument("--data", help="suite data folder to report on (default $COLONBENCH_DATA, else "
+                                  "$XDG_CACHE_HOME/colonbench/suites, else ~/.cache/colonbench/suites)")
     p.add_argument("--check", action="store_true", help="also hash the cached data of each suite and compare it "
                                                         "with the published hash (exit 1 on a difference)")
     p.add_argument("--all-versions", action="store_true", help="also list older versions of the suites")
