@@ -216,3 +216,4 @@ def test_two_evaluations_never_share_a_run_folder(smoke_dataset, tmp_path):
             evaluate(data, ["constant"], out, progress=False)
     evaluate(data, ["constant"], out, progress=False)  # released with its holder
     assert (out / "results" / "constant.csv").exists()
+    assert not (out / ".evaluate.lock").exists()  # a finished run leaves no lock file behind
