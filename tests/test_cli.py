@@ -159,3 +159,20 @@ def test_text_clouds_are_read_as_spreadsheets_and_cloudcompare_write_them(tmp_pa
     (tmp_path / "two.xyz").write_text("1 2\n3 4\n")
     with pytest.raises(InputError, match="line 1 is not x, y, z numbers"):
         read_surface(tmp_path / "two.xyz")
+
+
+def test_estimate_that_writes_nothing_leaves_no_folder_it_made(tmp_path):
+    out = tmp_path / "made" / "results"
+    (tmp_path / "a folder").mkdir()
+    for bad in (tmp_path / "missing.ply", tmp_path / "a folder"):
+        r = run("estimate", bad, "--method", "constant", "--out-dir", out)
+        assert r.returncode == 2 and "nothing was written" in r.stderr and "Traceback" not in r.stderr
+        assert not (tmp_path / "made").exists()  # neither the folder asked for nor the parent made for it
+    mine = tmp_path / "mine"
+    mine.mkdir()  # a folder that was there before is left as it was, empty or not
+    r = run("estimate", tmp_path / "missing.ply", "--method", "constant", "--out-dir", mine)
+    assert r.returncode == 2 and mine.is_dir()
+    np.save(tmp_path / "seg.npy", np.random.default_rng(0).normal(size=(500, 3)) * [15, 15, 30])
+    r = run("estimate", tmp_path / "seg.npy", tmp_path / "missing.ply", "--method", "constant", "--out-dir", out)
+    assert r.returncode == 2 and "the others were written" in r.stderr
+    assert [p.name for p in out.iterdir()] == ["seg.json"]

@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 import math
 import sys
+from contextlib import contextmanager
+from pathlib import Path
 
 from colonbench.errors import ColonbenchError
 
@@ -111,6 +113,31 @@ def note_dropped(path, dropped: int) -> None:
     """Say on stderr how many rows of a user's file were left out for not being finite (nothing for none)."""
     if dropped:
         print(f"colonbench: note: {path}: {dropped} point(s) that are NaN or infinite left out", file=sys.stderr)
+
+
+@contextmanager
+def output_folder(path):
+    """Make the folder ``path`` (and its missing parents) for the duration; on leaving, remove those of them that
+    this made and that are still empty, so that a command that wrote nothing leaves no folder behind.
+
+    Yields
+    ------
+    Path
+    """
+    path = Path(path)
+    made, p = [], path
+    while not p.exists() and p != p.parent:
+        made.append(p)  # the deepest first
+        p = p.parent
+    path.mkdir(parents=True, exist_ok=True)
+    try:
+        yield path
+    finally:
+        for p in made:
+            try:
+                p.rmdir()  # only an empty folder goes
+            except OSError:
+                break
 
 
 def model_sha256(model):

@@ -8,7 +8,8 @@ import shlex
 import sys
 from pathlib import Path
 
-from colonbench.commands.common import add_model_args, finite, model_sha256, note_dropped, positive, repeats
+from colonbench.commands.common import (add_model_args, finite, model_sha256, note_dropped, output_folder, positive,
+                                        repeats)
 from colonbench.errors import ColonbenchError
 from colonbench.pointio import MESH_DENSITY
 
@@ -80,33 +81,32 @@ def cmd_estimate(args):
     if getattr(method, "uses_truth", False):
         raise ColonbenchError(f"method {method.name!r} is a reference that needs ground truth; it runs only in "
                               "colonbench evaluate")
-    out = Path(args.out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     failed = 0
-    for f, name in zip(files, names):
-        try:
-            points, dropped = read_surface(f)          # its messages name the file
-        except ColonbenchError as exc:
-            print(f"colonbench: error: {exc}", file=sys.stderr)
-            failed += 1
-            continue
-        note_dropped(f, dropped)
-        try:
-            est = as_estimate(method.estimate(points), method.name)
-        except ColonbenchError as exc:                  # the method's do not
-            print(f"colonbench: error: {f}: {exc}", file=sys.stderr)
-            failed += 1
-            continue
-        write_estimate(out, name, est, method.version, input=str(f))
-        if args.mesh and len(est.mesh_faces):
-            import numpy as np
+    with output_folder(args.out_dir) as out:  # gone again, if made here, when nothing is written into it
+        for f, name in zip(files, names):
+            try:
+                points, dropped = read_surface(f)          # its messages name the file
+            except ColonbenchError as exc:
+                print(f"colonbench: error: {exc}", file=sys.stderr)
+                failed += 1
+                continue
+            note_dropped(f, dropped)
+            try:
+                est = as_estimate(method.estimate(points), method.name)
+            except ColonbenchError as exc:                  # the method's do not
+                print(f"colonbench: error: {f}: {exc}", file=sys.stderr)
+                failed += 1
+                continue
+            write_estimate(out, name, est, method.version, input=str(f))
+            if args.mesh and len(est.mesh_faces):
+                import numpy as np
 
-            colors = np.where(est.hole_vertices[:, None], [[220, 30, 30]], [[200, 200, 200]])
-            write_mesh_ply(out / f"{name}_mesh.ply", est.mesh_vertices, est.mesh_faces, colors)
-            write_points_ply(out / f"{name}_centerline.ply", est.centerline)
-        total = sum(est.seconds.values()) if est.seconds else float("nan")
-        print(f"{name}: coverage {est.coverage:.3f}, {len(est.holes)} hole points, "
-              f"centerline {len(est.centerline)} points, {total:.2f} s")
+                colors = np.where(est.hole_vertices[:, None], [[220, 30, 30]], [[200, 200, 200]])
+                write_mesh_ply(out / f"{name}_mesh.ply", est.mesh_vertices, est.mesh_faces, colors)
+                write_points_ply(out / f"{name}_centerline.ply", est.centerline)
+            total = sum(est.seconds.values()) if est.seconds else float("nan")
+            print(f"{name}: coverage {est.coverage:.3f}, {len(est.holes)} hole points, "
+                  f"centerline {len(est.centerline)} points, {total:.2f} s")
     if failed:
         rest = "nothing was written" if failed == len(files) else "the others were written"
         raise ColonbenchError(f"{failed} of {len(files)} input(s) failed (see above); {rest}")
