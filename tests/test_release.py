@@ -212,6 +212,21 @@ def test_bad_outputs_are_that_segments_failure(demo_data, tmp_path):
     assert pd.read_csv(slow / "results" / "sleeper.csv")["error"].str.contains("stopped after 1 s").all()
 
 
+def test_each_noise_levels_warning_names_a_failure_at_that_noise_level(demo_data, tmp_path, capsys):
+    program = tmp_path / "faulty.py"
+    program.write_text(FAULTY)
+    out = tmp_path / "bench"
+    assert main(["benchmark", "--methods", f"exec:{sys.executable} {program}", "--suites", "demo-v1", "--data",
+                 str(demo_data), "--out", str(out), "--quiet", "--no-figures"]) == 0
+    warnings = [x for x in capsys.readouterr().err.splitlines() if x.startswith("colonbench: warning: faulty")]
+    rows = pd.read_csv(out / "runs" / "demo-v1" / "results" / "faulty.csv").fillna({"error": ""})
+    assert len(warnings) == 2
+    for noise, line in zip((0.0, 0.5), warnings):
+        first = rows[(rows["noise_mm"] == noise) & (rows["error"] != "")]["error"].iloc[0]
+        assert f"at noise {noise:g} mm; first: {first} (" in line
+        assert f"_noise{noise:g}.json" in line and f"_noise{0.5 - noise:g}.json" not in line
+
+
 def test_a_method_object_from_a_notebook(demo_data):
     import colonbench as cb
 

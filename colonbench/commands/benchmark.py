@@ -106,8 +106,9 @@ def cmd_benchmark(args):
     mine = summary[summary["source"] != "shipped"]
     for _, r in mine[mine["failed"] > 0].iterrows():
         where = Path(args.out) / "runs" / r["suite"] / "results"
+        first = _first_error(where, r["method"], r["noise_mm"])
         print(f"colonbench: warning: {r['method']} failed on {r['failed']} of {r['segments']} samples of "
-              f"{r['suite']} at noise {r['noise_mm']:g} mm; first: {_first_error(where, r['method'])} (every "
+              f"{r['suite']} at noise {r['noise_mm']:g} mm; first: {first} (every "
               f"one is in {where})", file=sys.stderr)
     print(f"wrote {args.out}/leaderboard.md (.csv, .json) and suites/<suite>/ in {time.perf_counter() - t:.0f} s")
     dead = sorted({m for m, g in mine.groupby("method") if (g["failed"] >= g["segments"]).all()})
@@ -148,14 +149,16 @@ def cmd_score(args):
           f"--out DIR{_data_flag(args)}")
 
 
-def _first_error(results: Path, method: str) -> str:
-    """The first error message of a method's rows in a run's results folder (segment or whole-colon run)."""
+def _first_error(results: Path, method: str, noise_mm: float) -> str:
+    """The first error message of a method's rows at one noise level in a run's results folder (segment or
+    whole-colon run)."""
     from colonbench.benchmark.runfolder import read_rows
 
     for name in (f"{method}.csv", "colons.csv", "segments.csv"):
         if (results / name).is_file():
             rows = read_rows(results / name)
-            errors = rows[(rows.get("method", method) == method) & (rows["error"] != "")]["error"]
+            errors = rows[(rows.get("method", method) == method) & (rows["noise_mm"] == noise_mm)
+                          & (rows["error"] != "")]["error"]
             if len(errors):
                 return errors.iloc[0]
     return "?"
