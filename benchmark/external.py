@@ -40,6 +40,9 @@ SECONDS_NAME = "seconds.csv"
 #: Interpreters whose next argument names the method (``exec:python my_method.py`` is ``my_method``).
 INTERPRETERS = {"python", "python3", "bash", "sh", "Rscript", "julia", "node", "conda", "uv", "pixi", "env",
                 "matlab", "octave"}
+#: Endings of a script's name: a word of an ``exec:`` command line that ends so names a file, which must be there.
+SCRIPT_SUFFIXES = {".py", ".R", ".r", ".jl", ".js", ".mjs", ".cjs", ".ts", ".sh", ".bash", ".m", ".pl", ".rb",
+                   ".lua"}
 
 
 def content_key(points) -> str:
@@ -129,16 +132,9 @@ class ExecMethod(PredictionMethod):
 
     def __init__(self, command: str, predictions=None, name: str | None = None, timeout: float = TIMEOUT_S,
                  batch: int = BATCH):
-        try:
-            self.argv = shlex.split(command)
-        except ValueError as exc:
-            raise InputError(f"exec:{command}: cannot split the command line ({exc})") from None
-        if not self.argv:
-            raise InputError("exec: needs a program, e.g. exec:python my_method.py")
+        self.argv = check_command(command)
         if timeout <= 0 or batch < 1:
             raise InputError(f"exec: timeout must be positive and batch at least 1, got {timeout} and {batch}")
-        if shutil.which(self.argv[0]) is None:
-            raise InputError(f"exec:{command}: no program {self.argv[0]!r} here (not an executable file, not on PATH)")
         self.command, self.timeout, self.batch = command, float(timeout), int(batch)
         self._lock = threading.Lock()
         name = name or default_name(self.argv)
@@ -187,6 +183,32 @@ class ExecMethod(PredictionMethod):
                 (self.folder / f"{sid}.error").write_text(
                     f"{self.name}: no prediction {sid}.json" + (f" ({why})" if why else "") + "\n")
         return len(batch)
+
+
+def check_command(command: str) -> list[str]:
+    """The words of an ``exec:`` command line, checked before anything runs: its program is an executable file
+    or on ``PATH``, and every word that names a script (ends in one of :data:`SCRIPT_SUFFIXES`, not an option)
+    is a file that is there (relative to the current folder, where the program runs).
+
+    Raises
+    ------
+    InputError
+        The line cannot be split, is empty, or names a program or a script that is not there.
+    """
+    try:
+        argv = shlex.split(command)
+    except ValueError as exc:
+        raise InputError(f"exec:{command}: cannot split the command line ({exc})") from None
+    if not argv:
+        raise InputError("exec: needs a program, e.g. exec:python my_method.py")
+    if shutil.which(argv[0]) is None:
+        raise InputError(f"exec:{command}: no program {argv[0]!r} here (not an executable file, not on PATH)")
+    for word in argv[1:]:
+        path = Path(word)
+        if not word.startswith("-") and path.suffix in SCRIPT_SUFFIXES and not path.is_file():
+            where = "" if path.is_absolute() else f" (relative to {Path.cwd()}, where the program runs)"
+            raise InputError(f"exec:{command}: no such file {word!r}{where}; nothing was run")
+    return argv
 
 
 def _run_program(argv: list[str], limit: float, files: int) -> str:

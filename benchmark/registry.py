@@ -158,6 +158,25 @@ def as_method(method, default_name: str | None = None, spec: str | None = None):
     return method
 
 
+def check_spec(spec: str) -> None:
+    """Refuse, before anything runs or is written, a method spec that cannot run: an ``exec:`` program or a script
+    its command line names that is not there (:func:`colonbench.benchmark.external.check_command`), or a
+    ``predictions:`` folder that is not one. Other specs are checked when they are loaded.
+
+    Raises
+    ------
+    InputError
+    """
+    _, given = _split_name(spec.strip())
+    kind, _, rest = given.partition(":")
+    if kind == "exec":
+        from colonbench.benchmark.external import check_command
+
+        check_command(rest)
+    elif kind == "predictions" and not Path(rest).expanduser().is_dir():
+        raise InputError(f"predictions:{rest}: no such folder")
+
+
 def _split_name(spec: str) -> tuple[str | None, str]:
     """``NAME=SPEC`` gives the method its row name; ``(None, spec)`` without one."""
     head, eq, rest = spec.partition("=")

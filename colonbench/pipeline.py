@@ -93,10 +93,15 @@ def run_benchmark(methods=(), suites_=("demo-v1",), out="runs/benchmark", data=N
 
     from colonbench.benchmark.evaluate import method_list
 
+    from colonbench.benchmark.registry import check_spec
+
     chosen = suites.parse(suites_)
     methods = method_list(methods)
     if not methods and not shipped:
         raise InputError("no methods to evaluate and --no-shipped: nothing to show")
+    for spec in methods:  # a program or script that is not there: refused before any data is made or written
+        if isinstance(spec, str):
+            check_spec(spec)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     runs, timing = {}, {}

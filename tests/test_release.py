@@ -12,6 +12,7 @@ import pandas as pd
 import pytest
 
 from colonbench.benchmark import shipped, suites
+from colonbench.benchmark.evaluate import evaluate as cb_evaluate
 from colonbench.cli import main
 from colonbench.errors import InputError
 
@@ -338,11 +339,22 @@ def test_programs_that_cannot_run_and_predictions_that_match_nothing_say_so(demo
     data = ["--suites", "demo-v1", "--data", str(demo_data), "--quiet", "--no-figures"]
     assert main(["benchmark", "--methods", "exec:no-such-program --fast", "--out", str(tmp_path / "a"), *data]) == 2
     assert "no program 'no-such-program'" in capsys.readouterr().err
+    # a script the command line names that is not there: refused before anything runs or is written
+    for spec in (f"exec:{sys.executable} {tmp_path / 'missing.py'}", f"mine=exec:{sys.executable} missing.py --fast"):
+        assert main(["benchmark", "--methods", spec, "--out", str(tmp_path / "b"), *data]) == 2
+        err = capsys.readouterr().err
+        assert "missing.py" in err and "no such file" in err and "Traceback" not in err
+        assert not (tmp_path / "b").exists()
+    with pytest.raises(InputError, match="missing.py"):
+        cb_evaluate(suites.data_dir(suites.get("demo-v1"), demo_data), [f"exec:{sys.executable} missing.py"],
+                    tmp_path / "run", noise=[0], limit=1, progress=False)
+    assert not (tmp_path / "run").exists()
     # a program that starts and fails on every input: its rows say why, and the command fails
-    assert main(["benchmark", "--methods", f"exec:{sys.executable} {tmp_path / 'missing.py'}",
-                 "--out", str(tmp_path / "b"), *data]) == 2
+    crash = tmp_path / "crash.py"
+    crash.write_text("import sys\nprint('cannot load my model', file=sys.stderr)\nsys.exit(2)\n")
+    assert main(["benchmark", "--methods", f"exec:{sys.executable} {crash}", "--out", str(tmp_path / "b"), *data]) == 2
     err = capsys.readouterr().err
-    assert "failed on every sample" in err and "exited with status 2" in err
+    assert "failed on every sample" in err and "exited with status 2" in err and "cannot load my model" in err
     # predictions named otherwise than the export names its inputs
     preds = tmp_path / "preds"
     preds.mkdir()
