@@ -55,16 +55,24 @@ class _CallableBenchmark(types.ModuleType):
         -------
         dict
             ``summary`` (a DataFrame: suite, noise, method, MAE and its interval, ...), ``markdown``, ``paths``,
-            ``runs``, ``seconds`` and ``out``.
+            ``runs``, ``seconds``, ``failures`` and ``out``.
+
+        Raises
+        ------
+        colonbench.pipeline.RunFailed
+            A method failed on every sample: no tables are written; the benchmark folder keeps its run folders
+            (a temporary one too), whose rows say why.
         """
         import tempfile
 
-        from colonbench.pipeline import run_benchmark
+        from colonbench.pipeline import RunFailed, run_benchmark
 
         made = out is None
         out = tempfile.mkdtemp(prefix="colonbench-benchmark-") if made else out
         try:
             result = run_benchmark(methods, suites, out, **options)
+        except RunFailed:
+            raise  # its message names the run folders, which hold every failure: kept
         except BaseException:
             if made:
                 import shutil

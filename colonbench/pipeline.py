@@ -15,7 +15,9 @@ data (``shards``), evaluates (``benchmark``) and writes reports (``reports``).
    user evaluated themselves;
 4. per suite ``RUN/suites/<suite id>/leaderboard.md`` (and ``.csv``, ``.json``,
    breakdowns, figures), and across suites ``RUN/leaderboard.md``, ``.csv``
-   and ``.json`` (:mod:`colonbench.reports.benchmark_report`).
+   and ``.json`` (:mod:`colonbench.reports.benchmark_report`); unless a
+   method it evaluated gave no estimate on any sample: then it writes no
+   tables (:class:`RunFailed`).
 
 :func:`export_suite` and :func:`score_suite` are the offline route: inputs
 written as files, predictions made anywhere, then scored into a run folder
@@ -29,7 +31,24 @@ import time
 from pathlib import Path
 
 from colonbench.benchmark import suites
-from colonbench.errors import InputError
+from colonbench.errors import ColonbenchError, InputError
+
+#: Columns of :func:`failures`.
+FAILURE_COLUMNS = ["suite", "method", "noise_mm", "samples", "failed", "first_error"]
+
+
+class RunFailed(ColonbenchError):
+    """A method that :func:`run_benchmark` evaluated gave no estimate on any sample: it wrote no tables.
+
+    Attributes
+    ----------
+    failures : DataFrame
+        :func:`failures` of every suite evaluated.
+    """
+
+    def __init__(self, message: str, failures):
+        super().__init__(message)
+        self.failures = failures
 
 
 def _evaluate(suite, data, methods, run_dir, **kw) -> Path:
@@ -87,7 +106,15 @@ def run_benchmark(methods=(), suites_=("demo-v1",), out="runs/benchmark", data=N
     Returns
     -------
     dict
-        ``summary`` (the cross-suite table), ``markdown``, ``paths`` (written files), ``runs`` (per suite id).
+        ``summary`` (the cross-suite table), ``markdown``, ``paths`` (written files), ``runs`` (per suite id),
+        ``seconds`` (per suite id), ``failures`` (:func:`failures` of every suite evaluated).
+
+    Raises
+    ------
+    RunFailed
+        A method evaluated here gave no estimate on any sample of any suite. No tables are written, and those an
+        earlier run left in ``out`` (``leaderboard.*``, ``suites/<suite id>/`` of these suites) are removed, since
+        they no longer describe its runs; ``out/runs/<suite id>/`` keeps every sample's row with its error.
     """
     from colonbench.reports.benchmark_report import write_report
 
@@ -117,9 +144,75 @@ def run_benchmark(methods=(), suites_=("demo-v1",), out="runs/benchmark", data=N
         _check_suite_run(run_dir, suite)
         runs[suite.id] = run_dir
         timing[suite.id] = {"data_seconds": round(t1 - t0, 1), "evaluate_seconds": round(time.perf_counter() - t1, 1)}
+    import pandas as pd
+
+    by_id = {s.id: s for s in chosen}
+    failed = pd.DataFrame([row for sid, run_dir in runs.items() for row in failures(by_id[sid], run_dir)],
+                          columns=FAILURE_COLUMNS)
+    dead = _dead(failed, methods, runs)
+    if dead:
+        _remove_tables(out, chosen)
+        first = failed[failed["method"] == dead[0]].iloc[0]
+        raise RunFailed(f"{', '.join(dead)} failed on every sample (first, {first['suite']} at noise "
+                        f"{first['noise_mm']:g} mm: {first['first_error']}); no leaderboard was written: every "
+                        f"sample's row and its error are in {out / 'runs'}/<suite>/results", failed)
     result = write_report(out, chosen, runs, shipped=shipped, figures=figures)
-    result["runs"], result["seconds"] = runs, timing
+    result["runs"], result["seconds"], result["failures"] = runs, timing, failed
     return result
+
+
+def failures(suite, run_dir) -> list[dict]:
+    """What failed in a suite's finished run folder, per method and noise level.
+
+    A segment suite's samples are its segments; a whole-colon suite's are the segments of its headline track's
+    maps, and each map that failed as a whole.
+
+    Returns
+    -------
+    list of dict
+        :data:`FAILURE_COLUMNS`: ``samples``, ``failed`` (rows with an error) and ``first_error`` (the first of
+        them at that noise level, "" for none).
+    """
+    import pandas as pd
+
+    if suite.task == "colon":
+        from colonbench.benchmark.colon_evaluate import load_colon_results
+
+        _, segs, colons = load_colon_results(run_dir)
+        maps = colons[(colons["track"] == suite.headline_track) & (colons["error"] != "")]
+        rows = pd.concat([maps, segs[segs["track"] == suite.headline_track]], ignore_index=True)
+    else:
+        from colonbench.benchmark.evaluate import load_results
+
+        _, rows = load_results(run_dir)
+    out = []
+    for (method, noise), g in rows.groupby(["method", "noise_mm"], sort=True):
+        errors = g["error"].fillna("").astype(str)
+        errors = errors[errors != ""]
+        out.append({"suite": suite.id, "method": method, "noise_mm": float(noise), "samples": len(g),
+                    "failed": len(errors), "first_error": errors.iloc[0] if len(errors) else ""})
+    return out
+
+
+def _dead(failed, methods, runs: dict) -> list[str]:
+    """The methods of this call (by spec or object) that failed on every sample of every suite."""
+    from colonbench.benchmark.runfolder import read_run
+
+    specs = {m for m in methods if isinstance(m, str)}
+    objects = {getattr(m, "name", None) for m in methods if not isinstance(m, str)}
+    mine = {name for run_dir in runs.values() for name, rec in read_run(run_dir)["methods"].items()
+            if rec.get("spec") in specs or (rec.get("spec") is None and name in objects)}
+    return sorted(m for m, g in failed.groupby("method") if m in mine and (g["failed"] >= g["samples"]).all())
+
+
+def _remove_tables(out: Path, chosen) -> None:
+    """Remove the tables an earlier run wrote in a benchmark folder (its runs are left)."""
+    import shutil
+
+    for name in ("leaderboard.md", "leaderboard.csv", "leaderboard.json"):
+        (out / name).unlink(missing_ok=True)
+    for suite in chosen:
+        shutil.rmtree(out / "suites" / suite.id, ignore_errors=True)
 
 
 def export_suite(suite, out, data=None, workers: int = 1, scheduler=None, allow_unverified: bool = False,

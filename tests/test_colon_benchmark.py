@@ -198,3 +198,16 @@ def test_a_program_maps_whole_colons_through_exec(colon_dataset, tmp_path):
     answers = sorted((run / "predictions" / "point_eight").glob("*.json"))
     assert len(answers) == int((a.xs("segment-only")["points"] >= MIN_POINTS).sum())   # one per estimated segment
     assert all("_seg" in p.stem and p.stem.startswith("test_colon-00000_") for p in answers)
+    # what benchmark's warnings count: the headline track's segments, and the first error among them
+    import dataclasses
+
+    from colonbench.benchmark import suites
+    from colonbench.pipeline import failures
+
+    suite = dataclasses.replace(suites.get("colon-v1"), contexts_mm=(0.0, 15.0))
+    rows = {r["method"]: r for r in failures(suite, run)}
+    head = a.xs("context-15mm")
+    errors = head.loc[head["error"] != "", "error"]
+    for name in ("point_eight", "constant"):
+        assert rows[name]["samples"] == len(head) and rows[name]["failed"] == len(errors)
+        assert rows[name]["first_error"] == (errors.iloc[0] if len(errors) else "")

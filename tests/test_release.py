@@ -244,6 +244,24 @@ def test_a_method_object_from_a_notebook(demo_data):
     assert isinstance(est, cb.Estimate) and isinstance(cb.load_method("constant"), cb.Method)
 
 
+def test_a_method_object_that_fails_everywhere_fails_the_run(demo_data, tmp_path):
+    import colonbench as cb
+    from colonbench.pipeline import RunFailed
+
+    class Broken:
+        name = "broken"
+
+        def estimate(self, points):
+            raise ValueError("no model here")
+
+    with pytest.raises(RunFailed, match="broken failed on every sample .*no model here.*no leaderboard") as info:
+        cb.benchmark(Broken(), "demo-v1", out=tmp_path / "b", data=demo_data, progress=False, figures=False)
+    failures = info.value.failures
+    assert len(failures) == 2 and (failures["failed"] == failures["samples"]).all()
+    assert failures["first_error"].str.contains("no model here").all()
+    assert sorted(p.name for p in (tmp_path / "b").iterdir()) == ["runs"]
+
+
 def test_dask_gives_the_single_process_results(demo_data, tmp_path):
     from distributed import LocalCluster
 
@@ -355,6 +373,21 @@ def test_programs_that_cannot_run_and_predictions_that_match_nothing_say_so(demo
     assert main(["benchmark", "--methods", f"exec:{sys.executable} {crash}", "--out", str(tmp_path / "b"), *data]) == 2
     err = capsys.readouterr().err
     assert "failed on every sample" in err and "exited with status 2" in err and "cannot load my model" in err
+    # a failed run writes no tables: only the run folder, whose rows say why, is left
+    assert "no leaderboard was written" in err
+    assert sorted(p.name for p in (tmp_path / "b").iterdir()) == ["runs"]
+    assert (pd.read_csv(tmp_path / "b" / "runs" / "demo-v1" / "results" / "crash.csv")["error"]
+            .str.contains("cannot load my model").all())
+    # nor does it leave the tables of an earlier run there, which no longer describe the folder's runs
+    good = ["--methods", f"exec:{sys.executable} {EXAMPLE}", "--out", str(tmp_path / "g"), *data]
+    assert main(["benchmark", *good]) == 0 and (tmp_path / "g" / "leaderboard.md").is_file()
+    assert main(["benchmark", "--methods", f"exec:{sys.executable} {crash}", "--out", str(tmp_path / "g"), *data]) == 2
+    assert sorted(p.name for p in (tmp_path / "g").iterdir()) == ["runs", "suites"]
+    assert not (tmp_path / "g" / "suites" / "demo-v1").exists()
+    # the failed method is not this call's: the tables are written again, its cells missing
+    assert main(["benchmark", *good]) == 0
+    assert "| crash | " in (tmp_path / "g" / "leaderboard.md").read_text()
+    capsys.readouterr()
     # predictions named otherwise than the export names its inputs
     preds = tmp_path / "preds"
     preds.mkdir()

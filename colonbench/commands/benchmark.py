@@ -8,7 +8,6 @@ import time
 from pathlib import Path
 
 from colonbench.commands.common import add_suite_check_args
-from colonbench.errors import ColonbenchError
 
 
 def parse_methods(values) -> list[str]:
@@ -91,30 +90,40 @@ def cmd_suites(args):
 
 def cmd_benchmark(args):
     """Evaluate methods on named suites (data made where missing) and write the cross-suite leaderboard."""
-    from colonbench.pipeline import run_benchmark
+    from colonbench.pipeline import RunFailed, run_benchmark
 
     t = time.perf_counter()
     methods = parse_methods(args.methods)
-    result = run_benchmark(methods, args.suites, args.out, data=args.data, workers=args.workers,
-                           scheduler=args.scheduler, model=args.model, device=args.device,
-                           allow_unverified=args.allow_unverified, shipped=not args.no_shipped, timeout=args.timeout,
-                           batch=args.batch, figures=not args.no_figures, progress=not args.quiet)
+    try:
+        result = run_benchmark(methods, args.suites, args.out, data=args.data, workers=args.workers,
+                               scheduler=args.scheduler, model=args.model, device=args.device,
+                               allow_unverified=args.allow_unverified, shipped=not args.no_shipped,
+                               timeout=args.timeout, batch=args.batch, figures=not args.no_figures,
+                               progress=not args.quiet)
+    except RunFailed as exc:  # no tables: the warnings say what failed, then the error
+        warn_failures(exc.failures, lambda suite: Path(args.out) / "runs" / suite / "results")
+        raise
     print(result["markdown"])
     for suite, sec in result["seconds"].items():
         print(f"{suite}: data {sec['data_seconds']:.0f} s, evaluation {sec['evaluate_seconds']:.0f} s")
-    summary = result["summary"]
-    mine = summary[summary["source"] != "shipped"]
-    for _, r in mine[mine["failed"] > 0].iterrows():
-        where = Path(args.out) / "runs" / r["suite"] / "results"
-        first = _first_error(where, r["method"], r["noise_mm"])
-        print(f"colonbench: warning: {r['method']} failed on {r['failed']} of {r['segments']} samples of "
-              f"{r['suite']} at noise {r['noise_mm']:g} mm; first: {first} (every "
-              f"one is in {where})", file=sys.stderr)
+    warn_failures(result["failures"], lambda suite: Path(args.out) / "runs" / suite / "results")
     print(f"wrote {args.out}/leaderboard.md (.csv, .json) and suites/<suite>/ in {time.perf_counter() - t:.0f} s")
-    dead = sorted({m for m, g in mine.groupby("method") if (g["failed"] >= g["segments"]).all()})
-    if dead:
-        raise ColonbenchError(f"{', '.join(dead)} failed on every sample (see the warnings above); the tables hold "
-                              "no estimate of it")
+
+
+def warn_failures(failures, where) -> None:
+    """One warning on stderr per suite, method and noise level with failed samples, naming the first failure.
+
+    Parameters
+    ----------
+    failures : DataFrame
+        :func:`colonbench.pipeline.failures` rows.
+    where : callable
+        The results folder of a suite id, for the message.
+    """
+    for _, r in failures[failures["failed"] > 0].iterrows():
+        print(f"colonbench: warning: {r['method']} failed on {r['failed']} of {r['samples']} samples of "
+              f"{r['suite']} at noise {r['noise_mm']:g} mm; first: {r['first_error']} (every one is in "
+              f"{where(r['suite'])})", file=sys.stderr)
 
 
 def cmd_export(args):
@@ -147,21 +156,6 @@ def cmd_score(args):
     print(f"wrote {run}; the leaderboard with the shipped results: colonbench leaderboard {run} --out DIR "
           f"--shipped, or colonbench benchmark --suites {args.suite} --methods predictions:{args.predictions} "
           f"--out DIR{_data_flag(args)}")
-
-
-def _first_error(results: Path, method: str, noise_mm: float) -> str:
-    """The first error message of a method's rows at one noise level in a run's results folder (segment or
-    whole-colon run)."""
-    from colonbench.benchmark.runfolder import read_rows
-
-    for name in (f"{method}.csv", "colons.csv", "segments.csv"):
-        if (results / name).is_file():
-            rows = read_rows(results / name)
-            errors = rows[(rows.get("method", method) == method) & (rows["noise_mm"] == noise_mm)
-                          & (rows["error"] != "")]["error"]
-            if len(errors):
-                return errors.iloc[0]
-    return "?"
 
 
 def _data_flag(args) -> str:
