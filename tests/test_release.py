@@ -111,7 +111,7 @@ def test_a_tampered_sample_is_refused(demo_data, tmp_path, capsys):
 # ------------------------------------------------------------------------------------------------ other programs
 
 
-def test_a_program_outside_colonbench_joins_the_shipped_leaderboard(demo_data, tmp_path):
+def test_a_program_outside_colonbench_joins_the_shipped_leaderboard(demo_data, tmp_path, capsys):
     """The README's promise: a 10-line script writing a constant, on demo-v1, beside the shipped results."""
     out = tmp_path / "bench"
     assert main(["benchmark", "--methods", f"exec:{sys.executable} {EXAMPLE}", "--suites", "demo-v1",
@@ -150,6 +150,18 @@ def test_a_program_outside_colonbench_joins_the_shipped_leaderboard(demo_data, t
     assert main(["leaderboard", str(run), "--out", str(tmp_path / "lb"), "--shipped", "--no-figures"]) == 0
     text = (tmp_path / "lb" / "leaderboard.md").read_text()
     assert "constant_method" in text and "| completion |" in text
+    # one malformed prediction: score says which file and why, as benchmark does
+    bad = preds / f"{index['sample_id'].iloc[-1]}.json"
+    bad.write_text('{"coverage": 1.5}')
+    capsys.readouterr()
+    assert main(["score", "demo-v1", str(preds), "--data", str(demo_data), "--out", str(tmp_path / "scored2"),
+                 "--quiet"]) == 0
+    out, err = capsys.readouterr()
+    assert "23 of 24 segments, 1 without a valid prediction" in out
+    (warning,) = [x for x in err.splitlines() if x.startswith("colonbench: warning:")]
+    assert f"failed on 1 of 24 samples of demo-v1 at noise {index['noise_mm'].iloc[-1]:g} mm" in warning
+    assert f"first: {bad.name}: coverage 1.5 is not a fraction in [0, 1]" in warning
+    assert str(tmp_path / "scored2" / "results") in warning
 
 
 def test_exec_colonbench_estimate_gives_the_in_process_results(demo_data, tmp_path, monkeypatch):

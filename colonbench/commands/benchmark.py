@@ -139,8 +139,11 @@ def cmd_export(args):
 
 def cmd_score(args):
     """Score a folder of predictions (<sample_id>.json) on a suite into a run folder."""
+    import pandas as pd
+
+    from colonbench.benchmark import suites
     from colonbench.benchmark.evaluate import load_results
-    from colonbench.pipeline import score_suite
+    from colonbench.pipeline import FAILURE_COLUMNS, failures, score_suite
     from colonbench.benchmark.summary import summarize
 
     run = score_suite(args.suite, args.predictions, args.out, name=args.name, data=args.data, workers=args.workers,
@@ -153,6 +156,8 @@ def cmd_score(args):
             failed = f", {r['failed']} without a valid prediction" if r["failed"] else ""
             print(f"noise {r['noise_mm']:g} mm  {r['method']}: MAE {r['coverage_mae']:.2f} points over "
                   f"{r['segments'] - r['coverage_undefined']} of {r['segments']} segments{failed}")
+    warn_failures(pd.DataFrame(failures(suites.get(args.suite), run), columns=FAILURE_COLUMNS),
+                  lambda suite: run / "results")
     print(f"wrote {run}; the leaderboard with the shipped results: colonbench leaderboard {run} --out DIR "
           f"--shipped, or colonbench benchmark --suites {args.suite} --methods predictions:{args.predictions} "
           f"--out DIR{_data_flag(args)}")
