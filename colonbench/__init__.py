@@ -47,15 +47,18 @@ class _CallableBenchmark(types.ModuleType):
         suites : str or list of str
             Suite ids or names, or ``"all"``.
         out : path, optional
-            The benchmark folder (default: a new temporary folder).
+            The benchmark folder (default: a new temporary folder, kept after the call: ``result["out"]`` names it,
+            and so does the markdown's last paragraph; delete it when done).
         **options
             As :func:`colonbench.pipeline.run_benchmark` (``data``, ``workers``, ``progress``, ...).
 
         Returns
         -------
         dict
-            ``summary`` (a DataFrame: suite, noise, method, MAE and its interval, ...), ``markdown``, ``paths``,
-            ``runs``, ``seconds``, ``failures`` and ``out``.
+            ``summary`` (a DataFrame: suite, noise, method, MAE and its interval, ...), ``markdown`` (the
+            folder's ``leaderboard.md`` and a last paragraph naming the files written: the leaderboard and each
+            suite's page, and whether the folder is a temporary one), ``paths``, ``runs``, ``seconds``,
+            ``failures`` and ``out``.
 
         Raises
         ------
@@ -64,6 +67,7 @@ class _CallableBenchmark(types.ModuleType):
             (a temporary one too), whose rows say why.
         """
         import tempfile
+        from pathlib import Path
 
         from colonbench.pipeline import RunFailed, run_benchmark
 
@@ -80,6 +84,11 @@ class _CallableBenchmark(types.ModuleType):
                 shutil.rmtree(out, ignore_errors=True)
             raise
         result["out"] = out
+        pages = ", ".join(str(Path(out) / "suites" / s / "leaderboard.md") for s in result["summary"]["suite"].unique())
+        made_here = (" (a temporary folder made for this call and kept: delete it when done, or give out=)"
+                     if made else "")
+        result["markdown"] += (f"\nWritten to {out}{made_here}: {Path(out) / 'leaderboard.md'} (.csv, .json), and "
+                               f"each suite's page: {pages}.\n")
         return result
 
 

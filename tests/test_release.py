@@ -252,6 +252,15 @@ def test_a_method_object_from_a_notebook(demo_data):
     result = cb.benchmark(Half(), "demo-v1", data=demo_data, progress=False, figures=False, workers=2)
     mine = result["summary"][result["summary"]["method"] == "half"]
     assert len(mine) == 2 and (mine["source"] != "shipped").all()
+    # the folder it made is kept, and the markdown says where its pages are
+    out = Path(result["out"])
+    try:
+        page = out / "suites" / "demo-v1" / "leaderboard.md"
+        assert page.is_file() and str(page) in result["markdown"] and str(out / "leaderboard.md") in result["markdown"]
+        assert "temporary folder" in result["markdown"]
+        assert result["markdown"].startswith((out / "leaderboard.md").read_text())
+    finally:
+        shutil.rmtree(out)
     est = cb.load_method("constant").estimate(np.zeros((10, 3)))
     assert isinstance(est, cb.Estimate) and isinstance(cb.load_method("constant"), cb.Method)
 
