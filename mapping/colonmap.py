@@ -21,6 +21,7 @@ import numpy as np
 
 from colonbench.errors import InputError
 from colonbench.mapping import SEGMENT_MM
+from colonbench.mapping.reach import beyond_reach, unreached_error
 from colonbench.slab import point_at
 
 #: A segment with fewer points is reported without an estimate.
@@ -340,7 +341,8 @@ def map_colon(points: np.ndarray, method, segment_mm: float = SEGMENT_MM, positi
         ``segments`` (list of :class:`Segment`), ``centerline`` ((m, 3) mm),
         ``arclength`` ((m,) mm), ``interruptions`` (list of dicts), ``unreconstructed``
         (stretches with no reconstruction that the trajectory bridges: ``from_mm``, ``to_mm``),
-        ``orientation`` (str), ``seconds`` (per stage).
+        ``orientation`` (str), ``reached`` (share of the points within the centerline's reach,
+        :mod:`colonbench.mapping.reach`), ``seconds`` (per stage).
 
     Raises
     ------
@@ -371,6 +373,7 @@ def map_colon(points: np.ndarray, method, segment_mm: float = SEGMENT_MM, positi
     line, arc, spans, unseen = joined.line, joined.arc, joined.spans, joined.unseen
     t0 = time.perf_counter()
     point_s, point_piece = joined.assign(points)
+    far = beyond_reach(joined, [p.radius for p in pieces], points)
     segments = []
     for k, (a, b) in enumerate(spans):
         ps, pa = joined.arcs[k], joined.lines[k]
@@ -406,6 +409,10 @@ def map_colon(points: np.ndarray, method, segment_mm: float = SEGMENT_MM, positi
             continue
         if seg.points < MIN_POINTS:
             seg.error = f"{seg.points} points, fewer than {MIN_POINTS}: not estimated"
+            out.append(seg)
+            continue
+        seg.error = unreached_error(far[mask], 1.0 - float(far.mean()), positions is not None)
+        if seg.error:  # mostly points the centerline does not reach: not one segment's cloud
             out.append(seg)
             continue
         t = time.perf_counter()
@@ -454,7 +461,8 @@ def map_colon(points: np.ndarray, method, segment_mm: float = SEGMENT_MM, positi
     seconds["estimate"] = time.perf_counter() - t0
     return {"segments": out, "centerline": line, "arclength": arc, "interruptions": joined.interruptions,
             "unreconstructed": [{"from_mm": round(a, 2), "to_mm": round(b, 2)} for a, b in unseen],
-            "orientation": orientation, "context_mm": float(context_mm), "seconds": seconds}
+            "orientation": orientation, "context_mm": float(context_mm), "reached": 1.0 - float(far.mean()),
+            "seconds": seconds}
 
 
 def _add_unreconstructed(seg: Segment, radius: float) -> None:

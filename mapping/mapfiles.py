@@ -58,10 +58,15 @@ def write_map(result: dict, out, method_name: str, model: str | None, threshold:
             t = time.perf_counter()
             written.append(render_map(mesh, out / "map.png", red_at=threshold))
             seconds["figure"] = round(time.perf_counter() - t, 3)
+    mapped = sum(s.end_mm - s.start_mm for s in segs)
+    estimated_mm = sum(s.end_mm - s.start_mm for s in segs if s.coverage is not None)
     summary = {
         "coverage": round_or_none(whole_coverage(segs), 4),
         "segments": len(segs),
         "estimated": sum(s.coverage is not None for s in segs),
+        "estimated_mm": round(estimated_mm, 1),
+        "estimated_share": round(estimated_mm / mapped, 4) if mapped > 0 else 0.0,
+        "reached": round(result.get("reached", 1.0), 4),
         "below_threshold": {"threshold": threshold,
                             "segments": [s.index for s in segs if s.coverage is not None and s.coverage < threshold]},
         "centerline_mm": round(float(result["arclength"][-1]), 1),

@@ -466,3 +466,35 @@ def test_trajectories_are_read_with_headers_commas_and_in_time_order(tmp_path):
     (tmp_path / "ragged.txt").write_text("0 0 0\n0 0 1\n0 0 2 3\n")
     with pytest.raises(InputError, match="ragged.txt: line 3 is not a row of a TUM trajectory"):
         read_trajectory(tmp_path / "ragged.txt")
+
+
+def test_a_trajectory_over_part_of_the_reconstruction_maps_that_part_and_says_so(tmp_path, capsys):
+    """Poses of another run that pass the first 110 mm of a 360 mm tube: the centerline keeps to them, so the
+    map covers a third of the reconstruction. The end segment, whose cloud holds the rest, is not estimated, with
+    the trajectory named as the likely cause; summary.json and a warning say the whole-colon figure is partial."""
+    line = straight(360.0)
+    pts, _, _ = tube_cloud(line, density=1.0)
+    np.save(tmp_path / "tube.npy", pts)
+    np.save(tmp_path / "traj.npy", line.points[line.arclength < 110][::-20])
+    assert main(["map", str(tmp_path / "tube.npy"), "--trajectory", str(tmp_path / "traj.npy"), "--out",
+                 str(tmp_path / "map"), "--method", "constant", "--no-figure", "--quiet"]) == 0
+    out, err = capsys.readouterr()
+    segs = json.loads((tmp_path / "map" / "segments.json").read_text())["segments"]
+    summary = json.loads((tmp_path / "map" / "summary.json").read_text())
+    failed = [s for s in segs if s["coverage"] is None]
+    assert len(failed) == 1 and failed[0]["index"] == len(segs) - 1
+    assert "beyond the reach of the map's centerline" in failed[0]["error"] and "trajectory" in failed[0]["error"]
+    assert "cut the reconstruction" not in out
+    done = sum(s["end_mm"] - s["start_mm"] for s in segs if s["coverage"] is not None)
+    assert summary["estimated_mm"] == pytest.approx(done, abs=0.1)
+    assert summary["estimated_share"] == pytest.approx(done / sum(s["end_mm"] - s["start_mm"] for s in segs), abs=1e-3)
+    assert 0.3 < summary["reached"] < 0.8       # the points beyond the centerline's reach are counted
+    (warning,) = [x for x in err.splitlines() if x.startswith("colonbench: warning:")]
+    assert "part of the colon" in warning and f"reaches {100 * summary['reached']:.0f} % of the reconstruction's points" in warning and "trajectory" in warning
+    # with the whole run's trajectory the same tube maps whole, and nothing warns
+    np.save(tmp_path / "traj.npy", line.points[::-20])
+    assert main(["map", str(tmp_path / "tube.npy"), "--trajectory", str(tmp_path / "traj.npy"), "--out",
+                 str(tmp_path / "whole"), "--method", "constant", "--no-figure", "--quiet"]) == 0
+    assert "warning" not in capsys.readouterr().err
+    summary = json.loads((tmp_path / "whole" / "summary.json").read_text())
+    assert summary["estimated_share"] == 1.0 and summary["reached"] == 1.0

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sys
 import time
 
 from colonbench.commands.common import add_model_args, finite, note_dropped, positive
@@ -16,6 +17,7 @@ def cmd_map(args):
     from colonbench.mapping.colonmap import map_colon
     from colonbench.mapping.mapfiles import write_map
     from colonbench.mapping.inputs import check_trajectory, read_reconstruction, read_trajectory
+    from colonbench.mapping.reach import partial_warning
 
     t0 = time.perf_counter()
     points, dropped = read_reconstruction(args.reconstruction)
@@ -45,6 +47,9 @@ def cmd_map(args):
         cov = f"{s.coverage:.3f}" if s.coverage is not None else f"- ({s.error})"
         print(f"  {s.index:3d}  {s.start_mm:7.1f}-{s.end_mm:7.1f} mm  {s.points:7d} points  coverage {cov}")
     print(f"wrote {', '.join(p.name for p in paths)} to {args.out} ({time.perf_counter() - t0:.1f} s)")
+    partial = partial_warning(summary, positions is not None)
+    if partial:
+        print(f"colonbench: warning: {partial}", file=sys.stderr)
 
 
 def add_parsers(sub) -> None:
