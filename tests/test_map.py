@@ -473,29 +473,24 @@ def test_a_trajectory_over_part_of_the_reconstruction_maps_that_part_and_says_so
     map covers a third of the reconstruction. The end segment, whose cloud holds the rest, is not estimated, with
     the trajectory named as the likely cause; summary.json and a warning say the whole-colon figure is partial."""
     line = straight(360.0)
-    pts, _, _ = tube_cloud(line, density=1.0)
-    np.save(tmp_path / "tube.npy", pts)
-    np.save(tmp_path / "traj.npy", line.points[line.arclength < 110][::-20])
-    assert main(["map", str(tmp_path / "tube.npy"), "--trajectory", str(tmp_path / "traj.npy"), "--out",
-                 str(tmp_path / "map"), "--method", "constant", "--no-figure", "--quiet"]) == 0
-    out, err = capsys.readouterr()
-    segs = json.loads((tmp_path / "map" / "segments.json").read_text())["segments"]
-    summary = json.loads((tmp_path / "map" / "summary.json").read_text())
-    failed = [s for s in segs if s["coverage"] is None]
-    assert len(failed) == 1 and failed[0]["index"] == len(segs) - 1
-    assert "beyond the reach of the map's centerline" in failed[0]["error"] and "trajectory" in failed[0]["error"]
-    assert "cut the reconstruction" not in out
-    done = sum(s["end_mm"] - s["start_mm"] for s in segs if s["coverage"] is not None)
-    assert summary["estimated_mm"] == pytest.approx(done, abs=0.1)
-    assert summary["estimated_share"] == pytest.approx(done / sum(s["end_mm"] - s["start_mm"] for s in segs), abs=1e-3)
-    assert 0.3 < summary["reached"] < 0.8       # the points beyond the centerline's reach are counted
-    (warning,) = [x for x in err.splitlines() if x.startswith("colonbench: warning:")]
-    assert "part of the colon" in warning and "trajectory" in warning
-    assert f"reaches {100 * summary['reached']:.0f} % of the reconstruction's points" in warning
-    # with the whole run's trajectory the same tube maps whole, and nothing warns
-    np.save(tmp_path / "traj.npy", line.points[::-20])
-    assert main(["map", str(tmp_path / "tube.npy"), "--trajectory", str(tmp_path / "traj.npy"), "--out",
-                 str(tmp_path / "whole"), "--method", "constant", "--no-figure", "--quiet"]) == 0
-    assert "warning" not in capsys.readouterr().err
-    summary = json.loads((tmp_path / "whole" / "summary.json").read_text())
-    assert summary["estimated_share"] == 1.0 and summary["reached"] == 1.0
+    np.save(tmp_path / "tube.npy", tube_cloud(line, density=1.0)[0])
+    for name, traj in (("part", line.points[line.arclength < 110][::-20]), ("whole", line.points[::-20])):
+        np.save(tmp_path / f"{name}.npy", traj)
+        assert main(["map", str(tmp_path / "tube.npy"), "--trajectory", str(tmp_path / f"{name}.npy"), "--out",
+                     str(tmp_path / name), "--method", "constant", "--no-figure", "--quiet"]) == 0
+        segs = json.loads((tmp_path / name / "segments.json").read_text())["segments"]
+        summary = json.loads((tmp_path / name / "summary.json").read_text())
+        warnings = [x for x in capsys.readouterr().err.splitlines() if x.startswith("colonbench: warning:")]
+        if name == "whole":  # with the whole run's trajectory the same tube maps whole, and nothing warns
+            assert summary["estimated_share"] == 1.0 and summary["reached"] == 1.0 and not warnings
+            continue
+        failed = [s for s in segs if s["coverage"] is None]
+        assert len(failed) == 1 and failed[0]["index"] == len(segs) - 1
+        assert "beyond the reach of the map's centerline" in failed[0]["error"] and "trajectory" in failed[0]["error"]
+        done = sum(s["end_mm"] - s["start_mm"] for s in segs if s["coverage"] is not None)
+        assert summary["estimated_mm"] == pytest.approx(done, abs=0.1)
+        assert summary["estimated_share"] == pytest.approx(done / (segs[-1]["end_mm"] - segs[0]["start_mm"]), abs=1e-3)
+        assert 0.3 < summary["reached"] < 0.8       # the points beyond the centerline's reach are counted
+        (warning,) = warnings
+        assert "part of the colon" in warning and "trajectory" in warning
+        assert f"reaches {100 * summary['reached']:.0f} % of the reconstruction's points" in warning
