@@ -67,17 +67,53 @@ def write_json(path: Path, obj: dict) -> Path:
     return path
 
 
+#: The libraries whose versions shape the numbers (recorded in every run).
+PACKAGES = ("numpy", "scipy", "trimesh", "open3d", "manifold3d", "scikit-image", "scikit-fmm", "edt", "h5py",
+            "pandas", "torch", "monai", "safetensors")
+
+
 def versions() -> dict:
     """Versions of colonbench, Python and the libraries that shape the numbers."""
     from importlib.metadata import PackageNotFoundError, version
 
     out = {"colonbench": __version__, "python": platform.python_version()}
-    for pkg in ("numpy", "scipy", "scikit-image", "scikit-fmm", "edt", "torch", "monai", "h5py", "open3d"):
+    for pkg in PACKAGES:
         try:
             out[pkg] = version(pkg)
         except PackageNotFoundError:
             pass
     return out
+
+
+def environment() -> dict:
+    """The machine a run ran on, so that a difference between two machines' numbers can be explained: platform,
+    CPU model, the CPU features numpy dispatches on, and the BLAS numpy uses."""
+    out = {"platform": platform.platform(), "machine": platform.machine(), "cpu": _cpu_model(),
+           "cpu_count": os.cpu_count()}
+    try:
+        from numpy._core._multiarray_umath import __cpu_features__
+
+        out["numpy_cpu_features"] = sorted(k for k, on in __cpu_features__.items() if on)
+    except ImportError:   # numpy < 2 keeps it elsewhere; the record is informative only
+        pass
+    try:
+        import numpy as np
+
+        blas = np.show_config(mode="dicts").get("Build Dependencies", {}).get("blas", {})
+        out["blas"] = f"{blas.get('name', '?')} {blas.get('version', '')}".strip()
+    except (TypeError, AttributeError):
+        pass
+    return out
+
+
+def _cpu_model() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown"
 
 
 def method_record(spec: str, m) -> dict:
@@ -127,6 +163,7 @@ def begin_run(out: Path, settings: dict, loaded: dict, data: Path) -> dict:
     records = {name: method_record(spec, m) for name, (spec, m) in loaded.items()}
     run = open_run(out, settings, records)
     run["versions"] = run.get("versions") or versions()
+    run["environment"] = run.get("environment") or environment()
     run["data_path"] = str(data)
     write_json(out / RUN_FILE, run)
     for tmp in out.rglob(".*.tmp*"):
