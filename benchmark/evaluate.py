@@ -62,7 +62,8 @@ def result_columns() -> list[str]:
 # ---------------------------------------------------------------------------------------------- the data
 
 
-def _load_lock(data: Path) -> dict:
+def read_lock(data: Path) -> dict:
+    """A dataset folder's lock (:mod:`colonbench.shards.dataset`), or a clear error."""
     from colonbench.shards.dataset import LOCK_NAME
 
     path = data / LOCK_NAME
@@ -87,7 +88,7 @@ def select(data, split: str = "test", limit: int | None = None) -> tuple[dict, l
         In the lock's order.
     """
     data = Path(data)
-    lock = _load_lock(data)
+    lock = read_lock(data)
     shards = {n: e for n, e in lock.get("shards", {}).items() if e.get("split") == split}
     missing = [n for n in lock.get("missing", []) if n.startswith(f"{split}/")]
     if missing:
@@ -267,7 +268,7 @@ def load_methods(specs: list, options: dict, refuse_truth: str | None = None) ->
 
 
 def suite_of(identity: dict, sigmas, noise_seed: int, task: str, data, allow_unverified: bool) -> dict | None:
-    """The record of the suite a run's data and protocol are (checked against its published hash), or None."""
+    """The record of the suite a run's data and protocol are (checked against its published signature), or None."""
     from colonbench.benchmark import suites
 
     suite = suites.match(identity, sigmas, noise_seed, task)

@@ -58,8 +58,19 @@ class _Hasher:
         return f"{PREFIX}-{self.h.hexdigest()}"
 
 
-def segments_fingerprint(data, picks, noise_mm, noise_seed: int) -> str:
-    """The content hash of the chosen samples of a segment dataset under a noise protocol.
+def _segment_record(geo: dict, sid: str, inputs: dict) -> dict:
+    from colonbench.benchmark.signature import points_entry
+
+    points = {f"input@{k}": points_entry(v) for k, v in inputs.items()}
+    points["holes"] = points_entry(geo["hole_points"])
+    points["centerline"] = points_entry(geo["centerline"])
+    return {"sample": sid, "hole_model": str(geo["hole_model"]), "length_mm": float(geo["length_mm"]),
+            "coverage": float(geo["coverage"]), "observed_faces": int(np.count_nonzero(geo["observed_faces"])),
+            "exact": ["centerline"], "points": points}
+
+
+def segments_fingerprint(data, picks, noise_mm, noise_seed: int) -> tuple[str, list[dict]]:
+    """The content hash and per-sample signatures of the chosen samples of a segment dataset under a noise protocol.
 
     Parameters
     ----------
@@ -73,8 +84,10 @@ def segments_fingerprint(data, picks, noise_mm, noise_seed: int) -> str:
 
     Returns
     -------
-    str
-        ``cb1-<sha256 hex>``.
+    sha256 : str
+        ``cb1-<sha256 hex>``: equal only for bit-identical data (after rounding).
+    samples : list of dict
+        One signature per sample (:mod:`colonbench.benchmark.signature`), in order.
     """
     from colonbench.benchmark.evaluate import noisy
     from colonbench.benchmark.exchange import sample_id
@@ -82,6 +95,7 @@ def segments_fingerprint(data, picks, noise_mm, noise_seed: int) -> str:
 
     h = _Hasher()
     h.text("task", "segments")
+    records = []
     for shard_name, indices in picks:
         with Shard(Path(data) / shard_name) as shard:
             for i in indices:
@@ -91,20 +105,29 @@ def segments_fingerprint(data, picks, noise_mm, noise_seed: int) -> str:
                 h.fractions("coverage", geo["coverage"])
                 h.lengths("hole_points", geo["hole_points"])
                 h.lengths("centerline", geo["centerline"])
+                inputs = {}
                 for sigma in noise_mm:
                     h.text("sample", sample_id(shard_name, i, sigma))
-                    h.lengths("input", noisy(geo["partial_points"], sigma, noise_seed, shard_name, i))
-    return h.hexdigest()
+                    inputs[f"{sigma:g}"] = noisy(geo["partial_points"], sigma, noise_seed, shard_name, i)
+                    h.lengths("input", inputs[f"{sigma:g}"])
+                records.append(_segment_record(geo, sample_id(shard_name, i, 0.0), inputs))
+    return h.hexdigest(), records
 
 
-def colons_fingerprint(data, picks, noise_mm, noise_seed: int) -> str:
-    """The content hash of the chosen samples of a whole-colon dataset under a noise protocol (as above)."""
+def colons_fingerprint(data, picks, noise_mm, noise_seed: int) -> tuple[str, list[dict]]:
+    """The content hash and per-sample signatures of the chosen samples of a whole-colon dataset (as above).
+
+    A whole colon's signature also holds its true surface (vertices, and the observed faces' centres weighted by
+    their areas: the per-face truth), centerline and face arc lengths, and the withdrawal trajectory.
+    """
     from colonbench.benchmark.evaluate import noisy
     from colonbench.benchmark.exchange import sample_id
+    from colonbench.benchmark.signature import points_entry, rounded, sketch
     from colonbench.shards.colonshard import ColonShard
 
     h = _Hasher()
     h.text("task", "colon")
+    records = []
     for shard_name, indices in picks:
         shard = ColonShard(Path(data) / shard_name)
         truth = shard.colon()
@@ -113,13 +136,72 @@ def colons_fingerprint(data, picks, noise_mm, noise_seed: int) -> str:
         h.integers("faces", truth["faces"])
         h.lengths("centerline", truth["centerline"].points)
         h.lengths("face_arclength", truth["face_arclength"])
+        tri = truth["vertices"][truth["faces"]]
+        centres = tri.mean(axis=1)
+        areas = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+        # each face's arc length (the stretch of colon it belongs to) as the weight of its centre, in metres
+        colon_entries = {"vertices": points_entry(truth["vertices"]),
+                         "colon_centerline": points_entry(truth["centerline"].points),
+                         "face_arclength": {"n": int(len(centres)),
+                                            "s": rounded(sketch(centres, truth["face_arclength"] / 1e3))}}
         for i in indices:
             sample = shard.sample(i)
             h.text("hole_model", sample["hole_model"])
             h.fractions("coverage", sample["coverage"])
             h.integers("observed_faces", np.asarray(sample["observed_faces"], bool))
             h.lengths("positions", sample["positions"])
+            points = dict(colon_entries)
+            obs = np.asarray(sample["observed_faces"], bool)
+            # the per-face truth: the observed faces' centres, each weighted by its area over the mean face area
+            points["observed_surface"] = {"n": int(obs.sum()),
+                                          "s": rounded(sketch(centres[obs], areas[obs] / areas.mean()))}
+            points["positions"] = points_entry(sample["positions"])
             for sigma in noise_mm:
                 h.text("sample", sample_id(shard_name, i, sigma))
-                h.lengths("input", noisy(sample["points"], sigma, noise_seed, shard_name, i))
-    return h.hexdigest()
+                pts = noisy(sample["points"], sigma, noise_seed, shard_name, i)
+                h.lengths("input", pts)
+                points[f"input@{sigma:g}"] = points_entry(pts)
+            records.append({"sample": sample_id(shard_name, i, 0.0), "hole_model": str(sample["hole_model"]),
+                            "length_mm": 0.0, "coverage": float(sample["coverage"]),
+                            "observed_faces": int(obs.sum()),
+                            "exact": ["vertices", "colon_centerline", "face_arclength", "positions"],
+                            "points": points})
+    return h.hexdigest(), records
+
+
+def surface_distances(data, shard_name: str, index: int, task: str = "segments") -> dict:
+    """How far a sample's points lie from the true surface they are drawn on, mm.
+
+    Returns
+    -------
+    dict
+        ``input``: the largest distance of a noiseless input point from the sample's observed faces; ``holes``:
+        of a hole point from its unobserved faces (segments only; 0 where a set is empty).
+    """
+    from colonbench.datagen.camera import SurfaceScene
+
+    if task == "colon":
+        from colonbench.shards.colonshard import ColonShard
+
+        shard = ColonShard(Path(data) / shard_name)
+        truth, sample = shard.colon(), shard.sample(index)
+        sets = {"input": (sample["points"], sample["observed_faces"])}
+        vertices, faces = truth["vertices"], truth["faces"]
+    else:
+        from colonbench.shards.reader import Shard
+
+        with Shard(Path(data) / shard_name) as shard:
+            geo = shard.geometry(index)
+        obs = np.asarray(geo["observed_faces"], bool)
+        sets = {"input": (geo["partial_points"], obs), "holes": (geo["hole_points"], ~obs)}
+        vertices, faces = geo["vertices"], geo["faces"]
+    out = {}
+    for name, (points, on) in sets.items():
+        points = np.asarray(points, float).reshape(-1, 3)
+        if len(points) == 0:
+            out[name] = 0.0
+        elif not on.any():
+            out[name] = float("inf")
+        else:
+            out[name] = float(SurfaceScene(vertices, np.asarray(faces)[on]).distance(points).max())
+    return out

@@ -44,7 +44,7 @@ class Suite:
     samples : int
         Evaluated samples: segments, or whole-colon reconstructions.
     sha256 : str
-        The published content hash (:mod:`colonbench.benchmark.fingerprint`).
+        The published content hash (:mod:`colonbench.benchmark.fingerprint`): bit-identical data only.
     generate_seconds : float
         Time to generate its data on the project's 2-core machine (``--workers 2``), s.
     split : str
@@ -58,6 +58,12 @@ class Suite:
     segment_mm : float
         Whole colons: the maps' segment length, mm.
     metrics : tuple of str
+    signature : str
+        Digest of the published per-sample signature (:mod:`colonbench.benchmark.signature`), the suite's
+        identity on any machine: ``cbs1-<12 hex>``.
+    archive_url, archive_sha256 : str or None
+        Where a frozen archive of the suite's data is published, and its sha256
+        (:mod:`colonbench.benchmark.archive`): ``colonbench benchmark`` fetches it instead of generating.
     """
 
     name: str
@@ -75,6 +81,9 @@ class Suite:
     contexts_mm: tuple = ()
     segment_mm: float = 60.0
     metrics: tuple = field(default=SEGMENT_METRICS)
+    signature: str = ""
+    archive_url: str | None = None
+    archive_sha256: str | None = None
 
     @property
     def id(self) -> str:
@@ -91,38 +100,52 @@ class Suite:
 
         return track_name(max(self.contexts_mm))
 
-    def record(self, sha256: str, verified: bool) -> dict:
-        """What a run stores of the suite it evaluated: id, name, version, the hash found and the published one."""
-        return {"id": self.id, "name": self.name, "version": self.version, "sha256": sha256,
-                "published_sha256": self.sha256, "verified": bool(verified)}
+    @property
+    def citation(self) -> str:
+        """How a paper names the suite: ``real-v1 (cbs1-3f2a9c81e0d4)``, its id and published signature's digest."""
+        return f"{self.id} ({self.signature})"
+
+    def record(self, check) -> dict:
+        """What a run stores of the suite it evaluated: id, name, version, signature, the check's outcome (verified,
+        bit-identical or within tolerance, samples decided otherwise at a near-tie) and the hash found beside the
+        published one."""
+        return {"id": self.id, "name": self.name, "version": self.version, "signature": self.signature,
+                "verified": bool(check.verified), "check": check.status, "bit_identical": bool(check.bit_identical),
+                "tie_samples": int(check.ties), "sha256": check.sha256, "published_sha256": self.sha256}
 
 
 SUITES: tuple[Suite, ...] = (
     Suite("demo", 1, "demo.yaml", "segments",
           "a smoke test: 24 segments (5, 6, 7 cm) of 2 paper-style procedural colons, camera and sphere holes; "
           "checks that a method runs, in a minute", 24,
-          "cb1-a13629a7324018e9d8ecb09cea6be2586b5f45b4da3844544cd522dfa00dedd9", 9.0),
+          "cb1-a13629a7324018e9d8ecb09cea6be2586b5f45b4da3844544cd522dfa00dedd9", 9.0,
+          signature="cbs1-0cd018e664f0"),
     Suite("paper", 1, "paper.yaml", "segments",
           "the paper's synthetic protocol: 400 of the 1200 test segments (5, 6, 7 cm) of 40 procedural colons, "
           "spread evenly, camera and sphere holes", 400,
-          "cb1-19be7d96a87e397a2ef9b1e5ac22c7f85b639359e40bccad1dcb4b43dbbbc9ba", 267.0, limit=400),
+          "cb1-19be7d96a87e397a2ef9b1e5ac22c7f85b639359e40bccad1dcb4b43dbbbc9ba", 267.0, limit=400,
+          signature="cbs1-9aafe313d9e0"),
     Suite("wide", 1, "wide.yaml", "segments",
           "colons, clouds and holes unlike the paper's: radii 10-40 mm, flat to deep folds, elliptic sections, "
           "diverticula, 0.5-8 points/mm^2, outliers, double layers, unseen ends; 144 segments of 12 colons", 144,
-          "cb1-3658de0d12ed931028b451af9bfdbab14c646faeeaa407285d2894691a6b832e", 86.0),
+          "cb1-3658de0d12ed931028b451af9bfdbab14c646faeeaa407285d2894691a6b832e", 86.0,
+          signature="cbs1-76f58e24194d"),
     Suite("real", 1, "real-test.yaml", "segments",
           "a real CT colon no shipped model was trained on (gca00060, Gut Cell Atlas, CC BY 4.0): 86 segments, "
           "camera and sphere holes", 86,
-          "cb1-f464a6e95047c6c732cb9c72cd125d268a792b49c795ac033238b8ce0a0af301", 33.0),
+          "cb1-f464a6e95047c6c732cb9c72cd125d268a792b49c795ac033238b8ce0a0af301", 33.0,
+          signature="cbs1-7816a88abc21"),
     Suite("video", 1, "video.yaml", "segments",
           "reconstruction-like partials: rendered withdrawals with degraded depth and drifting poses, fused by "
           "TSDF; 36 segments of 6 paper-style test colons", 36,
-          "cb1-43638daac6027213e0d6048ecfce64a82d283c54e5ee3df49ea4e6f74aedec27", 84.0),
+          "cb1-43638daac6027213e0d6048ecfce64a82d283c54e5ee3df49ea4e6f74aedec27", 84.0,
+          signature="cbs1-ec4df20fabc8"),
     Suite("colon", 1, "colon-test.yaml", "colon",
           "whole colons (4 procedural and the real gca00060, 2 reconstructions each) mapped into 60 mm segments "
           "by colonbench map, scored on exact per-face truth, segment-only and in-context tracks", 10,
           "cb1-70ba1412f3455a7ba053f52a2cacc2265521ac4ad6edbb48145d89fd755c7cc1", 51.0,
-          contexts_mm=(0.0, 2.5), metrics=COLON_METRICS),
+          contexts_mm=(0.0, 2.5), metrics=COLON_METRICS,
+          signature="cbs1-067f84407832"),
 )
 
 
@@ -197,7 +220,9 @@ def data_dir(suite: Suite, root=None) -> Path:
 
 
 def ensure_data(suite: Suite, root=None, workers: int = 1, scheduler=None, progress: bool = True) -> Path:
-    """The suite's data folder, generating (or finishing) what is missing; resumable like ``generate``."""
+    """The suite's data folder: fetched from its published archive where the registry names one and nothing is
+    cached (:mod:`colonbench.benchmark.archive`), else generated (or finished) from its manifest, resumable like
+    ``generate``."""
     from colonbench.shards.dataset import LOCK_NAME, generate
 
     out = data_dir(suite, root)
@@ -212,36 +237,73 @@ def ensure_data(suite: Suite, root=None, workers: int = 1, scheduler=None, progr
         if suite.split in done.get("splits", []) and not any(m.startswith(f"{suite.split}/")
                                                              for m in done.get("missing", [])):
             return out
+    if suite.archive_url and not out.exists():
+        from colonbench.benchmark.archive import fetch
+
+        return fetch(suite, suite.archive_url, suite.archive_sha256, root, progress=progress)
     generate(manifest_path(suite), out, workers=workers, scheduler=scheduler, splits=[suite.split],
              progress=progress)
     return out
 
 
-def fingerprint(suite: Suite, data) -> str:
-    """The content hash of a suite's data folder (:mod:`colonbench.benchmark.fingerprint`)."""
+def identity(suite: Suite, data) -> tuple[str, list[dict], dict]:
+    """A suite's data folder as its identity is checked: content hash, per-sample signatures and the lock."""
     from colonbench.benchmark import fingerprint as fp
-    from colonbench.benchmark.evaluate import select
+    from colonbench.benchmark.evaluate import read_lock, select
 
     _, picks = select(data, suite.split, suite.limit)
     fn = fp.colons_fingerprint if suite.task == "colon" else fp.segments_fingerprint
-    return fn(data, picks, suite.noise_mm, suite.noise_seed)
+    sha256, records = fn(data, picks, suite.noise_mm, suite.noise_seed)
+    return sha256, records, read_lock(Path(data))
+
+
+def fingerprint(suite: Suite, data) -> str:
+    """The content hash of a suite's data folder (:mod:`colonbench.benchmark.fingerprint`): equal to the
+    published one only for bit-identical data."""
+    return identity(suite, data)[0]
+
+
+def published_signature(suite: Suite) -> dict:
+    """The suite's published per-sample signature (:mod:`colonbench.benchmark.signature`)."""
+    from colonbench.benchmark import verification
+
+    published = verification.load(suite.id, suite.signature)
+    if published is None:
+        raise InputError(f"this colonbench has no published signature of {suite.id} "
+                         f"(benchmark/signatures/{suite.id}.json.gz): reinstall it")
+    return published
+
+
+def check(suite: Suite, data):
+    """A suite's data folder against its published signature: a
+    :class:`~colonbench.benchmark.verification.SuiteCheck` (bit-identical, within tolerance, or what differs)."""
+    from colonbench.benchmark.evaluate import select
+    from colonbench.benchmark.fingerprint import surface_distances
+    from colonbench.benchmark.verification import check_suite
+
+    sha256, records, lock = identity(suite, data)
+    _, picks = select(data, suite.split, suite.limit)
+    where = [(name, i) for name, indices in picks for i in indices]
+    return check_suite(published_signature(suite), lock, sha256, records,
+                       surface=lambda k: surface_distances(data, *where[k], task=suite.task))
 
 
 def verify(suite: Suite, data, allow_unverified: bool = False) -> dict:
-    """Check a suite's data against its published hash; the record a run keeps (:meth:`Suite.record`).
+    """Check a suite's data against its published signature; the record a run keeps (:meth:`Suite.record`).
 
     Raises
     ------
     InputError
-        The data differs from the published suite and ``allow_unverified`` is not set.
+        The data differ from the published suite beyond its tolerances and ``allow_unverified`` is not set; the
+        message names the first sample that differs and by how much.
     """
-    found = fingerprint(suite, data)
-    if found != suite.sha256 and not allow_unverified:
+    result = check(suite, data)
+    if not result.verified and not allow_unverified:
         raise InputError(
-            f"{data} does not hold suite {suite.id}: its content hash is {found[:16]}..., the published one "
-            f"{suite.sha256[:16]}... (data made by another generator, or changed). Regenerate it into an empty "
-            "folder, or pass --allow-unverified to evaluate it anyway; the results then say 'unverified'")
-    return suite.record(found, found == suite.sha256)
+            f"{data} does not hold suite {suite.id}: {result.first_difference()} (docs/benchmark.md, Verified "
+            "suites). Regenerate it into an empty folder, or pass --allow-unverified to evaluate it anyway; the "
+            "results then say 'unverified'")
+    return suite.record(result)
 
 
 def match(identity: dict, noise_mm, noise_seed: int, task: str) -> Suite | None:

@@ -161,8 +161,11 @@ def sample_poses(rng: np.random.Generator, scene: SurfaceScene, centerline, s_ra
 
 
 def visible_faces(scene: SurfaceScene, poses: Poses, fov_deg: float, near_mm: float = 0.0,
-                  candidates: np.ndarray | None = None) -> np.ndarray:
+                  candidates: np.ndarray | None = None, margins: bool = False):
     """Faces seen by at least one pose.
+
+    A face is seen from a pose when its centroid is inside the view cone, between ``near_mm`` and the pose's
+    reach, and the ray to it hits nothing more than a hair (``1e-4`` of the distance + ``1e-3`` mm) before it.
 
     Parameters
     ----------
@@ -174,13 +177,20 @@ def visible_faces(scene: SurfaceScene, poses: Poses, fov_deg: float, near_mm: fl
         Closest distance seen, mm.
     candidates : (k,) int, optional
         Only these faces are tested (others are reported unseen).
+    margins : bool
+        Also return how near a tie each face's decision was.
 
     Returns
     -------
-    (m,) bool
+    seen : (m,) bool
         One flag per face of the scene.
+    margin : (m,) float
+        Only with ``margins``: per face, the smallest |hit distance - the distance a hit must reach to count as
+        the face|, mm, over the poses whose ray tested it (inf for faces no ray tested): the faces with the
+        smallest margins are those another CPU's float rounding can flip.
     """
     seen = np.zeros(len(scene.faces), dtype=bool)
+    margin = np.full(len(scene.faces), np.inf)
     idx = np.arange(len(scene.faces)) if candidates is None else np.asarray(candidates)
     cents = scene.centroids[idx]
     cos_half = np.cos(np.radians(fov_deg) / 2.0)
@@ -196,4 +206,6 @@ def visible_faces(scene: SurfaceScene, poses: Poses, fov_deg: float, near_mm: fl
         t, _ = scene.cast(np.broadcast_to(poses.positions[p], (int(ok.sum()), 3)), unit[ok])
         tol = 1e-4 * dist[ok] + 1e-3
         seen[idx[ok]] = t >= dist[ok] - tol
-    return seen
+        if margins:
+            margin[idx[ok]] = np.minimum(margin[idx[ok]], np.abs(t - (dist[ok] - tol)))
+    return (seen, margin) if margins else seen

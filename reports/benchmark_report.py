@@ -114,6 +114,8 @@ def _cell(r) -> str:
 
 def markdown(summary: pd.DataFrame, chosen, records: dict, skipped: list[str]) -> str:
     """The cross-suite leaderboard as Markdown."""
+    from colonbench.reports.leaderboard import suite_state
+
     ids = [s.id for s in chosen if s.id in records]
     lines = ["# colonbench benchmark", "",
              "Coverage MAE in percentage points with its 95 % bootstrap interval over segments, per suite; a "
@@ -134,12 +136,12 @@ def markdown(summary: pd.DataFrame, chosen, records: dict, skipped: list[str]) -
             lines.append(f"| {m}{mark} | {first['version']} | "
                          + " | ".join(_cell(keyed.get((m, s))) for s in ids) + " |")
         lines.append("")
-    lines += ["Suites (content hash; verified = the data evaluated is the published suite):", ""]
+    lines += ["Suites (cite a suite by its id and signature; verified = the data evaluated is the published suite, "
+              "bit-identical or within the tolerances of docs/benchmark.md):", ""]
     for s in chosen:
         if s.id in records:
-            rec = records[s.id]
-            state = "verified" if rec.get("verified") else "UNVERIFIED"
-            lines.append(f"- `{s.id}`: {s.tests}. Hash `{rec.get('sha256', s.sha256)}` ({state}).")
+            state = suite_state(records[s.id])
+            lines.append(f"- `{s.id}`: {s.tests}. {state[0].upper()}{state[1:]}.")
     if skipped:
         lines += ["", f"No results for {', '.join(skipped)}: no method was evaluated there and no shipped results "
                   "match."]

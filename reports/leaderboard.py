@@ -61,10 +61,19 @@ def merge_runs(run_dirs, extra=()) -> tuple[dict, pd.DataFrame]:
 
 
 def _setting(run: dict, key: str):
-    """A run's setting as compared: a suite run's data is its suite and content hash, whatever machine made it."""
+    """A run's setting as compared: a suite run's data is its suite, whatever machine made it: its published signature
+    where the data verified against it (bit-identical or within tolerance), else the content hash it had."""
     if key == "data" and run.get("suite"):
-        return {"suite": run["suite"]["id"], "sha256": run["suite"]["sha256"]}
+        return suite_identity(run["suite"])
     return run.get(key)
+
+
+def suite_identity(record: dict) -> dict:
+    """What two runs of a suite must share to be compared: the suite id and, for verified data, the published
+    signature it verified against; for unverified data, its own content hash."""
+    if record.get("verified"):
+        return {"suite": record["id"], "signature": record.get("signature") or record["published_sha256"]}
+    return {"suite": record["id"], "sha256": record["sha256"]}
 
 
 def add_run(meta: dict | None, run: dict, path, first, same) -> dict:
@@ -143,12 +152,21 @@ def data_line(meta: dict, unit: str) -> str:
     """The sentence saying what was evaluated: the suite and its content hash (verified or not), or the data."""
     d, suite = meta["data"], meta.get("suite")
     if suite:
-        state = "verified against the published hash" if suite["verified"] else (
-            f"**unverified**: the published hash is `{suite['published_sha256'][:16]}`")
-        return (f"Suite `{suite['id']}` ({d['samples']} {unit}; content hash `{suite['sha256'][:16]}`, {state}; "
-                f"manifest `{d['manifest_name']}`, split `{d['split']}`).")
+        return (f"Suite `{suite['id']}` ({d['samples']} {unit}; {suite_state(suite)}; manifest "
+                f"`{d['manifest_name']}`, split `{d['split']}`).")
     return (f"Data: manifest `{d['manifest_name']}` (sha256 {str(d['manifest_sha256'])[:12]}), split `{d['split']}`, "
             f"{d['samples']} {unit} (samples sha256 {d['samples_sha256'][:12]}; not a named suite).")
+
+
+def suite_state(suite: dict) -> str:
+    """How a run's suite data stand against the published suite, in words (docs/benchmark.md, Verified suites)."""
+    if not suite["verified"]:
+        return f"**unverified**: content hash `{suite['sha256'][:16]}`, not the published suite"
+    if "signature" not in suite:   # a run recorded before signatures: verified by its content hash
+        return f"content hash `{suite['sha256'][:16]}`, verified against the published hash"
+    how = "bit-identical to the published data" if suite["bit_identical"] else (
+        f"within tolerance of the published data ({suite['tie_samples']} samples decided otherwise at a near-tie)")
+    return f"verified against its signature `{suite['signature']}`, {how}"
 
 
 def markdown(meta: dict, tab: pd.DataFrame) -> str:

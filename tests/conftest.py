@@ -65,3 +65,13 @@ def tiny_run(smoke_dataset, tmp_path_factory):
     cfg = TrainConfig(epochs=1, batch_size=2, workers=0, augment_prob=0.5)
     result = train(out, run, cfg, device="cpu", progress=False)
     return out, run, cfg, result
+
+
+@pytest.fixture(scope="session")
+def demo_data(tmp_path_factory):
+    """demo-v1 generated from its manifest, as colonbench benchmark makes it: the data root."""
+    from colonbench.benchmark import suites
+
+    root = tmp_path_factory.mktemp("suites")
+    suites.ensure_data(suites.get("demo-v1"), root, workers=2, progress=False)
+    return root

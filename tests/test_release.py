@@ -34,14 +34,6 @@ sys.exit(3 if "--crash" in args else 0)
 '''
 
 
-@pytest.fixture(scope="session")
-def demo_data(tmp_path_factory):
-    """demo-v1 generated from its manifest, as colonbench benchmark makes it: the data root."""
-    root = tmp_path_factory.mktemp("suites")
-    suites.ensure_data(suites.get("demo-v1"), root, workers=2, progress=False)
-    return root
-
-
 # ------------------------------------------------------------------------------------------------ the registry
 
 
@@ -52,6 +44,7 @@ def test_registry_names_every_v1_suite_with_its_manifest():
     for s in suites.SUITES:
         assert suites.manifest_path(s).is_file(), s.manifest
         assert s.sha256.startswith("cb1-") and len(s.sha256) == 4 + 64
+        assert re.fullmatch(r"cbs1-[0-9a-f]{12}", s.signature) and suites.published_signature(s)["suite"] == s.id
         assert s.tests and s.samples > 0 and s.noise_mm == (0.0, 0.5)
     assert suites.get("paper").id == "paper-v1" and suites.get("real-v1").manifest == "real-test.yaml"
     assert [s.id for s in suites.parse("all")] == ids
@@ -74,17 +67,21 @@ def test_hashing_rounds_to_a_micrometre():
     assert digest(p) != digest(p[::-1])              # the order is part of the data
 
 
-def test_demo_v1_regenerates_to_its_published_hash(demo_data):
-    """CI's check that the generator still makes the published suite (a change that moves it needs demo-v2)."""
+def test_demo_v1_regenerates_to_the_published_suite(demo_data):
+    """CI's check that the generator still makes the published suite (a change that moves it needs demo-v2):
+    every sample verifies against its published signature, bit-identical or within tolerance."""
     suite = suites.get("demo-v1")
-    assert suites.fingerprint(suite, suites.data_dir(suite, demo_data)) == suite.sha256
+    result = suites.check(suite, suites.data_dir(suite, demo_data))
+    assert result.verified, result.summary()
+    assert len(result.samples) == 24 and not result.faults
 
 
 @pytest.mark.slow
-def test_real_v1_regenerates_to_its_published_hash(tmp_path):
+def test_real_v1_regenerates_to_the_published_suite(tmp_path):
     suite = suites.get("real-v1")
     data = suites.ensure_data(suite, tmp_path, workers=2, progress=False)
-    assert suites.fingerprint(suite, data) == suite.sha256
+    result = suites.check(suite, data)
+    assert result.verified, result.summary()
 
 
 def test_a_tampered_sample_is_refused(demo_data, tmp_path, capsys):
@@ -98,6 +95,7 @@ def test_a_tampered_sample_is_refused(demo_data, tmp_path, capsys):
     assert main(["evaluate", str(data), "--methods", "constant", "--out", str(tmp_path / "run"), "--quiet"]) == 2
     err = capsys.readouterr().err
     assert "does not hold suite demo-v1" in err and "--allow-unverified" in err
+    assert f"sample test_{shard.stem}_000_noise0: input@0" in err and "off the surface" in err
     assert main(["evaluate", str(data), "--methods", "constant", "--out", str(tmp_path / "run"), "--quiet",
                  "--allow-unverified"]) == 0
     rec = json.loads((tmp_path / "run" / "run.json").read_text())["suite"]
@@ -128,7 +126,7 @@ def test_a_program_outside_colonbench_joins_the_shipped_leaderboard(demo_data, t
     assert row["mae"] == pytest.approx(100 * np.abs(0.8 - mine["true_coverage"]).mean() / 1)
     assert row["mae_lo"] < row["mae"] < row["mae_hi"]
     page = (out / "suites" / "demo-v1" / "leaderboard.md").read_text()
-    assert suites.get("demo-v1").sha256[:16] in page and "verified against the published hash" in page
+    assert f"verified against its signature `{suites.get('demo-v1').signature}`" in page
     assert "constant_method" in (out / "leaderboard.md").read_text()
     # the same through export + score
     inputs, preds = tmp_path / "inputs", tmp_path / "preds"
@@ -338,7 +336,8 @@ def test_shipped_demo_results_reproduce(demo_data, tmp_path):
         b = rows[rows["method"] == m].set_index(key).sort_index()
         cols = [c for c in a.columns if c not in ("seconds", "error", "hole_model")]
         assert (a["hole_model"] == b["hole_model"]).all()
-        assert np.allclose(a[cols].to_numpy(float), b[cols].to_numpy(float), rtol=1e-8, atol=1e-9, equal_nan=True), m
+        # another CPU's float arithmetic (the network's sums) moves fractions by ~1e-9: compare to 1e-6
+        assert np.allclose(a[cols].to_numpy(float), b[cols].to_numpy(float), rtol=1e-6, atol=1e-6, equal_nan=True), m
 
 
 def test_cli_lists_suites_and_says_what_each_verb_does(capsys):

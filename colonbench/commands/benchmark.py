@@ -1,4 +1,4 @@
-"""``colonbench suites``, ``benchmark``, ``export`` and ``score``: the benchmark release's verbs."""
+"""``colonbench benchmark``, ``export`` and ``score``: the benchmark release's verbs (``suites``: :mod:`.suites`)."""
 
 from __future__ import annotations
 
@@ -60,34 +60,6 @@ def _add_data_args(p) -> None:
     p.add_argument("--quiet", action="store_true", help="no progress bars")
 
 
-def cmd_suites(args):
-    """List the named suites with what they test, their size, content hash and generation time."""
-    from colonbench.benchmark import suites
-
-    rows = suites.SUITES if args.all_versions else tuple(suites.latest().values())
-    for s in rows:
-        here = suites.data_dir(s, args.data)
-        state = "cached" if (here / "dataset.lock.json").is_file() else "not generated"
-        what = "whole-colon reconstructions" if s.task == "colon" else "segments"
-        noise = ", ".join(f"{n:g}" for n in s.noise_mm)
-        print(f"{s.id:<9} {s.samples:4d} {what} x noise {noise} mm; generates in {s.generate_seconds:.0f} s on "
-              f"2 cores ({state} in {here})\n          {s.tests}\n          manifest {s.manifest}, split {s.split}"
-              + (f", {s.limit} spread evenly" if s.limit else "") + f"\n          sha256 {s.sha256}\n")
-    if args.check:
-        failed = 0
-        for s in rows:
-            here = suites.data_dir(s, args.data)
-            if not (here / "dataset.lock.json").is_file():
-                continue
-            t = time.perf_counter()
-            found = suites.fingerprint(s, here)
-            ok = found == s.sha256
-            failed += not ok
-            print(f"{s.id}: {'OK' if ok else 'DIFFERS: ' + found} ({time.perf_counter() - t:.1f} s)")
-        return 1 if failed else 0
-    return 0
-
-
 def cmd_benchmark(args):
     """Evaluate methods on named suites (data made where missing) and write the cross-suite leaderboard."""
     from colonbench.pipeline import RunFailed, run_benchmark
@@ -132,9 +104,9 @@ def cmd_export(args):
 
     info = export_suite(args.suite, args.out, data=args.data, workers=args.workers, scheduler=args.scheduler,
                         allow_unverified=args.allow_unverified, progress=not args.quiet)
-    print(f"wrote {info['inputs']} inputs of {info['suite']['id']} (hash {info['suite']['sha256'][:16]}...) to "
-          f"{args.out}; predict PRED_DIR/<sample_id>.json for each, then colonbench score {info['suite']['id']} "
-          f"PRED_DIR --out RUN{_data_flag(args)}")
+    rec = info["suite"]
+    print(f"wrote {info['inputs']} inputs of {rec['id']} ({rec['signature']}, {rec['check']}) to {args.out}; predict "
+          f"PRED_DIR/<sample_id>.json for each, then colonbench score {rec['id']} PRED_DIR --out RUN{_data_flag(args)}")
 
 
 def cmd_score(args):
@@ -169,17 +141,7 @@ def _data_flag(args) -> str:
 
 
 def add_parsers(sub) -> None:
-    """Add ``suites``, ``benchmark``, ``export`` and ``score`` to the ``colonbench`` subparsers."""
-    p = sub.add_parser("suites", help="list the named, versioned suites: size, what each tests, content hash",
-                       description="List the benchmark's named, versioned suites: what each tests, its size, its "
-                                   "published content hash and the time to generate it.")
-    p.add_argument("--data", help="suite data folder to report on (default $COLONBENCH_DATA, else "
-                                  "$XDG_CACHE_HOME/colonbench/suites, else ~/.cache/colonbench/suites)")
-    p.add_argument("--check", action="store_true", help="also hash the cached data of each suite and compare it "
-                                                        "with the published hash (exit 1 on a difference)")
-    p.add_argument("--all-versions", action="store_true", help="also list older versions of the suites")
-    p.set_defaults(func=cmd_suites)
-
+    """Add ``benchmark``, ``export`` and ``score`` to the ``colonbench`` subparsers."""
     p = sub.add_parser("benchmark", help="evaluate methods on named suites and write one cross-suite leaderboard",
                        description="Evaluate methods on named suites and write one cross-suite leaderboard, the "
                                    "built-in methods' shipped results merged in. Suite data is generated where "
