@@ -51,7 +51,7 @@ __all__ = ["RUN_FILE", "RunMismatch", "evaluate", "load_results", "noisy", "read
 
 #: Per-segment columns, in order (then the metric columns, ``seconds`` and ``error``).
 ID_COLUMNS = ["method", "shard", "index", "colon_id", "length_mm", "hole_model", "noise_mm", "true_coverage",
-              "coverage", "coverage_error"]
+              "coverage", "coverage_error", "interval_low", "interval_high"]
 
 
 def result_columns() -> list[str]:
@@ -195,12 +195,15 @@ def run_unit(data: str, shard_name: str, indices: list[int], sigma: float, noise
                     est, seconds = _one(m, pts, truth, sample_id(shard_name, i, sigma))
                 except Exception as exc:  # noqa: BLE001 - recorded in the row and counted in the tables
                     msg = str(exc) if isinstance(exc, ColonbenchError) else f"{type(exc).__name__}: {exc}"
-                    row.update({"coverage": np.nan, "coverage_error": np.nan, "seconds": np.nan,
+                    row.update({"coverage": np.nan, "coverage_error": np.nan, "interval_low": np.nan,
+                                "interval_high": np.nan, "seconds": np.nan,
                                 "error": msg.replace("\n", " ")[:500]})
                     row.update({c: np.nan for c in metric_columns()})
                 else:
                     metrics = segment_metrics(est.coverage, est.holes, est.centerline, truth)
-                    row.update({"coverage": est.coverage, **metrics, "seconds": seconds, "error": ""})
+                    low, high = est.coverage_interval if est.coverage_interval is not None else (np.nan, np.nan)
+                    row.update({"coverage": est.coverage, "interval_low": low, "interval_high": high, **metrics,
+                                "seconds": seconds, "error": ""})
                     if i in examples and len(getattr(est, "mesh_faces", ())):
                         stem = shard_name.replace("/", "_").removesuffix(".h5")
                         _save_example(Path(run_dir) / "examples" / m.name / f"{stem}-{i:03d}-noise{sigma:g}.npz",

@@ -22,7 +22,7 @@ import math
 from pathlib import Path
 
 from colonbench.errors import InputError
-from colonbench.estimate import Estimate, points_array
+from colonbench.estimate import Estimate, interval, points_array
 
 #: Columns of an export's ``index.csv``.
 INDEX_COLUMNS = ["sample_id", "file", "noise_mm", "points"]
@@ -82,7 +82,8 @@ def read_prediction(path, method: str = "predictions") -> Estimate:
     ------
     InputError
         No such file, not a JSON object, ``coverage`` missing, not a number, NaN or outside [0, 1], or
-        ``holes`` / ``centerline`` not (n, 3) finite numbers; the message names the file and the fault.
+        ``holes`` / ``centerline`` not (n, 3) finite numbers, ``coverage_interval`` not ``[low, high]``
+        fractions; the message names the file and the fault.
     """
     path = Path(path)
     if not path.is_file():
@@ -102,4 +103,6 @@ def read_prediction(path, method: str = "predictions") -> Estimate:
     if math.isnan(c) or not 0.0 <= c <= 1.0:
         raise InputError(f"{path.name}: coverage {c} is not a fraction in [0, 1]")
     return Estimate(c, points_array(obj.get("holes"), "holes", path.name),
-                    points_array(obj.get("centerline"), "centerline", path.name), method)
+                    points_array(obj.get("centerline"), "centerline", path.name), method,
+                    coverage_interval=interval(obj.get("coverage_interval"), path.name),
+                    interval_level=float(obj.get("coverage_interval_level", 0.9)))

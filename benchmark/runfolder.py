@@ -45,6 +45,10 @@ def read_rows(path) -> pd.DataFrame:
     """A per-segment (or per-map) results CSV; ``error`` is "" where there was none."""
     df = pd.read_csv(path, dtype={"error": str, "shard": str, "method": str, "hole_model": str})
     df["error"] = df["error"].fillna("")
+    if "coverage_error" in df.columns and "interval_low" not in df.columns:   # rows written before intervals
+        at = df.columns.get_loc("coverage_error") + 1
+        df.insert(at, "interval_low", np.nan)
+        df.insert(at + 1, "interval_high", np.nan)
     return df
 
 

@@ -13,7 +13,7 @@ import zlib
 import numpy as np
 import pandas as pd
 
-from colonbench.benchmark.summary import KEY_COLUMNS, error_stats
+from colonbench.benchmark.summary import KEY_COLUMNS, error_stats, interval_stats
 from colonbench.errors import InputError
 
 #: Edges of the true-coverage bins of :func:`breakdown`: [lo, hi), the last one [0.9, 1.0].
@@ -21,7 +21,8 @@ coverage_bins = (0.0, 0.5, 0.7, 0.8, 0.9, 1.0)
 #: The groupings :func:`breakdown` knows.
 BREAKDOWNS = ("hole_model", "length_mm", "true_coverage", "unseen_end", "noise_mm")
 PAIRED_COLUMNS = ["noise_mm", "method", "reference", "diff", "diff_lo", "diff_hi", "pairs"]
-BREAKDOWN_COLUMNS = ["noise_mm", "method", "by", "group", "segments", "mae", "mae_lo", "mae_hi", "bias"]
+BREAKDOWN_COLUMNS = ["noise_mm", "method", "by", "group", "segments", "mae", "mae_lo", "mae_hi", "bias",
+                     "interval_covered", "interval_width"]
 _CHUNK_ELEMENTS = 2 ** 20  # per chunk of resamples: index matrix + gathered values, about 16 MB
 
 
@@ -233,17 +234,22 @@ def breakdown(results: pd.DataFrame, by: str, level=0.95, resamples=1000, seed=0
     DataFrame
         ``noise_mm``, ``method``, ``by``, ``group`` (str), ``segments`` (all rows of the
         group, undefined errors included), ``mae``, ``mae_lo``, ``mae_hi``, ``bias``
-        (percentage points); sorted by noise level, method, group.
+        (percentage points), ``interval_covered`` (%) and ``interval_width`` (points) of a method's
+        coverage intervals (NaN for one without, :func:`colonbench.benchmark.summary.interval_stats`);
+        sorted by noise level, method, group.
     """
     if by not in BREAKDOWNS:
         raise InputError(f"unknown breakdown {by!r}; expected one of {', '.join(BREAKDOWNS)}")
     _check(level, resamples)
     _need(results, ["noise_mm", "method", "coverage_error"], "results")
-    frame = results[["noise_mm", "method", "coverage_error"]].assign(_group=_groups(results, by))
+    extra = [c for c in ("true_coverage", "interval_low", "interval_high") if c in results.columns]
+    frame = results[["noise_mm", "method", "coverage_error", *extra]].assign(_group=_groups(results, by))
     rows = []  # rows in no group (None) are dropped by groupby
     for (noise, method, group), g in frame.groupby(["noise_mm", "method", "_group"], sort=True, dropna=True):
         err = g["coverage_error"].to_numpy(float)
         mae = mae_interval(err, level, resamples, _cell_seed(seed, by, repr(float(noise)), method, group))
+        iv = interval_stats(g) if "true_coverage" in g.columns else {}
         rows.append({"noise_mm": float(noise), "method": method, "by": by, "group": group, "segments": len(g),
-                     **mae, "bias": error_stats(err)["bias"]})
+                     **mae, "bias": error_stats(err)["bias"], "interval_covered": iv.get("interval_covered", np.nan),
+                     "interval_width": iv.get("interval_width", np.nan)})
     return pd.DataFrame(rows, columns=BREAKDOWN_COLUMNS)

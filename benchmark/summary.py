@@ -47,12 +47,28 @@ def error_stats(errors) -> dict:
             "q95": 100 * float(np.quantile(a, 0.95))}
 
 
+def interval_stats(g: pd.DataFrame) -> dict:
+    """How a method's coverage intervals did on rows with ``true_coverage``, ``interval_low`` and ``interval_high``
+    (fractions): ``interval_covered``, the share of the truths inside (%), ``interval_width``, the mean width
+    (points), over ``interval_segments`` rows with an interval; NaN (n/a) for a method that gives none."""
+    if "interval_low" not in g.columns:
+        return {"interval_covered": np.nan, "interval_width": np.nan, "interval_segments": 0}
+    low, high = g["interval_low"].to_numpy(float), g["interval_high"].to_numpy(float)
+    have = ~np.isnan(low) & ~np.isnan(high)
+    if not have.any():
+        return {"interval_covered": np.nan, "interval_width": np.nan, "interval_segments": 0}
+    true = g["true_coverage"].to_numpy(float)[have]
+    inside = (low[have] - 1e-9 <= true) & (true <= high[have] + 1e-9)
+    return {"interval_covered": 100 * float(inside.mean()), "interval_width": 100 * float((high - low)[have].mean()),
+            "interval_segments": int(have.sum())}
+
+
 def _stats(g: pd.DataFrame, metrics: list[str]) -> dict:
     err = g["coverage_error"].to_numpy(float)
     row = {"segments": len(g), "failed": int(g["error"].fillna("").astype(str).ne("").sum()),
            "coverage_undefined": int(np.isnan(err).sum()),
            **{f"coverage_{k}": v for k, v in error_stats(err).items()},
-           "seconds": float(g["seconds"].mean())}
+           **interval_stats(g), "seconds": float(g["seconds"].mean())}
     for m in metrics:
         v = g[m].to_numpy(float)
         d = v[~np.isnan(v)]

@@ -31,6 +31,16 @@ class Estimate:
         Which mesh vertices are holes.
     seconds : dict
         Wall time per stage.
+    coverage_interval : (float, float) or None
+        Where the true coverage lies with probability :attr:`interval_level` (fractions), for methods that
+        say how sure they are; None for the others.
+    interval_level : float
+        The interval's nominal coverage (0.9 unless the method documents another).
+    review : list of str
+        Why the estimate should not be trusted as it is (an interval wider than the method's threshold, a
+        fallback taken); empty when there is no reason.
+    signals : dict
+        What the method's own steps said of the segment (e.g. ``rims``: cut rims found at its ends).
     """
 
     coverage: float
@@ -41,12 +51,23 @@ class Estimate:
     mesh_faces: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), dtype=np.int64))
     hole_vertices: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
     seconds: dict = field(default_factory=dict)
+    coverage_interval: tuple | None = None
+    interval_level: float = 0.9
+    review: list = field(default_factory=list)
+    signals: dict = field(default_factory=dict)
 
     def to_json(self) -> dict:
-        """The ``estimate`` command's JSON: coverage, holes, centerline (mm), method."""
-        return {"coverage": float(self.coverage), "holes": np.round(self.holes, 4).tolist(),
-                "centerline": np.round(self.centerline, 4).tolist(), "method": self.method,
-                "seconds": {k: round(v, 4) for k, v in self.seconds.items()}}
+        """The ``estimate`` command's JSON: coverage (with its interval where the method gives one, and why to review
+        it), holes, centerline (mm), method."""
+        out = {"coverage": float(self.coverage)}
+        if self.coverage_interval is not None:
+            out.update(coverage_interval=[round(float(x), 6) for x in self.coverage_interval],
+                       coverage_interval_level=float(self.interval_level), review=list(self.review))
+        out.update(holes=np.round(self.holes, 4).tolist(), centerline=np.round(self.centerline, 4).tolist(),
+                   method=self.method, seconds={k: round(v, 4) for k, v in self.seconds.items()})
+        if self.signals:
+            out["signals"] = self.signals
+        return out
 
 
 @runtime_checkable
@@ -117,7 +138,9 @@ def as_estimate(result, name: str) -> Estimate:
     elif isinstance(result, dict):
         if "coverage" not in result:
             raise InputError(f"{who} returned a dict without 'coverage'")
-        est = Estimate(result["coverage"], result.get("holes"), result.get("centerline"), name)
+        est = Estimate(result["coverage"], result.get("holes"), result.get("centerline"), name,
+                       coverage_interval=result.get("coverage_interval"),
+                       interval_level=result.get("coverage_interval_level", 0.9))
     else:
         raise InputError(f"{who} returned {type(result).__name__}; expected an Estimate or a dict")
     try:
@@ -127,7 +150,22 @@ def as_estimate(result, name: str) -> Estimate:
     if not (np.isnan(coverage) or -1e-9 <= coverage <= 1 + 1e-9):
         raise InputError(f"{who} returned coverage {coverage}; a fraction in [0, 1] is expected")
     est.coverage = coverage
+    est.coverage_interval = interval(est.coverage_interval, who)
     est.holes = points_array(est.holes, "holes", who)
     est.centerline = points_array(est.centerline, "centerline", who)
     est.method = name
     return est
+
+
+def interval(value, who: str) -> tuple | None:
+    """A method's ``coverage_interval`` checked: None, or ``(low, high)`` fractions with 0 <= low <= high <= 1."""
+    if value is None:
+        return None
+    try:
+        low, high = (float(x) for x in value)
+    except (TypeError, ValueError):
+        raise InputError(f"{who} returned coverage_interval {value!r}; [low, high] fractions are expected") from None
+    if not (-1e-9 <= low <= high <= 1 + 1e-9):
+        raise InputError(f"{who} returned coverage_interval [{low}, {high}]; fractions with 0 <= low <= high <= 1 "
+                         "are expected")
+    return (min(max(low, 0.0), 1.0), min(max(high, 0.0), 1.0))

@@ -196,6 +196,7 @@ def markdown(meta: dict, tab: pd.DataFrame) -> str:
         base = g["baseline"].iloc[0] if len(g) else ""
         if base:
             lines += ["", f"Best baseline at this noise level: `{base}`."]
+        lines += interval_lines(g)
         head = ["method"] + [f"{w} {pr} @{t:g}" for t in ths for w in ("holes", "centerline") for pr in ("P", "R")]
         lines += ["", "Precision (P) and recall (R), mean (median); undefined segments in the last column.", "",
                   "| " + " | ".join(head) + " | undefined (holes / centerline) |",
@@ -215,6 +216,21 @@ def markdown(meta: dict, tab: pd.DataFrame) -> str:
     lines += ["Breakdowns by hole model, segment length, true coverage, unseen end and noise: breakdowns.md. Runs: "
               + ", ".join(f"`{r['path']}`" for r in meta["runs"]) + ".", ""]
     return "\n".join(lines)
+
+
+def interval_lines(g: pd.DataFrame) -> list[str]:
+    """The coverage-interval table of one noise level: methods that give intervals, the share of truths inside and
+    the mean width; empty when no method gives any."""
+    if "interval_segments" not in g.columns or not (g["interval_segments"] > 0).any():
+        return []
+    lines = ["", "Coverage intervals (methods without: n/a): the share of segments whose true coverage lies inside "
+             "the method's interval (completion's are 90 % intervals), and their mean width.", "",
+             "| method | segments with an interval | truth inside | mean width, points |", "|---|---:|---:|---:|"]
+    for _, r in g.iterrows():
+        if r["interval_segments"] > 0:
+            lines.append(f"| {r['method']} | {r['interval_segments']} | {_f(r['interval_covered'], 1)} % | "
+                         f"{_f(r['interval_width'], 1)} |")
+    return lines
 
 
 def breakdowns(results: pd.DataFrame) -> pd.DataFrame:
@@ -245,6 +261,10 @@ def breakdown_markdown(meta: dict, bd: pd.DataFrame) -> str:
                 cells = {x["group"]: f"{_f(x['mae'])} {interval(x['mae_lo'], x['mae_hi'])} ({x['segments']})"
                          for _, x in r.iterrows()}
                 lines.append(f"| {m} | " + " | ".join(cells.get(c, "") for c in groups) + " |")
+            for m, r in h[h["interval_covered"].notna()].groupby("method", sort=True):
+                cells = {x["group"]: f"{_f(x['interval_covered'], 0)} % inside, {_f(x['interval_width'], 1)} wide"
+                         for _, x in r.iterrows()}
+                lines.append(f"| {m}: interval | " + " | ".join(cells.get(c, "") for c in groups) + " |")
             lines.append("")
     return "\n".join(lines)
 

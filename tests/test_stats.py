@@ -159,7 +159,8 @@ def _cells(out):
 def test_breakdown_groups_and_counts():
     res = _breakdown_frame()
     out = breakdown(res, "hole_model", seed=3)
-    assert list(out.columns) == ["noise_mm", "method", "by", "group", "segments", "mae", "mae_lo", "mae_hi", "bias"]
+    assert list(out.columns) == ["noise_mm", "method", "by", "group", "segments", "mae", "mae_lo", "mae_hi", "bias",
+                                 "interval_covered", "interval_width"]
     assert out["noise_mm"].tolist() == [0.0, 0.0, 0.5, 0.5] and out["group"].tolist() == ["camera", "camera+end"] * 2
     assert out["segments"].tolist() == [5, 4, 5, 4] and set(out["by"]) == {"hole_model"}
     cam, end = out.iloc[0], out.iloc[1]
@@ -204,3 +205,20 @@ def test_breakdown_seeds_per_cell():
     assert out.iloc[0]["mae_lo"] != out.iloc[2]["mae_lo"] or out.iloc[0]["mae_hi"] != out.iloc[2]["mae_hi"]
     other = breakdown(res, "hole_model", resamples=200, seed=4)
     assert not np.array_equal(other["mae_lo"], out["mae_lo"])
+
+
+def test_intervals_are_scored_by_the_share_of_truths_inside_and_their_width():
+    from colonbench.benchmark.summary import interval_stats
+
+    rows = pd.DataFrame({"true_coverage": [0.5, 0.8, 0.9, 0.2, 0.7],
+                         "interval_low": [0.4, 0.85, 0.8, 0.1, np.nan],
+                         "interval_high": [0.6, 0.95, 0.9, 0.3, np.nan]})
+    got = interval_stats(rows)
+    assert got["interval_segments"] == 4                       # the row without an interval is not counted
+    assert got["interval_covered"] == pytest.approx(75.0)      # 0.8 lies below [0.85, 0.95]; 0.9 on an edge counts
+    assert got["interval_width"] == pytest.approx(100 * (0.2 + 0.1 + 0.1 + 0.2) / 4)
+    none = interval_stats(rows.assign(interval_low=np.nan, interval_high=np.nan))
+    assert none["interval_segments"] == 0 and np.isnan(none["interval_covered"])
+    grouped = breakdown(_breakdown_frame().assign(true_coverage=0.5, interval_low=0.4, interval_high=0.6),
+                        "hole_model", seed=3)
+    assert (grouped["interval_covered"] == 100.0).all() and np.allclose(grouped["interval_width"], 20.0)
