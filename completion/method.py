@@ -29,6 +29,7 @@ import numpy as np
 
 from colonbench.completion.gaps import GAP_VALLEY
 from colonbench.completion.heatmap_centerline import END_LEVEL, extract_centerline
+from colonbench.completion.intervals import known_length, load as load_intervals
 from colonbench.completion.planes import line_between
 from colonbench.completion.steps import STEPS_VERSION, complete
 from colonbench.completion.symmetry import averaged, check_tta
@@ -37,7 +38,7 @@ from colonbench.errors import InputError
 from colonbench.estimate import Estimate
 from colonbench.grid import Grid, check_points, distinct_points, fit_grid, principal_axes
 from colonbench.heatmaps import input_from_points
-from colonbench.polyline import resample
+from colonbench.polyline import arc_length, resample
 
 #: Fewest points accepted: below this there is no segment to complete.
 MIN_POINTS = 200
@@ -311,12 +312,10 @@ def shared_predictor(model=None, device: str = "cpu", tta: int = 1) -> Predictor
 def on_prediction(predictor: Predictor, points, step: str, fn) -> Estimate:
     """A method built on the shared prediction: ``fn(points, prediction)`` timed as ``step``.
 
-    The cloud is checked, the (cached) prediction and its centerline are
-    taken from ``predictor``, and the result's ``seconds`` count those shared
-    steps in full, then ``step``. The prediction is made on the completion
-    method's own cloud (:func:`method_cloud`: a dense cloud thinned), so that
-    the methods built on the network share its prediction and its line on
-    every cloud, and ``fn`` gets the checked cloud (its distinct points, not thinned).
+    The cloud is checked, the (cached) prediction and its centerline are taken from ``predictor``, and the
+    result's ``seconds`` count those shared steps in full, then ``step``. The prediction is made on the
+    completion method's own cloud (:func:`method_cloud`: a dense cloud thinned), so that the methods built on the
+    network share its prediction and its line on every cloud; ``fn`` gets the checked cloud (not thinned).
 
     Parameters
     ----------
@@ -394,6 +393,9 @@ class CompletionMethod:
         self.thin_above = thin_above
         self.version = f"{self.predictor.version},{steps_version(shell_level, gaps, end_level, thin_above)}" + (
             f",context={self.context_predictor.version}" if self.context_predictor is not None else "")
+        self.intervals = load_intervals(self.predictor.path, steps_version(shell_level, gaps, end_level, thin_above)
+                                        if self.context_predictor is None else "context")
+        self.version += f",intervals={self.intervals.source['id']}" if self.intervals is not None else ""
         self.meta = self.predictor.meta
 
     def predict(self, points) -> tuple[Grid, np.ndarray, np.ndarray]:
@@ -411,12 +413,12 @@ class CompletionMethod:
         """Whether :meth:`estimate` needs a slab for every segment (its model is an in-context model)."""
         return self.predictor.in_context
 
-    def estimate(self, points, slab=None) -> Estimate:
+    def estimate(self, points, slab=None, length_mm: float | None = None) -> Estimate:
         """Coverage, holes and centerline of one partial segment (points in mm).
 
         ``slab`` (:class:`colonbench.slab.Slab`): the segment's stretch of the map's centerline. Given one,
         the in-context model estimates (``context_model``, or ``model`` when that is one); a segment model
-        ignores it.
+        ignores it. ``length_mm``: the segment's arc length where known (``intervals.known_length``).
         """
         t0 = time.perf_counter()
         pts = method_cloud(points, self.thin_above)
@@ -434,6 +436,10 @@ class CompletionMethod:
         est = from_heatmap(p.heatmap, p.grid, pts, self.name, self.hole_distance, centerline_vox=cl,
                            cut_rims=self.cut_rims, shell_level=self.shell_level, gaps=self.gaps)
         est.seconds = {"check": t1 - t0, **shared, **{k: v for k, v in est.seconds.items() if k != "centerline"}}
+        if length_mm is not None:
+            known_length(est, length_mm)
+        if self.intervals is not None:
+            self.intervals.apply(est)
         return est
 
 
@@ -470,8 +476,7 @@ def from_heatmap(heatmap: np.ndarray, grid: Grid, points, method: str = "complet
     centerline_vox : (m, 3) float, optional
         Its centerline in voxels, if already extracted.
     cut_rims : bool
-        Clip the mesh at the cloud's cut rims where found (docs/method.md step 5); off where the
-        caller clips at planes it knows (``colonbench map``).
+        Clip the mesh at the cloud's cut rims where found (docs/method.md step 5); off where the caller knows them.
     shell_level : float or None
         :func:`colonbench.completion.surface.clip_to_shell`'s level; None keeps every face.
     gaps : bool
@@ -488,6 +493,8 @@ def from_heatmap(heatmap: np.ndarray, grid: Grid, points, method: str = "complet
     verts = grid.to_mm(comp.vertices) if len(comp.vertices) else np.zeros((0, 3))
     inside = line_between(cl_vox, comp.planes)
     cl = resample(grid.to_mm(inside), CENTERLINE_SPACING_MM) if len(inside) else np.zeros((0, 3))
+    signals = {"rims": int(comp.rims), "length_mm": round(float(arc_length(cl)[-1]), 2) if len(cl) else 0.0,
+               **({} if cut_rims else {"extent": "known"})}     # a caller clipping at planes it knows its ends
     return Estimate(coverage=comp.coverage, holes=verts[comp.hole], centerline=cl, method=method,
                     mesh_vertices=verts, mesh_faces=comp.faces, hole_vertices=comp.hole,
-                    seconds={"centerline": t1 - t0, "mesh_holes": t2 - t1})
+                    seconds={"centerline": t1 - t0, "mesh_holes": t2 - t1}, signals=signals)

@@ -65,6 +65,14 @@ RIM_FIT_DEG = 15.0
 RIM_BEYOND = 1.0
 
 
+class Planes(list):
+    """A segment's end planes, ``(point, inward unit normal)`` each, and ``rims``: how many of them were found at
+    a cut rim of the cloud (:func:`rim_planes`; 0 for planes found otherwise). An end with no rim is one the
+    cloud does not reach, or reaches raggedly: where the segment may go on unseen."""
+
+    rims: int = 0
+
+
 def end_planes(centerline_vox: np.ndarray, reach: float = END_REACH) -> list[tuple[np.ndarray, np.ndarray]]:
     """The segment's two end planes: (point, inward normal) at each end of the centerline.
 
@@ -152,20 +160,22 @@ def rim_planes(centerline_vox: np.ndarray, partial_vox: np.ndarray, band: float 
 
     Returns
     -------
-    list of (point, inward unit normal), one per end (as :func:`end_planes`).
+    Planes
+        (point, inward unit normal), one per end (as :func:`end_planes`), with the number found at a cut rim.
     """
-    planes = end_planes(centerline_vox)
+    planes = Planes(end_planes(centerline_vox))
     pts = np.asarray(partial_vox, float)
     if len(planes) != 2 or len(pts) < RIM_MIN_POINTS:
         return planes
     dense = resample(np.asarray(centerline_vox, float), 0.25)
     _, nearest = cKDTree(dense).query(pts)
-    out = []
+    out = Planes()
     for k, (point, normal) in enumerate(planes):
         near = nearest <= RIM_END_SHARE * len(dense) if k == 0 else nearest >= (1 - RIM_END_SHARE) * len(dense)
         x = pts[near]
         rim = _rim_plane(point, normal, x, band, cap_deg, min_share)
         out.append(pushed_out(point, normal, x) if rim is None else rim)
+        out.rims += rim is not None
     return out
 
 

@@ -40,6 +40,9 @@ class Completion:
         Observed area / total area of the completed mesh (NaN if the mesh is empty).
     planes : list of (point, inward normal)
         The planes the mesh was clipped at (the segment's ends).
+    rims : int
+        How many of them were found at a cut rim of the cloud (:class:`colonbench.completion.planes.Planes`); with
+        ``cut_rims`` off, where the caller knows the segment's ends, all of them.
     """
 
     vertices: np.ndarray
@@ -47,11 +50,13 @@ class Completion:
     hole: np.ndarray
     coverage: float
     planes: list = field(default_factory=list)
+    rims: int = 0
 
 
 def complete(heatmap: np.ndarray, centerline_vox: np.ndarray, partial_vox: np.ndarray,
              distance: float | None = None, cut_rims: bool = True,
-             shell_level: float | None = SHELL_LEVEL, gaps: bool = True, valley: float = GAP_VALLEY) -> Completion:
+             shell_level: float | None = SHELL_LEVEL, gaps: bool = True, valley: float = GAP_VALLEY,
+             planes: list | None = None) -> Completion:
     """Mesh, holes and coverage of a segment from its target heatmap, centerline and partial cloud (voxels).
 
     ``distance`` is the hole distance in voxels (default: the paper's sqrt(2)/2). ``cut_rims``: clip
@@ -60,12 +65,13 @@ def complete(heatmap: np.ndarray, centerline_vox: np.ndarray, partial_vox: np.nd
     every face, as before version 4 of the steps. ``gaps``: add hole patches where the tube has no wall
     (:func:`wall_gaps`), as from version 5; ``valley``: where the heatmap along such a ray falls below this
     (``inf``: every ray that meets no wall, for a surface without faint walls, such as a classical
-    reconstruction's).
+    reconstruction's). ``planes`` (point, inward normal; voxels): clip at these instead of finding them (a caller
+    that knows the segment's ends).
     """
     verts, faces = extract_mesh(*resigned_field(heatmap, centerline_vox))
     if shell_level is not None:
         verts, faces = clip_to_shell(verts, faces, heatmap, shell_level)
-    planes = segment_planes(centerline_vox, partial_vox, cut_rims)
+    planes = segment_planes(centerline_vox, partial_vox, cut_rims) if planes is None else planes
     verts, faces = clip_to_segment(verts, faces, centerline_vox, planes=planes)
     hole = hole_vertices(verts, partial_vox, HOLE_DISTANCE if distance is None else distance)
     if gaps and len(faces):
@@ -73,4 +79,5 @@ def complete(heatmap: np.ndarray, centerline_vox: np.ndarray, partial_vox: np.nd
         faces = np.concatenate([faces, gap_f + len(verts)])
         verts = np.concatenate([verts, gap_v])
         hole = np.concatenate([hole, np.ones(len(gap_v), bool)])
-    return Completion(verts, faces, hole, mesh_coverage(verts, faces, hole), planes)
+    rims = getattr(planes, "rims", 0) if cut_rims else len(planes)   # planes the caller knows are the segment's ends
+    return Completion(verts, faces, hole, mesh_coverage(verts, faces, hole), planes, rims)

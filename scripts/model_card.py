@@ -62,8 +62,30 @@ def main(argv=None):
             raise SystemExit("--log: the run's log.csv is needed for a trained model")
         out += _trained_rows(args, config, meta)
     out += _figures(args, meta)
+    out += intervals_rows(Path(args.model))
     print("\n".join(out))
     return 0
+
+
+def intervals_rows(model: Path) -> list[str]:
+    """The card's section on the model's coverage intervals, from its calibration file (none: no section)."""
+    from colonbench.completion import intervals
+
+    cal = intervals.load(model, steps=None) if intervals.path_for(model).is_file() else None
+    if cal is None:
+        return []
+    src = cal.source
+    out = ["", "## Coverage intervals", "",
+           f"`{intervals.path_for(model).name}` (id `{src.get('id')}`): {cal.level:.0%} split-conformal intervals "
+           f"for {src.get('steps')}, grouped by {cal.scheme}, calibrated by `python scripts/calibrate_intervals.py` on "
+           f"`{src.get('manifest')}` (sha256 `{src.get('manifest_sha256', '')[:16]}...`), {src.get('segments')} "
+           f"segments at noise {', '.join(f'{x:g}' for x in src.get('noise_mm', []))} mm ({src.get('estimates')} "
+           f"estimates); an interval wider than {100 * cal.review_width:.0f} points flags its estimate for review.", "",
+           "| group | calibration segments | interval around the estimate, points |", "|---|---:|---|"]
+    rows = [(k, g) for k, g in cal.groups.items() if k != "all"] + ([("extent known", cal.known)] if cal.known else [])
+    for key, g in rows:
+        out.append(f"| {key} | {g['n']} | {100 * g['low']:+.1f} to {100 * g['high']:+.1f} |")
+    return out
 
 
 def _network(config) -> str:

@@ -149,6 +149,17 @@ dump("train-video", "Video partials for training (the video hole model on the wi
       "validation": split(208, 4, 2, 1, WIDE_NOISE, {"video": 1.0})}, WIDE, axes="tube",
      mesh_names=["gca00090", "gca00080"])
 
+# ------------------------------------------------------------------ interval calibration (issue 52)
+#: Where the completion method's coverage intervals are calibrated (scripts/calibrate_intervals.py): widened colons
+#: under a seed of their own (no manifest trains on them), with a tenth video partials, and the real training colons
+#: (seen in training: their errors are optimistic). No suite's colons are used.
+dump("calibration", "Calibration of the completion method's coverage intervals (scripts/calibrate_intervals.py): "
+     "24 widened colons under this manifest's own seed, which no manifest trains on, with the widened hole models "
+     "and a tenth video partials, and the real training colons gca00090 and gca00080. Validation split only; no "
+     "suite's colons.", 20261128,
+     {"validation": split(0, 24, 3, 2, WIDE_NOISE, {**{k: round(0.9 * v, 4) for k, v in WIDE_HOLES.items()}, "video": 0.1},
+                          meshes=["gca00090", "gca00080"])}, WIDE, axes="tube", mesh_names=["gca00090", "gca00080"])
+
 # ------------------------------------------------------------------ whole-colon benchmark (issue 12)
 def whole_colons(first, count, permutations, meshes):
     """A split of whole-colon reconstructions (task: colon): no segments, camera and sphere holes half and half."""

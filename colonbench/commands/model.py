@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import inspect
 import shlex
 import sys
 from pathlib import Path
@@ -81,6 +82,9 @@ def cmd_estimate(args):
     if getattr(method, "uses_truth", False):
         raise ColonbenchError(f"method {method.name!r} is a reference that needs ground truth; it runs only in "
                               "colonbench evaluate")
+    known = {} if args.length_mm is None else {"length_mm": args.length_mm}
+    if known and "length_mm" not in inspect.signature(method.estimate).parameters:
+        raise ColonbenchError(f"--length-mm: method {method.name!r} does not take a segment's length")
     failed = 0
     with output_folder(args.out_dir) as out:  # gone again, if made here, when nothing is written into it
         for f, name in zip(files, names):
@@ -92,7 +96,7 @@ def cmd_estimate(args):
                 continue
             note_dropped(f, dropped)
             try:
-                est = as_estimate(method.estimate(points), method.name)
+                est = as_estimate(method.estimate(points, **known), method.name)
             except ColonbenchError as exc:                  # the method's do not
                 print(f"colonbench: error: {f}: {exc}", file=sys.stderr)
                 failed += 1
@@ -105,7 +109,9 @@ def cmd_estimate(args):
                 write_mesh_ply(out / f"{name}_mesh.ply", est.mesh_vertices, est.mesh_faces, colors)
                 write_points_ply(out / f"{name}_centerline.ply", est.centerline)
             total = sum(est.seconds.values()) if est.seconds else float("nan")
-            print(f"{name}: coverage {est.coverage:.3f}, {len(est.holes)} hole points, "
+            within = "" if est.coverage_interval is None else \
+                f" [{est.coverage_interval[0]:.3f}, {est.coverage_interval[1]:.3f}]" + (" REVIEW" if est.review else "")
+            print(f"{name}: coverage {est.coverage:.3f}{within}, {len(est.holes)} hole points, "
                   f"centerline {len(est.centerline)} points, {total:.2f} s")
     if failed:
         rest = "nothing was written" if failed == len(files) else "the others were written"
@@ -184,4 +190,8 @@ def add_parsers(sub) -> None:
                       "CHANGELOG.md), or small, the shipped model (the default)")
     p.add_argument("--mesh", action="store_true",
                    help="also write <name>_mesh.ply (completed mesh, holes red) and <name>_centerline.ply")
+    p.add_argument("--length-mm", type=positive(float), metavar="L",
+                   help="the segments' arc length along the colon where known, mm: a cloud that stops short of it "
+                        "has the rest counted unobserved (completion; docs/method.md, How sure it is)")
     p.set_defaults(func=cmd_estimate)
+

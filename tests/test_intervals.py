@@ -1,0 +1,117 @@
+"""How sure the completion method is: split-conformal intervals, a segment's known length, and how the benchmark
+scores intervals."""
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from colonbench.cli import main
+from colonbench.completion import intervals
+from colonbench.errors import InputError
+from colonbench.estimate import Estimate, as_estimate
+
+
+def test_conformal_quantiles_take_the_finite_sample_ranks():
+    r = np.arange(1, 20) / 100.0                       # 19 residuals: ranks floor(20 * 0.05) = 1, ceil(20 * 0.95) = 19
+    assert intervals.conformal_quantiles(r, 0.9) == (0.01, 0.19)
+    assert intervals.conformal_quantiles(r[:5], 0.9) == (-1.0, 1.0)   # too few for a 90 % interval: everything
+
+
+def test_a_calibration_covers_its_level_on_fresh_segments_of_the_same_kind():
+    rng = np.random.default_rng(0)
+
+    def draw(n):
+        length = rng.choice([35.0, 50.0, 65.0], n)
+        est = rng.uniform(0.5, 1.0, n)
+        spread = np.where(length < 45, 0.15, 0.03)     # short clouds err more, and downwards
+        true = np.clip(est - np.abs(rng.normal(0, spread)) + rng.normal(0, 0.01, n), 0, 1)
+        return true, est, [{"length_mm": x, "rims": 2} for x in length]
+
+    cal = intervals.fit(*draw(3000), "length", review_width=0.25)
+    true, est, signals = draw(4000)
+    inside, width = [], []
+    for t, c, sig in zip(true, est, signals):
+        e = Estimate(c, np.zeros((0, 3)), np.zeros((0, 3)), "m", signals=sig)
+        cal.apply(e)
+        inside.append(e.coverage_interval[0] <= t <= e.coverage_interval[1])
+        width.append(e.coverage_interval[1] - e.coverage_interval[0])
+        assert (width[-1] > 0.25) == any("wide" in r for r in e.review)
+    inside, width, short = np.array(inside), np.array(width), np.array([s["length_mm"] < 45 for s in signals])
+    assert 0.87 <= inside.mean() <= 0.93
+    assert 0.85 <= inside[short].mean() <= 0.95 and 0.85 <= inside[~short].mean() <= 0.95   # per group, too
+    assert width[short].mean() > 3 * width[~short].mean()                                     # it adapts
+
+
+def test_a_known_length_counts_what_the_cloud_does_not_reach_as_unobserved():
+    est = Estimate(0.9, np.zeros((0, 3)), np.zeros((0, 3)), "m", signals={"length_mm": 30.0, "rims": 2})
+    intervals.known_length(est, 60.0)
+    assert est.coverage == pytest.approx(0.45) and est.signals["extent"] == "known"
+    assert "spans 30 of the segment's 60 mm" in est.review[0]
+    near = Estimate(0.9, np.zeros((0, 3)), np.zeros((0, 3)), "m", signals={"length_mm": 57.0})
+    intervals.known_length(near, 60.0)                 # a line a little short of the cut: the cloud reaches it
+    assert near.coverage == 0.9 and not near.review
+    with pytest.raises(ValueError, match="positive"):
+        intervals.known_length(near, -1.0)
+
+
+def test_intervals_in_the_contract_are_checked():
+    est = as_estimate({"coverage": 0.8, "coverage_interval": [0.7, 0.9]}, "m")
+    assert est.coverage_interval == (0.7, 0.9) and est.to_json()["coverage_interval"] == [0.7, 0.9]
+    assert "coverage_interval" not in as_estimate({"coverage": 0.8}, "m").to_json()
+    for bad in ([0.9, 0.7], [0.5], [0.1, 1.5], "wide"):
+        with pytest.raises(InputError, match="coverage_interval"):
+            as_estimate({"coverage": 0.8, "coverage_interval": bad}, "m")
+
+
+def test_estimate_writes_the_interval_and_takes_a_known_length(demo_data, tmp_path, capsys):
+    from colonbench.shards.reader import Shard
+
+    shard = sorted((demo_data / "demo-v1" / "test").glob("*.h5"))[0]
+    with Shard(shard) as s:
+        np.save(tmp_path / "seg.npy", s.geometry(0)["partial_points"])
+    assert main(["estimate", str(tmp_path / "seg.npy"), "--out-dir", str(tmp_path / "a")]) == 0
+    a = json.loads((tmp_path / "a" / "seg.json").read_text())
+    assert a["coverage_interval"][0] <= a["coverage"] <= a["coverage_interval"][1]
+    assert a["coverage_interval_level"] == 0.9 and isinstance(a["review"], list)
+    assert main(["estimate", str(tmp_path / "seg.npy"), "--out-dir", str(tmp_path / "b"), "--length-mm", "500"]) == 0
+    b = json.loads((tmp_path / "b" / "seg.json").read_text())
+    assert b["coverage"] < 0.2 and b["signals"]["extent"] == "known" and "counted unobserved" in b["review"][0]
+    capsys.readouterr()
+    with pytest.raises(SystemExit):
+        main(["estimate", str(tmp_path / "seg.npy"), "--out-dir", str(tmp_path / "c"), "--length-mm", "-3"])
+    assert "--length-mm: must be a positive number" in capsys.readouterr().err
+    assert main(["estimate", str(tmp_path / "seg.npy"), "--out-dir", str(tmp_path / "c"), "--length-mm", "60",
+                 "--method", "constant"]) == 2
+    assert "does not take a segment's length" in capsys.readouterr().err
+
+
+def test_the_benchmark_scores_intervals_and_says_n_a_for_methods_without(demo_data, tmp_path):
+    from colonbench.benchmark.evaluate import evaluate
+    from colonbench.reports.leaderboard import write_leaderboard
+
+    class Sure:
+        name, version = "sure", "1"
+
+        def estimate(self, points):
+            return {"coverage": 0.8, "coverage_interval": [0.7, 0.9]}
+
+    class Plain:
+        name, version = "plain", "1"
+
+        def estimate(self, points):
+            return {"coverage": 0.8}
+
+    run = evaluate(demo_data / "demo-v1", [Sure(), Plain()], tmp_path / "run", noise=[0], progress=False, examples=0)
+    rows = pd.read_csv(run / "results" / "sure.csv")
+    assert (rows["interval_low"] == 0.7).all() and pd.read_csv(run / "results" / "plain.csv")["interval_low"].isna().all()
+    inside = ((rows["true_coverage"] >= 0.7) & (rows["true_coverage"] <= 0.9)).mean()
+    summary = json.loads((run / "results" / "sure.json").read_text())
+    row = summary["rows"][0] if "rows" in summary else summary
+    text = json.dumps(row)
+    assert "interval_covered" in text
+    out = write_leaderboard([run], tmp_path / "lb", figures=False)
+    md = (tmp_path / "lb" / "leaderboard.md").read_text()
+    assert f"| sure | 24 | {100 * inside:.1f} % | 20.0 |" in md and "| plain | 24 |" not in md
+    assert "interval" in (tmp_path / "lb" / "breakdowns.md").read_text() and out["paths"]
