@@ -97,7 +97,8 @@ def run_colon_unit(data: str, shard_name: str, index: int, sigma: float, noise_s
         ``{method: (segment rows, colon rows)}`` (lists of dicts, :data:`SEGMENT_COLUMNS`, :data:`COLON_COLUMNS`).
     """
     from colonbench.mapping.reconstruction_centerline import colon_centerline
-    from colonbench.mapping.colonmap import map_colon, whole_coverage
+    from colonbench.mapping.colonmap import map_colon
+    from colonbench.mapping.segments import whole_coverage
 
     shard, truth = _colon(data, shard_name)
     sample = shard.sample(index)

@@ -22,96 +22,11 @@ import numpy as np
 from colonbench.errors import InputError
 from colonbench.mapping import SEGMENT_MM
 from colonbench.mapping.reach import beyond_reach, unreached_error
+from colonbench.mapping.segments import MIN_HOLE_MM2, Segment, add_unreconstructed, hole_regions
 from colonbench.slab import point_at
 
 #: A segment with fewer points is reported without an estimate.
 MIN_POINTS = 200
-#: Hole regions smaller than this are not counted in ``holes`` (specks between the cloud's points), mm^2.
-MIN_HOLE_MM2 = 10.0
-
-
-@dataclass
-class Segment:
-    """One segment of the map (mm, the input's frame).
-
-    Attributes
-    ----------
-    index : int
-        From 0 at the rectum end (or at the first end when the direction is unknown).
-    start_mm, end_mm : float
-        Arc lengths along the map's centerline.
-    plane_start, plane_end : dict
-        ``{"point": [x, y, z], "normal": [x, y, z]}``, normals along increasing arc length.
-    points : int
-        Reconstruction points in the segment.
-    coverage : float or None
-        The method's estimate; None when it could not run (``error`` says why).
-    hole_area_mm2, largest_hole_mm2 : float or None
-        From the completed mesh (None for methods without one).
-    holes : int or None
-        Hole regions of at least :data:`MIN_HOLE_MM2` on the completed mesh.
-    """
-
-    index: int
-    piece: int
-    start_mm: float
-    end_mm: float
-    plane_start: dict
-    plane_end: dict
-    points: int
-    coverage: float | None = None
-    hole_area_mm2: float | None = None
-    holes: int | None = None
-    largest_hole_mm2: float | None = None
-    area_mm2: float | None = None
-    seconds: float = 0.0
-    error: str = ""
-    mesh: tuple = field(default=(), repr=False)
-    #: Arc length of the segment that the trajectory passes with no reconstruction, mm (counted unobserved).
-    unreconstructed_mm: float = 0.0
-
-    def row(self) -> dict:
-        """The JSON / CSV row."""
-        return {"index": self.index, "piece": self.piece, "start_mm": round(self.start_mm, 2),
-                "end_mm": round(self.end_mm, 2), "plane_start": self.plane_start, "plane_end": self.plane_end,
-                "points": self.points, "coverage": round_or_none(self.coverage, 4),
-                "hole_area_mm2": round_or_none(self.hole_area_mm2, 1), "holes": self.holes,
-                "largest_hole_mm2": round_or_none(self.largest_hole_mm2, 1), "area_mm2": round_or_none(self.area_mm2, 1),
-                "unreconstructed_mm": round(self.unreconstructed_mm, 1), "seconds": round(self.seconds, 3),
-                "error": self.error}
-
-
-def round_or_none(x, nd):
-    return None if x is None or not np.isfinite(x) else round(float(x), nd)
-
-
-def hole_regions(vertices: np.ndarray, faces: np.ndarray, hole: np.ndarray) -> tuple[float, np.ndarray]:
-    """Hole area and the area of each hole region of a completed mesh, mm^2.
-
-    Each triangle counts its area times its share of hole vertices (as
-    :func:`colonbench.completion.surface.mesh_coverage` does); a region is a
-    set of triangles with a hole vertex joined by shared edges.
-
-    Returns
-    -------
-    total : float
-    regions : (r,) float, largest first
-    """
-    import trimesh
-
-    from colonbench.meshes import triangle_areas
-
-    if len(faces) == 0:
-        return 0.0, np.zeros(0)
-    share = hole[faces].mean(axis=1)
-    area = triangle_areas(vertices, faces) * share
-    holed = np.flatnonzero(share > 0)
-    if len(holed) == 0:
-        return 0.0, np.zeros(0)
-    adjacency = trimesh.graph.face_adjacency(faces[holed])
-    groups = trimesh.graph.connected_components(adjacency, nodes=np.arange(len(holed)), min_len=1)
-    regions = np.sort([float(area[holed[g]].sum()) for g in groups])[::-1]
-    return float(area.sum()), regions
 
 
 def _frame(line: np.ndarray, s: np.ndarray, at: float, half_mm: float = 8.0) -> dict:
@@ -456,41 +371,14 @@ def map_colon(points: np.ndarray, method, segment_mm: float = SEGMENT_MM, positi
             index[used] = np.arange(len(used))
             seg.mesh = (est.mesh_vertices[used], index[faces], est.hole_vertices[used])
         if seg.unreconstructed_mm > 0:
-            _add_unreconstructed(seg, radius)
+            add_unreconstructed(seg, radius)
+        if est.coverage_interval is not None:  # the method's interval, moved with the segment's own coverage
+            shift = seg.coverage - est.coverage
+            seg.coverage_interval = [float(np.clip(x + shift, 0, 1)) for x in est.coverage_interval]
+        seg.review = list(est.review)
         out.append(seg)
     seconds["estimate"] = time.perf_counter() - t0
     return {"segments": out, "centerline": line, "arclength": arc, "interruptions": joined.interruptions,
             "unreconstructed": [{"from_mm": round(a, 2), "to_mm": round(b, 2)} for a, b in unseen],
             "orientation": orientation, "context_mm": float(context_mm), "reached": 1.0 - float(far.mean()),
             "seconds": seconds}
-
-
-def _add_unreconstructed(seg: Segment, radius: float) -> None:
-    """Count the segment's stretch with no reconstruction (the trajectory passes it) as unobserved.
-
-    The method estimated the reconstructed part; the stretch it could not see
-    adds a tube of the colon's ``radius`` and its length to the area, all of it
-    hole: coverage = observed / (estimated area + that tube).
-    """
-    gap_area = float(2 * np.pi * radius * seg.unreconstructed_mm)
-    seen_length = max(seg.end_mm - seg.start_mm - seg.unreconstructed_mm, 1e-6)
-    area = seg.area_mm2 if seg.area_mm2 else float(2 * np.pi * radius * seen_length)
-    hole = seg.hole_area_mm2 if seg.hole_area_mm2 is not None else (1.0 - seg.coverage) * area
-    seg.coverage = float((area - hole) / (area + gap_area))
-    if seg.area_mm2:
-        seg.area_mm2, seg.hole_area_mm2 = area + gap_area, hole + gap_area
-        seg.largest_hole_mm2 = max(seg.largest_hole_mm2 or 0.0, gap_area)
-
-
-def whole_coverage(segments: list[Segment]) -> float | None:
-    """Observed over completed area over all estimated segments (coverage weighted by length without meshes)."""
-    done = [s for s in segments if s.coverage is not None]
-    if not done:
-        return None
-    if all(s.area_mm2 for s in done):
-        area = sum(s.area_mm2 for s in done)
-        return float(sum(s.area_mm2 - s.hole_area_mm2 for s in done) / area)
-    length = np.array([s.end_mm - s.start_mm for s in done])
-    return float(np.sum(length * [s.coverage for s in done]) / length.sum())
-
-

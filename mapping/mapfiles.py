@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from colonbench.mapping.colonmap import round_or_none, whole_coverage
+from colonbench.mapping.segments import round_or_none, whole_coverage
 
 
 #: Coverage at or below this is red, 1 green (the paper's supplementary map).

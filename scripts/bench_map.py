@@ -41,7 +41,8 @@ def main() -> None:
     from colonbench.benchmark.registry import load_method
     from colonbench.datagen.colon import generate_colon
     from colonbench.datagen.wholecolon import whole_partial
-    from colonbench.mapping.colonmap import map_colon, whole_coverage
+    from colonbench.mapping.colonmap import map_colon
+    from colonbench.mapping.segments import whole_coverage
     from colonbench.mapping.mapfiles import map_mesh, render_map
 
     torch.set_num_threads(args.threads)

@@ -77,6 +77,8 @@ def test_straight_tube_segments_get_their_known_coverage(tmp_path, capsys):
     assert [round(x["start_mm"]) for x in segs] == [0, 60, 120, 180, 240]
     truth = [1.0, 1 - 30 / (4 * 60), 1.0, 1 - 40 / (2 * 60), 1.0]
     for seg, t in zip(segs, truth):
+        low, high = seg["coverage_interval"]     # the method's 90 % interval for a segment whose ends are known
+        assert low <= t <= high and high - low < 0.25 and isinstance(seg["review"], list)
         assert seg["plane_start"]["point"][2] == pytest.approx(seg["start_mm"], abs=4.0)
         assert abs(seg["plane_start"]["normal"][2]) > np.cos(np.radians(5))
         assert seg["coverage"] == pytest.approx(t, abs=0.08), (seg, t)
@@ -154,7 +156,8 @@ def test_a_trajectory_bridges_a_stretch_with_no_reconstruction():
         def estimate(self, points):
             return {"coverage": 1.0, "holes": np.zeros((0, 3)), "centerline": np.zeros((0, 3))}
 
-    from colonbench.mapping.colonmap import map_colon, whole_coverage
+    from colonbench.mapping.colonmap import map_colon
+    from colonbench.mapping.segments import whole_coverage
 
     result = map_colon(pts[keep], Full(), segment_mm=60.0, positions=traj, progress=False)
     assert result["interruptions"] == []
@@ -328,7 +331,8 @@ def test_a_segment_without_an_estimate_is_reported_and_left_out_of_the_whole_col
             cov = float("nan") if np.mean(points[:, 2]) < 60 else 0.8
             return {"coverage": cov, "holes": np.zeros((0, 3)), "centerline": np.zeros((0, 3))}
 
-    from colonbench.mapping.colonmap import map_colon, whole_coverage
+    from colonbench.mapping.colonmap import map_colon
+    from colonbench.mapping.segments import whole_coverage
 
     result = map_colon(pts, NoSurfaceNearZero(), segment_mm=60.0, positions=line.points[::-20], progress=False)
     failed = [s for s in result["segments"] if s.coverage is None]
