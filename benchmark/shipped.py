@@ -68,37 +68,56 @@ def load(suite, exclude=()) -> tuple | None:
     return run, pd.concat(frames, ignore_index=True), label
 
 
-def publish(run_dir, suite) -> Path:
-    """Copy a finished run of a suite into the shipped results (replacing what was there).
+def publish(run_dir, suite, methods=None) -> Path:
+    """Copy a finished run of a suite into the shipped results: all of it (replacing what was there), or only
+    ``methods``, whose rows replace their shipped ones while the other methods' stay.
 
     Raises
     ------
     InputError
-        The run is not of this suite, not verified against its published hash, or not finished.
+        The run is not of this suite, not made on its published data (bit-identical), not finished, or lacks a
+        method asked for.
     """
     run_dir = Path(run_dir)
     run = read_run(run_dir)
     rec = run.get("suite") or {}
     if rec.get("id") != suite.id or not rec.get("verified") or rec.get("sha256") != suite.sha256:
-        raise InputError(f"{run_dir}: not a verified run of {suite.id} (its suite record: {rec or 'none'})")
+        raise InputError(f"{run_dir}: not a run of {suite.id} on its published data (its suite record: "
+                         f"{rec or 'none'})")
     if not run.get("complete"):
         raise InputError(f"{run_dir}: not finished")
+    colon = run.get("task") == "colon"
+    if methods is not None:
+        missing = sorted(set(methods) - set(run["methods"]))
+        if missing:
+            raise InputError(f"{run_dir}: holds no run of {', '.join(missing)}")
+        old = read_run(folder(suite))
+        run = {**old, "methods": {**old["methods"], **{m: run["methods"][m] for m in methods}},
+               "suite": run["suite"], "versions": run.get("versions"), "environment": run.get("environment")}
     out = folder(suite)
-    if out.exists():
-        shutil.rmtree(out)
-    (out / "results").mkdir(parents=True)
-    run = {k: v for k, v in run.items() if k != "data_path"}
-    names = ["segments.csv", "colons.csv"] if run.get("task") == "colon" else \
+    staging = out.with_name(f".{out.name}.new")
+    shutil.rmtree(staging, ignore_errors=True)
+    (staging / "results").mkdir(parents=True)
+    names = ["segments.csv", "colons.csv"] if colon else \
         [f"{n}.{ext}" for n in run["methods"] for ext in ("csv", "json")]
     for name in names:
         src = run_dir / "results" / name
+        if methods is not None and (colon or Path(name).stem not in methods):
+            src = out / "results" / name              # kept from the shipped results
         if name.endswith(".csv"):
-            read_rows(src).to_csv(out / "results" / name, index=False, float_format=f"%.{DIGITS}g")
+            rows = read_rows(src)
+            if colon and methods is not None:         # the new run's rows of these methods, the shipped ones of others
+                new = read_rows(run_dir / "results" / name)
+                rows = pd.concat([rows[~rows["method"].isin(methods)], new[new["method"].isin(methods)]],
+                                 ignore_index=True)
+            rows.to_csv(staging / "results" / name, index=False, float_format=f"%.{DIGITS}g")
         else:
             summary = json.loads(src.read_text())
             summary.pop("data_path", None)
-            write_json(out / "results" / name, summary)
-    write_json(out / RUN_FILE, run)
+            write_json(staging / "results" / name, summary)
+    write_json(staging / RUN_FILE, {k: v for k, v in run.items() if k != "data_path"})
+    shutil.rmtree(out, ignore_errors=True)
+    staging.rename(out)
     return out
 
 

@@ -178,6 +178,8 @@ class Tolerances:
 
 
 TOLERANCES = Tolerances()
+#: Points up to which :attr:`Tolerances.points_mm` holds as it is (:func:`same_limit_mm`).
+NOISE_POINTS = 20000
 
 
 def displacement_mm(a, b) -> float:
@@ -244,8 +246,6 @@ def _drawn_alike(name: str, found: dict, pub: dict, tol: Tolerances) -> str:
     return ""
 
 
-#: Points up to which :attr:`Tolerances.points_mm` holds as it is (:func:`same_limit_mm`).
-NOISE_POINTS = 20000
 #: The noiseless input of a sample, by its signature entry's name.
 NOISELESS = "input@0"
 

@@ -193,7 +193,7 @@ def check_suite(published: dict, lock: dict, sha256: str, records: list[dict], s
                              f"{diverged[0].sample}: {diverged[0].what}")
         if ties > tol.tie_share * len(pub):
             first = next(c for c in checks if c.level in ("tie", "diverged"))
-            aggregate.append(f"{ties} of {len(pub)} samples were decided otherwise at a near-tie, more than float noise "
-                             f"makes ({tol.tie_share:.0%}): the generator differs; the first: sample {first.sample}, "
+            aggregate.append(f"{ties} of {len(pub)} samples were decided otherwise at a near-tie, more than float "
+                             f"noise makes ({tol.tie_share:.0%}): the generator differs; the first: sample {first.sample}, "
                              f"{first.what}")
     return SuiteCheck(published["suite"], sha256, sha256 == published["sha256"], faults, checks, aggregate)

@@ -1,6 +1,7 @@
 """Make the shipped reference results: every built-in method on every suite, evaluated and published.
 
     python scripts/reference_results.py [--suites all] [--data DIR] [--workers 2] [--out runs/reference]
+                                        [--methods completion]
 
 Each suite's data is generated where missing (and checked against its
 published hash), the built-in methods are evaluated into OUT/runs/<suite>/ by
@@ -26,13 +27,16 @@ def main() -> None:
     ap.add_argument("--data", help="suite data folder (default: colonbench's cache)")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--out", default="runs/reference")
+    ap.add_argument("--methods", help="only these built-in methods (comma-separated): their shipped rows are replaced, "
+                                      "the other methods' kept")
     args = ap.parse_args()
+    only = [m.strip() for m in args.methods.split(",")] if args.methods else None
     for suite in suites.parse(args.suites):
         t = time.perf_counter()
-        methods = list(ALL_METHODS if suite.task == "colon" else DEFAULT_METHODS)
+        methods = only or list(ALL_METHODS if suite.task == "colon" else DEFAULT_METHODS)
         result = run_benchmark(methods, [suite], args.out, data=args.data, workers=args.workers, shipped=False,
                                figures=False, progress=False)
-        where = shipped.publish(result["runs"][suite.id], suite)
+        where = shipped.publish(result["runs"][suite.id], suite, methods=only)
         sec = result["seconds"][suite.id]
         print(f"{suite.id}: {len(methods)} methods, data {sec['data_seconds']:.0f} s, evaluation "
               f"{sec['evaluate_seconds']:.0f} s with {args.workers} workers -> {where} "

@@ -47,9 +47,9 @@ def _archive(args):
     suite = suites.get(args.suite)
     data = suites.ensure_data(suite, args.data, workers=args.workers, progress=not args.quiet)
     info = archive.write_archive(suite, data, args.out)
-    print(f"wrote {args.out}: {suite.citation}, {info['samples']} samples, {info['bytes'] / 2**20:.1f} MiB, "
-          f"{'bit-identical to the published data' if info['bit_identical'] else 'within tolerance of the published data'}"
-          f"\nsha256 {info['sha256_archive']}")
+    how = "bit-identical to" if info["bit_identical"] else "within tolerance of"
+    print(f"wrote {args.out}: {suite.citation}, {info['samples']} samples, {info['bytes'] / 2**20:.1f} MiB, {how} the "
+          f"published data\nsha256 {info['sha256_archive']}")
     return 0
 
 
