@@ -18,7 +18,6 @@ same bytes; its sha256 is what a fetch checks first.
 
 from __future__ import annotations
 
-import hashlib
 import io
 import json
 import os
@@ -75,6 +74,7 @@ def write_archive(suite, data, out, progress: bool = True) -> dict:
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     staging = out.with_name(f".{out.name}.parts-{os.getpid()}")
+    tmp = out.with_name(f".{out.name}.tmp-{os.getpid()}")
     shutil.rmtree(staging, ignore_errors=True)
     try:
         shards = {}
@@ -89,10 +89,12 @@ def write_archive(suite, data, out, progress: bool = True) -> dict:
         new_lock = {k: v for k, v in lock.items() if k not in ("shards", "missing", "splits")}
         new_lock.update(splits={suite.split: lock["splits"][suite.split]}, missing=[],
                         shards={n: e for n, (_, e) in shards.items()})
+        subsets = {n: list(map(int, i)) for n, i in picks if len(i) != int(lock["shards"][n]["samples"])}
+        if subsets:   # the rows the subset shards hold (colonbench.benchmark.evaluate.select reads only those)
+            new_lock["kept_samples"] = subsets
         info = {"format": FORMAT, "format_version": FORMAT_VERSION, "suite": suite.id, "signature": suite.signature,
                 "sha256": result.sha256, "bit_identical": bool(result.bit_identical),
                 "samples": len(result.samples)}
-        tmp = out.with_name(f".{out.name}.tmp-{os.getpid()}")
         with tarfile.open(tmp, "w", format=tarfile.PAX_FORMAT) as tar:
             _add(tar, INFO_NAME, json.dumps(info, indent=1).encode())
             _add(tar, "dataset.lock.json", json.dumps(new_lock, indent=1, sort_keys=True).encode())
@@ -101,15 +103,8 @@ def write_archive(suite, data, out, progress: bool = True) -> dict:
         os.replace(tmp, out)
     finally:
         shutil.rmtree(staging, ignore_errors=True)
-    return {**info, "sha256_archive": _sha256(out), "bytes": out.stat().st_size}
-
-
-def _sha256(path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 22), b""):
-            h.update(block)
-    return h.hexdigest()
+        tmp.unlink(missing_ok=True)
+    return {**info, "sha256_archive": sha256_file(out), "bytes": out.stat().st_size}
 
 
 def _check_members(tar: tarfile.TarFile) -> None:
@@ -122,9 +117,9 @@ def _check_members(tar: tarfile.TarFile) -> None:
 def fetch(suite, url: str, sha256: str, root=None, progress: bool = True) -> Path:
     """Download a suite's archive into the suite cache, checked, from where every command uses it.
 
-    The download (pooch: cached, with a progress bar) must have ``sha256``; the archive must hold ``suite`` and its
-    data must verify against the suite's published signature. Only then does it replace the suite's folder under
-    ``root``; on any failure nothing is left in the cache.
+    The download (pooch: checked by sha256, with a progress bar) must have ``sha256``; the archive must hold
+    ``suite`` and its data must verify against the suite's published signature. Only then is it put in place as
+    the suite's folder under ``root``, which must not exist yet; on any failure nothing is left in the cache.
 
     Parameters
     ----------
@@ -152,6 +147,9 @@ def fetch(suite, url: str, sha256: str, root=None, progress: bool = True) -> Pat
     if not re.fullmatch(r"[0-9a-f]{64}", sha256):
         raise InputError(f"--sha256 must be the archive's sha256, 64 hex digits; got {sha256!r}")
     target = suites.data_dir(suite, root)
+    if target.exists():
+        raise InputError(f"{target} exists: the suite's data are cached there already (colonbench suites --check says "
+                         "whether they verify); remove the folder to fetch the archive in its place")
     target.parent.mkdir(parents=True, exist_ok=True)
     staging = target.parent / f".fetch-{suite.id}-{os.getpid()}"
     shutil.rmtree(staging, ignore_errors=True)
@@ -177,10 +175,9 @@ def fetch(suite, url: str, sha256: str, root=None, progress: bool = True) -> Pat
             raise InputError(f"{url}: not a colonbench suite archive (no {INFO_NAME})") from None
         if info.get("format") != FORMAT or info.get("suite") != suite.id:
             raise InputError(f"{url}: an archive of {info.get('suite')!r} ({info.get('format')}), not of {suite.id}")
-        suites.verify(suite, folder)
-        old = staging / "replaced"
-        if target.exists():
-            target.rename(old)
+        result = suites.check(suite, folder)
+        if not result.verified:
+            raise InputError(f"{url}: its data do not verify against {suite.signature}: {result.first_difference()}")
         folder.rename(target)
     finally:
         shutil.rmtree(staging, ignore_errors=True)

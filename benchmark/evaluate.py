@@ -100,7 +100,8 @@ def select(data, split: str = "test", limit: int | None = None) -> tuple[dict, l
         path = data / name
         if not path.is_file() or path.stat().st_size != e["bytes"]:
             raise InputError(f"{path}: missing or not the size its lock records; run colonbench verify {data}")
-    flat = [(n, i) for n, e in shards.items() for i in range(int(e["samples"]))]
+    kept = lock.get("kept_samples", {})   # a suite archive's subset shards hold only these rows
+    flat = [(n, i) for n, e in shards.items() for i in (kept[n] if n in kept else range(int(e["samples"])))]
     if limit is not None:
         if limit < 1:
             raise InputError(f"--limit must be >= 1, got {limit}")

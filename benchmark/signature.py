@@ -138,7 +138,7 @@ def rounded(values) -> list[float]:
 
 @dataclass(frozen=True)
 class Tolerances:
-    """How far a regenerated sample may be from its published signature (decision record 0144).
+    """How far a regenerated sample may be from its published signature (decision record 0320).
 
     Attributes
     ----------
@@ -251,10 +251,13 @@ NOISELESS = "input@0"
 
 
 def _may_redraw(name: str, tie: bool, redrawn: set) -> bool:
-    """Whether the generator can have drawn point set ``name`` anew from float noise alone (module docstring): any
-    set at a tie; the noiseless input and the holes always (a face's area moved by a hair moves which face a draw
-    lands on); a noisy input only with the noiseless one (it is that one plus the suite's fixed noise draw)."""
-    return tie or name in ("holes", NOISELESS) or NOISELESS in redrawn
+    """Whether the generator can have drawn point set ``name`` anew from float noise alone (module docstring): a
+    noisy input only with the noiseless one, tie or not (it is that one plus the suite's fixed noise draw, point by
+    point); the noiseless input and the holes always (a face's area moved by a hair moves which face a draw lands
+    on); any other set at a tie."""
+    if name.startswith("input@") and name != NOISELESS:
+        return NOISELESS in redrawn
+    return tie or name in ("holes", NOISELESS)
 
 
 def check_sample(found: dict, pub: dict, tol: Tolerances = TOLERANCES, surface=None) -> SampleCheck:
@@ -286,8 +289,12 @@ def check_sample(found: dict, pub: dict, tol: Tolerances = TOLERANCES, surface=N
         if why:
             out.what = why
             return out
-    tie = found["observed_faces"] != pub["observed_faces"] or abs(dc) > tol.coverage_float
-    if tie and not abs(dc) <= tol.coverage_tie:
+    if set(found["points"]) != set(pub["points"]):
+        out.what = (f"point sets {', '.join(sorted(found['points']))}, published {', '.join(sorted(pub['points']))} "
+                    "(another noise protocol)")
+        return out
+    tie = found["observed_faces"] != pub["observed_faces"] or not abs(dc) <= tol.coverage_float
+    if tie and not abs(dc) <= tol.coverage_tie:   # a NaN coverage too
         out.what = f"coverage {found['coverage']:.6f}, published {pub['coverage']:.6f} (differs by {dc:+.2e}, " \
                    f"more than a near-tie makes: {tol.coverage_tie:g})"
         return out

@@ -246,15 +246,16 @@ def ensure_data(suite: Suite, root=None, workers: int = 1, scheduler=None, progr
     return out
 
 
-def identity(suite: Suite, data) -> tuple[str, list[dict], dict]:
-    """A suite's data folder as its identity is checked: content hash, per-sample signatures and the lock."""
+def identity(suite: Suite, data) -> tuple[str, list[dict], dict, list]:
+    """A suite's data folder as its identity is checked: content hash, per-sample signatures, the lock and the
+    samples' places (shard name, index), in order."""
     from colonbench.benchmark import fingerprint as fp
     from colonbench.benchmark.evaluate import read_lock, select
 
     _, picks = select(data, suite.split, suite.limit)
     fn = fp.colons_fingerprint if suite.task == "colon" else fp.segments_fingerprint
     sha256, records = fn(data, picks, suite.noise_mm, suite.noise_seed)
-    return sha256, records, read_lock(Path(data))
+    return sha256, records, read_lock(Path(data)), [(name, i) for name, indices in picks for i in indices]
 
 
 def fingerprint(suite: Suite, data) -> str:
@@ -277,15 +278,13 @@ def published_signature(suite: Suite) -> dict:
 def check(suite: Suite, data):
     """A suite's data folder against its published signature: a
     :class:`~colonbench.benchmark.verification.SuiteCheck` (bit-identical, within tolerance, or what differs)."""
-    from colonbench.benchmark.evaluate import select
     from colonbench.benchmark.fingerprint import surface_distances
     from colonbench.benchmark.verification import check_suite
 
-    sha256, records, lock = identity(suite, data)
-    _, picks = select(data, suite.split, suite.limit)
-    where = [(name, i) for name, indices in picks for i in indices]
+    sha256, records, lock, where = identity(suite, data)
     return check_suite(published_signature(suite), lock, sha256, records,
-                       surface=lambda k: surface_distances(data, *where[k], task=suite.task))
+                       surface=lambda k: surface_distances(data, *where[k], task=suite.task), noise_mm=suite.noise_mm,
+                       noise_seed=suite.noise_seed)
 
 
 def verify(suite: Suite, data, allow_unverified: bool = False) -> dict:

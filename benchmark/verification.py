@@ -57,7 +57,7 @@ def load(suite_id: str, expected: str | None = None) -> dict | None:
 
     Raises
     ------
-    ValueError
+    InputError
         Its digest is not ``expected`` (the registry's): the file was changed without a new suite version.
     """
     import gzip
@@ -67,7 +67,10 @@ def load(suite_id: str, expected: str | None = None) -> dict | None:
         return None
     published = json.loads(gzip.decompress(path.read_bytes()))
     if expected is not None and digest(published) != expected:
-        raise ValueError(f"{path}: its digest is {digest(published)}, the registry publishes {expected}")
+        from colonbench.errors import InputError
+
+        raise InputError(f"{path}: its digest is {digest(published)}, the registry publishes {expected}: the file "
+                         "was changed; reinstall colonbench")
     return published
 
 
@@ -155,10 +158,12 @@ class SuiteCheck:
         return f"differs: {self.first_difference()}" + (f" (and {more} more)" if more > 0 else "")
 
 
-def check_suite(published: dict, lock: dict, sha256: str, records: list[dict], surface=None) -> SuiteCheck:
+def check_suite(published: dict, lock: dict, sha256: str, records: list[dict], surface=None, noise_mm=None,
+                noise_seed: int = 0) -> SuiteCheck:
     """Compare a suite's data (its lock, content hash and per-sample signatures) with the published signature.
 
-    ``surface(k)``: the on-surface distances of sample ``k`` (:func:`check_sample`'s ``surface``).
+    ``surface(k)``: the on-surface distances of sample ``k`` (:func:`check_sample`'s ``surface``); ``noise_mm`` and
+    ``noise_seed``: the noise protocol the records were made with (checked against the published one where given).
     """
     tol = Tolerances(**published["tolerances"])
     faults = []
@@ -166,6 +171,10 @@ def check_suite(published: dict, lock: dict, sha256: str, records: list[dict], s
         if lock.get(key) != published[key]:
             faults.append(f"made from another {what} ({key} {str(lock.get(key))[:12]}..., published "
                           f"{published[key][:12]}...)")
+    if noise_mm is not None:
+        for key, value in (("noise_mm", [float(x) for x in noise_mm]), ("noise_seed", int(noise_seed))):
+            if value != published[key]:
+                faults.append(f"checked with {key} {value}, published {published[key]} (another noise protocol)")
     pub = published["samples"]
     checks = []
     for k, (found, want) in enumerate(zip(records, pub)):

@@ -18,7 +18,6 @@ import argparse
 import time
 
 from colonbench.benchmark import signature, suites, verification
-from colonbench.benchmark.evaluate import select
 from colonbench.benchmark.fingerprint import surface_distances
 
 
@@ -39,12 +38,10 @@ def main() -> None:
     for suite in suites.parse(args.suites):
         t = time.perf_counter()
         data = suites.ensure_data(suite, args.data, workers=args.workers, progress=False)
-        sha256, records, lock = suites.identity(suite, data)
+        sha256, records, lock, where = suites.identity(suite, data)
         if sha256 != suite.sha256:
             raise SystemExit(f"{suite.id}: the data here hash to {sha256[:20]}..., not the published "
                              f"{suite.sha256[:20]}...: a signature is made from the published data only")
-        _, picks = select(data, suite.split, suite.limit)
-        where = [(name, i) for name, indices in picks for i in indices]
         for record, (name, i) in zip(records, where):
             record["cloud"] = cloud_class(record, surface_distances(data, name, i, task=suite.task))
         published = verification.make(suite, lock, sha256, records)

@@ -5,7 +5,9 @@ its sample id) and every reader works on it unchanged; the rows that are not
 kept are emptied: their point sets, masks and meshes have no entries and their
 heatmaps are never written (HDF5 stores no chunk for them; they read as 0).
 Segments that no kept sample uses are emptied the same way. The file attribute
-``kept_samples`` (a JSON list of the kept row indices) says which rows hold data.
+``kept_samples`` (a JSON list of the kept row indices) says which rows hold data, and a dataset lock that
+lists subsets names them under ``kept_samples`` too, so that every reader of the folder
+(:func:`colonbench.benchmark.evaluate.select`) takes only those rows.
 """
 
 from __future__ import annotations
@@ -16,17 +18,12 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from colonbench.errors import InputError
 from colonbench.shards import schema
 from colonbench.shards.writer import TMP_SUFFIX, publish
 
 #: File attribute of a subset: JSON list of the sample rows that hold data (absent in a whole shard).
 KEPT_ATTR = "kept_samples"
-
-
-def kept_samples(h5: h5py.File) -> list[int] | None:
-    """The sample rows of an open shard that hold data: None for a whole shard."""
-    value = h5.attrs.get(KEPT_ATTR)
-    return None if value is None else [int(i) for i in json.loads(value)]
 
 
 def _copy_ragged(src: h5py.Group, dst: h5py.Group, name: str, keep: np.ndarray) -> None:
@@ -62,6 +59,10 @@ def write_subset(src, dst, samples) -> Path:
     dst = Path(dst)
     dst.parent.mkdir(parents=True, exist_ok=True)
     tmp = dst.with_name(dst.name + f"{TMP_SUFFIX}subset")
+    with h5py.File(src, "r") as a:
+        if a.attrs.get("format") != schema.FORMAT:
+            raise InputError(f"{src}: a subset is made of a segment shard ({schema.FORMAT}), not of "
+                             f"{a.attrs.get('format')!r}")
     with h5py.File(src, "r") as a, h5py.File(tmp, "w") as b:
         n = int(a.attrs["n_samples"])
         keep = np.zeros(n, bool)

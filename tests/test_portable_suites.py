@@ -131,7 +131,7 @@ def test_a_second_machine_played_verifies_and_a_changed_generator_does_not(demo_
 def test_what_must_still_fail(demo_data):
     suite = suites.get(DEMO)
     data = suites.data_dir(suite, demo_data)
-    sha256, records, lock = suites.identity(suite, data)
+    sha256, records, lock, _ = suites.identity(suite, data)
     published = suites.published_signature(suite)
 
     def check(recs=records, lk=lock):
@@ -144,10 +144,22 @@ def test_what_must_still_fail(demo_data):
     assert not swapped.verified and "reordered" in swapped.first_difference()
     other_manifest = check(lk={**lock, "manifest_sha256": "0" * 64})
     assert not other_manifest.verified and "another manifest" in other_manifest.first_difference()
+    other_config = check(lk={**lock, "config_sha256": "1" * 64})
+    assert not other_config.verified and "another generator configuration" in other_config.first_difference()
+    assert "another noise protocol" in verification.check_suite(published, lock, sha256, records, noise_mm=(0.0, 1.0),
+                                                                 noise_seed=0).first_difference()
     # another noise draw: the noisy inputs are not the published ones, wherever the noiseless ones are
-    _, noisier, _ = suites.identity(replace(suite, noise_seed=1), data)
+    _, noisier, _, _ = suites.identity(replace(suite, noise_seed=1), data)
     redrawn = check(noisier)
     assert not redrawn.verified and "input@0.5: points moved by" in redrawn.first_difference()
+    # ... also in a sample decided otherwise at a near-tie, where the noiseless input came out the same
+    tie = {**records[3], "coverage": records[3]["coverage"] + 2e-5, "observed_faces": records[3]["observed_faces"] + 1}
+    assert signature.check_sample(tie, published["samples"][3]).level == "tie"
+    noisy_tie = {**tie, "points": {**tie["points"], "input@0.5": noisier[3]["points"]["input@0.5"]}}
+    result = signature.check_sample(noisy_tie, published["samples"][3])
+    assert result.level == "differs" and "input@0.5" in result.what
+    nan = signature.check_sample({**records[3], "coverage": float("nan")}, published["samples"][3])
+    assert nan.level == "differs" and "coverage nan" in nan.what
     # an evaluation that goes on anyway says so in its record
     assert suites.verify(suite, data)["check"] in ("bit-identical", "within tolerance")
 
@@ -230,7 +242,64 @@ def test_an_archive_served_over_http_is_fetched_and_scored_as_the_generated_suit
         assert words in capsys.readouterr().err
         assert not empty.exists() or not any(empty.iterdir()), list(empty.iterdir())
 
+    # the right sha256 but data that do not verify: refused, nothing left; and no fetch over cached data
+    import tarfile
+
+    bad = tmp_path / "bad"
+    with tarfile.open(www / "demo.tar") as tar:
+        tar.extractall(bad)
+    shard = sorted((bad / "test").glob("*.h5"))[0]
+    with h5py.File(shard, "r+") as h5:
+        h5["samples/coverage"][0] = h5["samples/coverage"][0] - 0.05
+    _relock(bad)
+    with tarfile.open(www / "bad.tar", "w") as tar:
+        for f in sorted(bad.rglob("*")):
+            if f.is_file():
+                tar.add(f, arcname=f.relative_to(bad).as_posix())
+    bad_sha = hashlib.sha256((www / "bad.tar").read_bytes()).hexdigest()
+    assert main(["suites", "fetch", DEMO, "--url", f"{url}/bad.tar", "--sha256", bad_sha, "--data", str(empty),
+                 "--quiet"]) == 2
+    assert f"do not verify against {suites.get(DEMO).signature}: sample test_{shard.stem}_000_noise0" in \
+        capsys.readouterr().err
+    assert not empty.exists() or not any(empty.iterdir())
+    assert main(["suites", "--data", str(cache), "fetch", DEMO, "--url", f"{url}/demo.tar", "--sha256", sha,
+                 "--quiet"]) == 2
+    assert "exists" in capsys.readouterr().err and (cache / DEMO / "suite.json").is_file()
+
     # a suite whose registry entry names the archive is fetched, not generated
     published = replace(suites.get(DEMO), archive_url=f"{url}/demo.tar", archive_sha256=sha)
     where = suites.ensure_data(published, tmp_path / "registry", progress=False)
     assert (where / "suite.json").is_file() and suites.check(published, where).verified
+
+
+def test_a_subset_shard_keeps_its_samples_under_their_ids_and_readers_take_only_those(demo_data, tmp_path):
+    from colonbench.benchmark.evaluate import select
+    from colonbench.shards.reader import Shard
+    from colonbench.shards.subset import write_subset
+    from colonbench.shards.verify import verify
+
+    data = _copy(demo_data, tmp_path)
+    name = sorted(p.relative_to(data).as_posix() for p in (data / "test").glob("*.h5"))[0]
+    original = (data / name).read_bytes()
+    (tmp_path / "whole.h5").write_bytes(original)
+    write_subset(tmp_path / "whole.h5", data / name, [0, 2])
+    assert (data / name).stat().st_size < len(original)
+    with Shard(tmp_path / "whole.h5") as a, Shard(data / name) as b:
+        for i in (0, 2):
+            ga, gb = a.geometry(i), b.geometry(i)
+            for key in ("partial_points", "hole_points", "centerline", "vertices", "faces", "observed_faces"):
+                assert np.array_equal(ga[key], gb[key]), key
+            assert np.array_equal(a.heatmaps(i)[1], b.heatmaps(i)[1]) and gb["coverage"] == ga["coverage"]
+        assert len(b.geometry(1)["partial_points"]) == 0          # an emptied row
+    lock = json.loads((data / "dataset.lock.json").read_text())
+    lock["kept_samples"] = {name: [0, 2]}
+    (data / "dataset.lock.json").write_text(json.dumps(lock))
+    _relock(data)
+    assert not verify(data)                                           # the schema holds
+    _, picks = select(data, "test")
+    assert dict(picks)[name] == [0, 2] and sum(len(i) for _, i in picks) == 24 - 2
+    with pytest.raises(InputError, match="segment shard"):
+        colon = tmp_path / "colon.h5"
+        with h5py.File(colon, "w") as h5:
+            h5.attrs["format"] = "colonbench-colon-shard"
+        write_subset(colon, tmp_path / "sub.h5", [0])
