@@ -22,7 +22,7 @@ import math
 from pathlib import Path
 
 from colonbench.errors import InputError
-from colonbench.estimate import Estimate, interval, points_array
+from colonbench.estimate import Estimate, interval, level, points_array
 
 #: Columns of an export's ``index.csv``.
 INDEX_COLUMNS = ["sample_id", "file", "noise_mm", "points"]
@@ -105,4 +105,4 @@ def read_prediction(path, method: str = "predictions") -> Estimate:
     return Estimate(c, points_array(obj.get("holes"), "holes", path.name),
                     points_array(obj.get("centerline"), "centerline", path.name), method,
                     coverage_interval=interval(obj.get("coverage_interval"), path.name),
-                    interval_level=float(obj.get("coverage_interval_level", 0.9)))
+                    interval_level=level(obj.get("coverage_interval_level"), path.name))

@@ -91,9 +91,10 @@ def publish(run_dir, suite, methods=None) -> Path:
         missing = sorted(set(methods) - set(run["methods"]))
         if missing:
             raise InputError(f"{run_dir}: holds no run of {', '.join(missing)}")
-        old = read_run(folder(suite))
-        run = {**old, "methods": {**old["methods"], **{m: run["methods"][m] for m in methods}},
-               "suite": run["suite"], "versions": run.get("versions"), "environment": run.get("environment")}
+        old = read_run(folder(suite))       # each re-published method keeps the versions and machine it ran with
+        fresh = {m: {**run["methods"][m], "versions": run.get("versions"), "environment": run.get("environment")}
+                 for m in methods}
+        run = {**old, "methods": {**old["methods"], **fresh}, "suite": run["suite"]}
     out = folder(suite)
     staging = out.with_name(f".{out.name}.new")
     shutil.rmtree(staging, ignore_errors=True)

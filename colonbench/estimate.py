@@ -62,7 +62,9 @@ class Estimate:
         out = {"coverage": float(self.coverage)}
         if self.coverage_interval is not None:
             out.update(coverage_interval=[round(float(x), 6) for x in self.coverage_interval],
-                       coverage_interval_level=float(self.interval_level), review=list(self.review))
+                       coverage_interval_level=float(self.interval_level))
+        if self.coverage_interval is not None or self.review:
+            out["review"] = list(self.review)
         out.update(holes=np.round(self.holes, 4).tolist(), centerline=np.round(self.centerline, 4).tolist(),
                    method=self.method, seconds={k: round(v, 4) for k, v in self.seconds.items()})
         if self.signals:
@@ -140,7 +142,7 @@ def as_estimate(result, name: str) -> Estimate:
             raise InputError(f"{who} returned a dict without 'coverage'")
         est = Estimate(result["coverage"], result.get("holes"), result.get("centerline"), name,
                        coverage_interval=result.get("coverage_interval"),
-                       interval_level=result.get("coverage_interval_level", 0.9))
+                       interval_level=result.get("coverage_interval_level") or 0.9)
     else:
         raise InputError(f"{who} returned {type(result).__name__}; expected an Estimate or a dict")
     try:
@@ -151,6 +153,7 @@ def as_estimate(result, name: str) -> Estimate:
         raise InputError(f"{who} returned coverage {coverage}; a fraction in [0, 1] is expected")
     est.coverage = coverage
     est.coverage_interval = interval(est.coverage_interval, who)
+    est.interval_level = level(est.interval_level, who)
     est.holes = points_array(est.holes, "holes", who)
     est.centerline = points_array(est.centerline, "centerline", who)
     est.method = name
@@ -169,3 +172,16 @@ def interval(value, who: str) -> tuple | None:
         raise InputError(f"{who} returned coverage_interval [{low}, {high}]; fractions with 0 <= low <= high <= 1 "
                          "are expected")
     return (min(max(low, 0.0), 1.0), min(max(high, 0.0), 1.0))
+
+
+def level(value, who: str) -> float:
+    """A method's ``coverage_interval_level`` checked: a number strictly between 0 and 1 (0.9 when None)."""
+    if value is None:
+        return 0.9
+    try:
+        out = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"{who} returned coverage_interval_level {value!r}; a number in (0, 1) is expected") from None
+    if not 0.0 < out < 1.0:
+        raise InputError(f"{who} returned coverage_interval_level {out}; a number in (0, 1) is expected")
+    return out

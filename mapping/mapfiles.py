@@ -36,7 +36,9 @@ def write_map(result: dict, out, method_name: str, model: str | None, threshold:
     (out / "segments.json").write_text(json.dumps(doc, indent=1) + "\n")
     flat = []
     for r in rows:
-        f = {k: v for k, v in r.items() if k not in ("plane_start", "plane_end")}
+        f = {k: v for k, v in r.items() if k not in ("plane_start", "plane_end", "coverage_interval", "review")}
+        low, high = r["coverage_interval"] or (None, None)
+        f.update(coverage_low=low, coverage_high=high, review="; ".join(r["review"]))
         for name in ("plane_start", "plane_end"):
             for part in ("point", "normal"):
                 for axis, v in zip("xyz", r[name][part]):

@@ -230,6 +230,8 @@ def interval_lines(g: pd.DataFrame) -> list[str]:
         if r["interval_segments"] > 0:
             lines.append(f"| {r['method']} | {r['interval_segments']} | {_f(r['interval_covered'], 1)} % | "
                          f"{_f(r['interval_width'], 1)} |")
+        else:
+            lines.append(f"| {r['method']} | 0 | n/a | n/a |")
     return lines
 
 

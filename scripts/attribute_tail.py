@@ -35,6 +35,7 @@ from colonbench.completion.planes import end_planes
 from colonbench.completion.steps import complete
 from colonbench.completion.surface import mesh_coverage
 from colonbench.heatmaps import sample_heatmaps
+from colonbench.polyline import arc_length
 from colonbench.shards.reader import Shard
 
 VARIANTS = ("base", "heatmap", "centerline", "planes", "holes")
@@ -42,8 +43,7 @@ VARIANTS = ("base", "heatmap", "centerline", "planes", "holes")
 
 def extent_share(points: np.ndarray, centerline: np.ndarray) -> float:
     """Share of the true centerline's length between the cloud's first and last projections onto it."""
-    seg = np.linalg.norm(np.diff(centerline, axis=0), axis=1)
-    s = np.concatenate([[0.0], np.cumsum(seg)])
+    s = arc_length(centerline)
     _, nearest = cKDTree(centerline).query(points)
     return float((s[nearest].max() - s[nearest].min()) / max(s[-1], 1e-9))
 
@@ -58,12 +58,14 @@ def variants(method: CompletionMethod, pts: np.ndarray, geo: dict) -> dict:
                             geo["centerline"].astype(float)).target
     true_cl = grid.to_voxel(geo["centerline"].astype(float))
     cl = p.centerline_vox
+    steps = {"distance": method.hole_distance, "cut_rims": method.cut_rims, "shell_level": method.shell_level,
+             "gaps": method.gaps}           # the method's own settings, as estimate() runs them
     out = {}
-    base = complete(pred, cl, vox)
+    base = complete(pred, cl, vox, **steps)
     out["base"] = base.coverage
-    out["heatmap"] = complete(exact, extract_centerline(exact), vox).coverage
-    out["centerline"] = complete(pred, true_cl, vox).coverage
-    out["planes"] = complete(pred, cl, vox, planes=end_planes(true_cl)).coverage
+    out["heatmap"] = complete(exact, extract_centerline(exact), vox, **steps).coverage
+    out["centerline"] = complete(pred, true_cl, vox, **steps).coverage
+    out["planes"] = complete(pred, cl, vox, **steps, planes=end_planes(true_cl)).coverage
     if len(base.vertices) and len(geo["hole_points"]):
         d_hole, _ = cKDTree(grid.to_voxel(geo["hole_points"].astype(float))).query(base.vertices)
         d_part, _ = cKDTree(vox).query(base.vertices)
@@ -84,6 +86,9 @@ def main() -> None:
     method = CompletionMethod()
     rows = []
     for suite in suites.parse(args.suites):
+        if suite.task != "segments" or shipped.load(suite) is None:
+            print(f"{suite.id}: skipped (whole colons, or no shipped results to take the tail from)")
+            continue
         data = suites.ensure_data(suite, args.data, progress=False)
         ship = shipped.load(suite)[1]
         ship = ship[(ship["method"] == "completion") & (ship["noise_mm"] == args.noise)].copy()

@@ -25,6 +25,7 @@ import pandas as pd
 from colonbench.benchmark.evaluate import noisy, select
 from colonbench.completion import intervals
 from colonbench.completion.method import CompletionMethod, model_path, steps_version
+from colonbench.errors import ColonbenchError
 from colonbench.shards.dataset import generate
 from colonbench.shards.reader import Shard
 from colonbench.shards.schema import sha256_file
@@ -48,12 +49,18 @@ def estimates(data: Path, method: CompletionMethod, cache: Path) -> pd.DataFrame
             for i in indices:
                 geo = shard.geometry(i)
                 for sigma in NOISE_MM:
-                    est = method.estimate(noisy(geo["partial_points"], sigma, 0, name, i))
+                    try:
+                        est = method.estimate(noisy(geo["partial_points"], sigma, 0, name, i))
+                    except ColonbenchError as exc:     # counted, not calibrated on
+                        print(f"{name} {i} at {sigma:g} mm: no estimate ({exc})", flush=True)
+                        continue
                     rows.append({"shard": name, "index": i, "colon_id": geo["colon_id"], "noise_mm": sigma,
-                                 "hole_model": geo["hole_model"], "true": geo["coverage"], "estimate": est.coverage,
+                                 "hole_model": geo["hole_model"], "segment_mm": geo["length_mm"],
+                                 "true": geo["coverage"], "estimate": est.coverage,
                                  "rims": est.signals.get("rims", 0), "length_mm": est.signals.get("length_mm")})
         print(f"{name}: {len(rows)} estimates", flush=True)
     out = pd.DataFrame(rows)
+    out = out[np.isfinite(out["estimate"])]             # an empty completed surface gives no estimate
     out.to_csv(cache, index=False)
     return out
 
@@ -92,7 +99,9 @@ def main() -> None:
     generate(MANIFEST, data, workers=args.workers, splits=["validation"], progress=False)
     method = CompletionMethod(args.model)
     method.intervals = None
-    df = estimates(data, method, data / "completion-estimates.csv")
+    path = model_path(args.model)
+    cache = data / f"completion-estimates-{sha256_file(path)[:12]}-{steps_version()}.csv"   # per model and steps
+    df = estimates(data, method, cache)
     print(f"{len(df)} estimates of {df[['shard', 'index']].drop_duplicates().shape[0]} segments; MAE "
           f"{100 * (df['estimate'] - df['true']).abs().mean():.2f} points")
     best, best_width = "marginal", np.inf
@@ -109,7 +118,6 @@ def main() -> None:
               .to_string())
         if ok and h["width"].mean() < best_width:
             best, best_width = scheme, h["width"].mean()
-    path = model_path(args.model)
     source = {"model": path.name, "model_sha256": sha256_file(path), "steps": steps_version(),
               "manifest": MANIFEST.name,
               "manifest_sha256": sha256_file(MANIFEST), "noise_mm": list(NOISE_MM),
@@ -118,8 +126,7 @@ def main() -> None:
     cal = intervals.fit(df["true"], df["estimate"], signals(df), best, REVIEW_WIDTH, args.level, source)
     # segments whose length is known (colonbench estimate --length-mm, the map's segments): the estimate scaled where
     # the line stops short, as intervals.known_length does, and their own interval
-    length = df["shard"].str.extract(r"-(\d+)mm\.h5$")[0].astype(float)
-    share = df["length_mm"] / length
+    share = df["length_mm"] / df["segment_mm"]
     known = np.where(share < intervals.SHORT_SHARE, df["estimate"] * share, df["estimate"])
     intervals.fit_known(cal, df["true"], known)
     print(f"\nknown length: MAE {100 * np.abs(known - df['true']).mean():.2f} points (unknown "

@@ -60,6 +60,10 @@ def test_intervals_in_the_contract_are_checked():
     est = as_estimate({"coverage": 0.8, "coverage_interval": [0.7, 0.9]}, "m")
     assert est.coverage_interval == (0.7, 0.9) and est.to_json()["coverage_interval"] == [0.7, 0.9]
     assert "coverage_interval" not in as_estimate({"coverage": 0.8}, "m").to_json()
+    reviewed = Estimate(0.8, np.zeros((0, 3)), np.zeros((0, 3)), "m", review=["a reason"])
+    assert reviewed.to_json()["review"] == ["a reason"]          # a reason to review is said, interval or not
+    with pytest.raises(InputError, match="coverage_interval_level"):
+        as_estimate({"coverage": 0.8, "coverage_interval": [0.7, 0.9], "coverage_interval_level": 90}, "m")
     for bad in ([0.9, 0.7], [0.5], [0.1, 1.5], "wide"):
         with pytest.raises(InputError, match="coverage_interval"):
             as_estimate({"coverage": 0.8, "coverage_interval": bad}, "m")
@@ -78,6 +82,12 @@ def test_estimate_writes_the_interval_and_takes_a_known_length(demo_data, tmp_pa
     assert main(["estimate", str(tmp_path / "seg.npy"), "--out-dir", str(tmp_path / "b"), "--length-mm", "500"]) == 0
     b = json.loads((tmp_path / "b" / "seg.json").read_text())
     assert b["coverage"] < 0.2 and b["signals"]["extent"] == "known" and "counted unobserved" in b["review"][0]
+    from colonbench.completion.method import CompletionMethod, model_path
+
+    known = intervals.load(model_path(None), "steps=10").known       # the known-extent interval, not a length group
+    width = b["coverage_interval"][1] - b["coverage_interval"][0]
+    assert width == pytest.approx(min(b["coverage"] + known["high"], 1) - max(b["coverage"] + known["low"], 0), abs=2e-6)
+    assert CompletionMethod().intervals is not None
     capsys.readouterr()
     with pytest.raises(SystemExit):
         main(["estimate", str(tmp_path / "seg.npy"), "--out-dir", str(tmp_path / "c"), "--length-mm", "-3"])
@@ -107,11 +117,13 @@ def test_the_benchmark_scores_intervals_and_says_n_a_for_methods_without(demo_da
     rows = pd.read_csv(run / "results" / "sure.csv")
     assert (rows["interval_low"] == 0.7).all() and pd.read_csv(run / "results" / "plain.csv")["interval_low"].isna().all()
     inside = ((rows["true_coverage"] >= 0.7) & (rows["true_coverage"] <= 0.9)).mean()
-    summary = json.loads((run / "results" / "sure.json").read_text())
-    row = summary["rows"][0] if "rows" in summary else summary
-    text = json.dumps(row)
-    assert "interval_covered" in text
-    out = write_leaderboard([run], tmp_path / "lb", figures=False)
+    assert 0 < inside < 1                              # demo-v1's truths lie on both sides of [0.7, 0.9]
+    write_leaderboard([run], tmp_path / "lb", figures=False)
+    table = pd.read_csv(tmp_path / "lb" / "leaderboard.csv").set_index("method")
+    assert table.loc["sure", "interval_covered"] == pytest.approx(100 * inside)
+    assert table.loc["sure", "interval_width"] == pytest.approx(20.0)
+    assert np.isnan(table.loc["plain", "interval_covered"]) and table.loc["plain", "interval_segments"] == 0
     md = (tmp_path / "lb" / "leaderboard.md").read_text()
-    assert f"| sure | 24 | {100 * inside:.1f} % | 20.0 |" in md and "| plain | 24 |" not in md
-    assert "interval" in (tmp_path / "lb" / "breakdowns.md").read_text() and out["paths"]
+    assert f"| sure | 24 | {100 * inside:.1f} % | 20.0 |" in md and "| plain | 0 | n/a | n/a |" in md
+    bd = (tmp_path / "lb" / "breakdowns.md").read_text()
+    assert "| sure: interval |" in bd and "| plain: interval |" not in bd and "% inside, 20.0 wide" in bd

@@ -45,7 +45,10 @@ def cmd_map(args):
           f"{summary['coverage']}; orientation {result['orientation']}")
     for s in segs:
         cov = f"{s.coverage:.3f}" if s.coverage is not None else f"- ({s.error})"
-        print(f"  {s.index:3d}  {s.start_mm:7.1f}-{s.end_mm:7.1f} mm  {s.points:7d} points  coverage {cov}")
+        if s.coverage_interval is not None:
+            cov += f" [{s.coverage_interval[0]:.3f}, {s.coverage_interval[1]:.3f}]"
+        look = f"  REVIEW: {'; '.join(s.review)}" if s.review else ""
+        print(f"  {s.index:3d}  {s.start_mm:7.1f}-{s.end_mm:7.1f} mm  {s.points:7d} points  coverage {cov}{look}")
     print(f"wrote {', '.join(p.name for p in paths)} to {args.out} ({time.perf_counter() - t0:.1f} s)")
     partial = partial_warning(summary, positions is not None)
     if partial:
