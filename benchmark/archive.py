@@ -77,19 +77,19 @@ def write_archive(suite, data, out, progress: bool = True) -> dict:
     tmp = out.with_name(f".{out.name}.tmp-{os.getpid()}")
     shutil.rmtree(staging, ignore_errors=True)
     try:
-        shards = {}
+        shards, subsets = {}, {}
         for name, indices in picks:
             entry = dict(lock["shards"][name])
             if len(indices) == int(entry["samples"]):
                 path = data / name
             else:
                 path = write_subset(data / name, staging / name, indices)
+                subsets[name] = [int(i) for i in indices]
             entry.update(sha256=sha256_file(path), bytes=path.stat().st_size)
             shards[name] = (path, entry)
         new_lock = {k: v for k, v in lock.items() if k not in ("shards", "missing", "splits")}
         new_lock.update(splits={suite.split: lock["splits"][suite.split]}, missing=[],
                         shards={n: e for n, (_, e) in shards.items()})
-        subsets = {n: list(map(int, i)) for n, i in picks if len(i) != int(lock["shards"][n]["samples"])}
         if subsets:   # the rows the subset shards hold (colonbench.benchmark.evaluate.select reads only those)
             new_lock["kept_samples"] = subsets
         info = {"format": FORMAT, "format_version": FORMAT_VERSION, "suite": suite.id, "signature": suite.signature,

@@ -123,6 +123,7 @@ def colons_fingerprint(data, picks, noise_mm, noise_seed: int) -> tuple[str, lis
     from colonbench.benchmark.evaluate import noisy
     from colonbench.benchmark.exchange import sample_id
     from colonbench.benchmark.signature import points_entry, rounded, sketch
+    from colonbench.meshes import triangle_areas
     from colonbench.shards.colonshard import ColonShard
 
     h = _Hasher()
@@ -136,9 +137,8 @@ def colons_fingerprint(data, picks, noise_mm, noise_seed: int) -> tuple[str, lis
         h.integers("faces", truth["faces"])
         h.lengths("centerline", truth["centerline"].points)
         h.lengths("face_arclength", truth["face_arclength"])
-        tri = truth["vertices"][truth["faces"]]
-        centres = tri.mean(axis=1)
-        areas = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+        centres = truth["vertices"][truth["faces"]].mean(axis=1)
+        areas = triangle_areas(truth["vertices"], truth["faces"])
         # each face's arc length (the stretch of colon it belongs to) as the weight of its centre, in metres
         colon_entries = {"vertices": points_entry(truth["vertices"]),
                          "colon_centerline": points_entry(truth["centerline"].points),

@@ -78,7 +78,7 @@ def _features():
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     omega = 2 * np.pi / np.geomspace(*WAVELENGTHS_MM, K)
     phase = rng.uniform(0, 2 * np.pi, K)
-    order = np.zeros(K, int)
+    order = np.full(K, PLAIN)
     order[[0, 2, 4, 6]] = ALTERNATING       # the shortest waves: two neighbours swapped move them most
     order[[9, 13]] = RAMP
     return d * omega[:, None], phase, order
@@ -283,16 +283,16 @@ def check_sample(found: dict, pub: dict, tol: Tolerances = TOLERANCES, surface=N
     if abs(found["length_mm"] - pub["length_mm"]) > 1e-6:
         out.what = f"length {found['length_mm']:g} mm, published {pub['length_mm']:g} mm"
         return out
+    if set(found["points"]) != set(pub["points"]):
+        out.what = (f"point sets {', '.join(sorted(found['points']))}, published {', '.join(sorted(pub['points']))} "
+                    "(another noise protocol)")
+        return out
     exact = set(pub.get("exact", ()))
     for name in sorted(exact):       # truth that no tie moves (a centerline, a whole colon's surface)
         why = _same_points(name, found["points"][name], pub["points"][name], tol)
         if why:
             out.what = why
             return out
-    if set(found["points"]) != set(pub["points"]):
-        out.what = (f"point sets {', '.join(sorted(found['points']))}, published {', '.join(sorted(pub['points']))} "
-                    "(another noise protocol)")
-        return out
     tie = found["observed_faces"] != pub["observed_faces"] or not abs(dc) <= tol.coverage_float
     if tie and not abs(dc) <= tol.coverage_tie:   # a NaN coverage too
         out.what = f"coverage {found['coverage']:.6f}, published {pub['coverage']:.6f} (differs by {dc:+.2e}, " \

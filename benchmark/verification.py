@@ -99,25 +99,24 @@ class SuiteCheck:
     samples: list
     aggregate: list = field(default_factory=list)
 
+    def at(self, level: str) -> list:
+        """The samples at one level of :func:`~colonbench.benchmark.signature.check_sample`."""
+        return [s for s in self.samples if s.level == level]
+
     @property
     def ties(self) -> int:
         """Samples decided otherwise at a near-tie."""
-        return sum(s.level == "tie" for s in self.samples)
-
-    @property
-    def diverged(self) -> list:
-        """The samples whose draws went another way after a near-tie."""
-        return [s for s in self.samples if s.level == "diverged"]
+        return len(self.at("tie"))
 
     @property
     def redrawn(self) -> int:
         """Samples whose truth is the same but whose points were drawn anew on the same surface."""
-        return sum(s.level == "redrawn" for s in self.samples)
+        return len(self.at("redrawn"))
 
     @property
     def differing(self) -> list:
         """The samples that differ from their published signature."""
-        return [s for s in self.samples if s.level == "differs"]
+        return self.at("differs")
 
     @property
     def verified(self) -> bool:
@@ -146,12 +145,10 @@ class SuiteCheck:
             return "bit-identical to the published data"
         if self.verified:
             mean = float(np.mean([abs(s.coverage_diff) for s in self.samples])) if self.samples else 0.0
-            same = len(self.samples) - self.ties - self.redrawn
-            same = same - len(self.diverged)
-            text = (f"within tolerance: {same} samples equal up to float noise, {self.ties} decided otherwise at a "
+            text = (f"within tolerance: {len(self.at('same'))} samples equal up to float noise, {self.ties} decided otherwise at a "
                     f"near-tie, {self.redrawn} with points redrawn on the same surface (mean |coverage difference| "
                     f"{mean:.1e})")
-            for d in self.diverged:
+            for d in self.at("diverged"):
                 text += f"; {d.sample}: {d.what}"
             return text
         more = len(self.faults) + len(self.differing) + len(self.aggregate) - 1

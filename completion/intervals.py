@@ -110,13 +110,17 @@ class Intervals:
                 return g["low"], g["high"]
         return -1.0, 1.0
 
+    def interval(self, coverage: float, signals: dict) -> tuple[float, float]:
+        """The interval (fractions, clipped to [0, 1]) around an estimate with these signals."""
+        low, high = self.quantiles(coverage, signals)
+        return float(np.clip(coverage + low, 0, 1)), float(np.clip(coverage + high, 0, 1))
+
     def apply(self, est) -> None:
         """Set an :class:`~colonbench.estimate.Estimate`'s ``coverage_interval``, ``interval_level`` and ``review``
-        from its coverage and its ``signals["rims"]``."""
+        from its coverage and its signals."""
         if not np.isfinite(est.coverage):
             return
-        low, high = self.quantiles(est.coverage, est.signals)
-        est.coverage_interval = (float(np.clip(est.coverage + low, 0, 1)), float(np.clip(est.coverage + high, 0, 1)))
+        est.coverage_interval = self.interval(est.coverage, est.signals)
         est.interval_level = self.level
         width = est.coverage_interval[1] - est.coverage_interval[0]
         if width > self.review_width:

@@ -81,8 +81,7 @@ def held_out(df: pd.DataFrame, scheme: str, level: float) -> pd.DataFrame:
         a, b = df[fit_on], df[test_on]
         cal = intervals.fit(a["true"], a["estimate"], signals(a), scheme, REVIEW_WIDTH, level)
         for _, r in b.iterrows():
-            low, high = cal.quantiles(r["estimate"], signals_of(r))
-            lo, hi = np.clip(r["estimate"] + low, 0, 1), np.clip(r["estimate"] + high, 0, 1)
+            lo, hi = cal.interval(r["estimate"], signals_of(r))
             rows.append({"group": intervals.group_key(r["estimate"], signals_of(r), scheme),
                          "inside": lo - 1e-12 <= r["true"] <= hi + 1e-12, "width": hi - lo})
     return pd.DataFrame(rows)
