@@ -58,16 +58,20 @@ def voxel_indices(grid: Grid, ijk: np.ndarray) -> tuple[np.ndarray, int]:
     outside : float
         Fraction of the inputs that fell outside (0 when there are none).
     """
-    idx = np.rint(ijk).astype(np.int64)
-    keep = np.all((idx >= 0) & (idx < grid.size), axis=1)
-    return idx[keep], float(1.0 - keep.mean()) if len(idx) else 0.0
+    r = np.rint(ijk)
+    # column by column: numpy reduces a short last axis slowly
+    keep = (r[:, 0] >= 0) & (r[:, 0] < grid.size)
+    for axis in (1, 2):
+        keep &= (r[:, axis] >= 0) & (r[:, axis] < grid.size)
+    return r[keep].astype(np.intp), float(1.0 - keep.mean()) if len(r) else 0.0
 
 
 def occupancy(grid: Grid, idx: np.ndarray) -> np.ndarray:
     """(s, s, s) bool grid with the voxels ``idx`` (m, 3) set."""
-    occ = np.zeros((grid.size,) * 3, dtype=bool)
-    occ[idx[:, 0], idx[:, 1], idx[:, 2]] = True
-    return occ
+    occ = np.zeros(grid.size ** 3, dtype=bool)
+    idx = np.asarray(idx, dtype=np.intp)
+    occ[(idx[:, 0] * grid.size + idx[:, 1]) * grid.size + idx[:, 2]] = True
+    return occ.reshape((grid.size,) * 3)
 
 
 def voxelize_points(grid: Grid, points) -> tuple[np.ndarray, int]:
@@ -105,8 +109,10 @@ def triangle_lattice(a: np.ndarray, b: np.ndarray, c: np.ndarray, spacing: float
         u = (i[ok] / n)[:, None]
         v = (j[ok] / n)[:, None]
         w = 1.0 - u - v
-        # (k, 1) weights against (f, 3) corners -> (f, k, 3)
-        pts = (w[None] * a[sel][:, None] + u[None] * b[sel][:, None] + v[None] * c[sel][:, None])
+        # (k, 1) weights against (f, 3) corners -> (f, k, 3); in place, in the order w a + u b + v c
+        pts = w[None] * a[sel][:, None]
+        pts += u[None] * b[sel][:, None]
+        pts += v[None] * c[sel][:, None]
         out.append(pts.reshape(-1, 3))
     return np.concatenate(out) if out else np.zeros((0, 3))
 
@@ -216,6 +222,49 @@ def input_from_points(grid: Grid, partial) -> tuple[np.ndarray, int]:
     return input_heatmap(distance_to(occ)), outside
 
 
+@dataclass
+class Occupancy:
+    """The three occupancy grids a sample's heatmaps are functions of (:func:`heatmaps_from_occupancy`).
+
+    Attributes
+    ----------
+    s0, s1, c : (s, s, s) bool
+        Voxels holding a partial point, voxels the complete surface passes
+        through, voxels the centerline passes through.
+    outside : dict
+        Fraction of each geometry that fell outside the grid, as in :class:`Heatmaps`.
+    """
+
+    s0: np.ndarray
+    s1: np.ndarray
+    c: np.ndarray
+    outside: dict
+
+    def heatmaps(self) -> Heatmaps:
+        """The sample's input and target heatmaps, float32."""
+        h_in, h_t = heatmaps_from_occupancy(self.s0, self.s1, self.c)
+        return Heatmaps(h_in, h_t, dict(self.outside))
+
+
+def sample_occupancy(grid: Grid, partial, vertices, faces, centerline) -> Occupancy:
+    """The occupancy grids of one sample (arguments as :func:`sample_heatmaps`)."""
+    occ_p, out_p = voxelize_points(grid, partial)
+    occ_s, out_s = voxelize_mesh(grid, vertices, faces)
+    occ_c, out_c = voxelize_polyline(grid, centerline)
+    return Occupancy(occ_p, occ_s, occ_c, {"partial": out_p, "complete": out_s, "centerline": out_c})
+
+
+def pack_occupancy(occupied: np.ndarray) -> np.ndarray:
+    """(s, s, s) bool -> (s^3 / 8,) uint8: ``numpy.packbits`` in C order (how shards and packs store a grid)."""
+    return np.packbits(np.asarray(occupied, dtype=bool).ravel())
+
+
+def unpack_occupancy(bits: np.ndarray, size: int) -> np.ndarray:
+    """(..., s^3 / 8) uint8 -> (..., s, s, s) bool: the inverse of :func:`pack_occupancy`."""
+    bits = np.asarray(bits, dtype=np.uint8)
+    return np.unpackbits(bits, axis=-1).astype(bool).reshape(bits.shape[:-1] + (size,) * 3)
+
+
 def sample_heatmaps(grid: Grid, partial, vertices, faces, centerline) -> Heatmaps:
     """Input and target heatmaps of one sample.
 
@@ -231,8 +280,4 @@ def sample_heatmaps(grid: Grid, partial, vertices, faces, centerline) -> Heatmap
     centerline : (m, 3) float
         GT centerline polyline inside the segment, mm.
     """
-    occ_p, out_p = voxelize_points(grid, partial)
-    occ_s, out_s = voxelize_mesh(grid, vertices, faces)
-    occ_c, out_c = voxelize_polyline(grid, centerline)
-    h_in, h_t = heatmaps_from_occupancy(occ_p, occ_s, occ_c)
-    return Heatmaps(h_in, h_t, {"partial": out_p, "complete": out_s, "centerline": out_c})
+    return sample_occupancy(grid, partial, vertices, faces, centerline).heatmaps()

@@ -45,7 +45,8 @@ def epoch_slots(sizes, repeat=()) -> np.ndarray:
 
 
 def _data_lock(data_dir: Path) -> dict:
-    """What the run needs to know of its data: ``manifest_sha256``, ``train_coverage_mean``, ``pack``."""
+    """What the run needs to know of its data: ``manifest_sha256``, ``train_coverage_mean``, ``pack``,
+    ``occupancies`` (a pack, or shards of format 2: the occupancy grids can be read without the geometry)."""
     from colonbench.shards.pack import PACK_NAME, is_pack
     pack = is_pack(data_dir)
     lock = data_dir / (PACK_NAME if pack else LOCK_NAME)
@@ -59,8 +60,9 @@ def _data_lock(data_dir: Path) -> dict:
                          "make it with them")
     coverage = lock["train_coverage_mean"] if pack else lock["splits"]["train"]["statistics"]["coverage"]["mean"]
     samples = lock["splits"]["train"].get("samples")
+    occupancies = pack or int(lock.get("shard_format_version", 1)) >= 2
     return {"manifest_sha256": lock["manifest_sha256"], "train_coverage_mean": coverage, "pack": pack,
-            "train_samples": samples}
+            "occupancies": occupancies, "train_samples": samples}
 
 
 def data_locks(data_dirs: list[Path], repeat=()) -> dict:
@@ -82,4 +84,4 @@ def data_locks(data_dirs: list[Path], repeat=()) -> dict:
     hashes = [lk["manifest_sha256"] for lk in locks]
     return {"manifest_sha256": hashlib.sha256("+".join(hashes).encode()).hexdigest(), "manifests": hashes,
             "train_coverage_mean": float(np.average([lk["train_coverage_mean"] for lk in locks], weights=weights)),
-            "pack": locks[0]["pack"], "train_samples": sum(n)}
+            "pack": locks[0]["pack"], "occupancies": all(lk["occupancies"] for lk in locks), "train_samples": sum(n)}

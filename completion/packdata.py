@@ -48,7 +48,7 @@ import torch
 from colonbench import seeding
 from colonbench.errors import InputError
 from colonbench.heatmaps import heatmaps_from_occupancy, input_heatmap
-from colonbench.shards.pack import GRIDS, SLAB, read_pack
+from colonbench.shards.pack import GRIDS, SLAB, is_pack, read_pack, read_shard_bits
 
 #: Elements of the broadcast (n, S, S, S, S) tensor of one min-plus step, at most.
 _CHUNK_ELEMENTS = 1 << 28
@@ -218,12 +218,13 @@ def apply_transposes(x: torch.Tensor, y: torch.Tensor, orders: list) -> tuple[to
 
 
 class PackSplit:
-    """One split of a pack, held packed on the training device.
+    """One split of a pack, or of a format-2 dataset's shards, held packed on the training device.
 
     Parameters
     ----------
     pack_dir : path or list of paths
-        Several packs (the same grid) are one split, in the order given.
+        Packs or format-2 dataset folders (:func:`colonbench.shards.pack.read_shard_bits`); several (the
+        same grid) are one split, in the order given.
     split : str
     device : torch.device
     cache : bool, optional
@@ -244,7 +245,7 @@ class PackSplit:
 
     def __init__(self, pack_dir, split: str, device, cache: bool | None = None):
         dirs = [pack_dir] if isinstance(pack_dir, (str, os.PathLike)) else list(pack_dir)
-        read = [read_pack(d, split) for d in dirs]
+        read = [read_pack(d, split) if is_pack(d) else read_shard_bits(d, split) for d in dirs]
         self.info = read[0][0]
         other = [str(d) for d, (info, _) in zip(dirs, read) if info["grid_options"] != self.info["grid_options"]]
         if other:

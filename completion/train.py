@@ -220,8 +220,11 @@ def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "a
     ----------
     data_dir : path or list of paths
         Dataset folder with ``train`` and ``validation`` splits, or a pack of
-        one (:mod:`colonbench.shards.pack`; heatmaps are then made on the
-        training device, and only flips and transposes augment). Several dataset folders, or
+        one (:mod:`colonbench.shards.pack`). From a pack, and from format-2
+        shards without geometric augmentation (``augment_prob`` 0), the
+        occupancy grids are read and the heatmaps made on the training device
+        (flips, transposes and erasure augment); otherwise the shards' geometry
+        is read and augmented on the CPU. Several dataset folders, or
         several packs (same grid), train together: their train splits are one
         training set, their validation splits one validation set; the
         config's ``repeat`` weighs their training samples (:func:`epoch_slots`).
@@ -256,7 +259,9 @@ def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "a
         dev = torch.device("cuda", int(os.environ.get("LOCAL_RANK", "0")))
         torch.cuda.set_device(dev)
     out.mkdir(parents=True, exist_ok=True)
-    if lock["pack"]:
+    # the grids alone, heatmaps made on the device: a pack, or format-2 shards when no geometry is deformed
+    on_device = lock["pack"] or (lock["occupancies"] and cfg.augment_prob == 0)
+    if on_device:
         if cfg.augment_prob > 0:
             raise InputError(f"{data_dir} is a pack: it holds voxel occupancies, not the geometry the augmentations "
                              "deform, so train on it with --augment-prob 0 (and --flips, --transposes: its exact "
@@ -270,8 +275,11 @@ def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "a
         from colonbench.shards.reader import ShardDataset, dataset_files
         aug = AugmentConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in cfg.augment.items()})
         if cfg.erase > 0:
-            raise InputError("--erase takes patches out of a pack's partial-surface occupancies; make a pack of "
-                             f"{data_dir} first (colonbench pack) and train on it")
+            raise InputError("--erase takes patches out of the partial-surface occupancies: train with "
+                             "--augment-prob 0 on format-2 shards or on a pack (colonbench pack)"
+                             if lock["occupancies"] else "--erase takes patches out of the partial-surface "
+                             f"occupancies, which format-1 shards do not store; make a pack of {data_dir} first "
+                             "(colonbench pack) and train on it")
         per_dir = {split: [dataset_files(d, split) for d in data_dirs] for split in ("train", "validation")}
         files = {split: [f for fs in per_dir[split] for f in fs] for split in per_dir}
         train_ds = ShardDataset(files["train"], augment=aug if cfg.augment_prob > 0 else None,
@@ -350,7 +358,7 @@ def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "a
         for sig in (signal.SIGINT, signal.SIGTERM):
             previous[sig] = signal.signal(sig, lambda signum, frame: stop_signal.append(signum))
     threads = torch.get_num_threads()
-    if dev.type == "cpu" and lock["pack"] and cfg.workers > 0:
+    if dev.type == "cpu" and on_device and cfg.workers > 0:
         # the batch workers take a core each; the training step takes the rest (one at least)
         torch.set_num_threads(max(1, min(threads, len(os.sched_getaffinity(0)) - cfg.workers)))
     start = time.perf_counter()
@@ -369,7 +377,7 @@ def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "a
             raise InputError(f"{data_dir}: {len(order)} training samples, fewer than one batch of {bs} per process")
         mine = order[: n_batches * bs * world][rank::world]
         todo = mine[state["position"] * bs:]
-        if lock["pack"]:
+        if on_device:
             made = PackBatches(train_ds, slots[todo], todo, bs, cfg.seed, epoch, cfg.erase)
             if dev.type == "cpu" and cfg.workers > 0:  # made in worker processes while the step runs
                 batches = torch.utils.data.DataLoader(made, batch_size=None, num_workers=cfg.workers,

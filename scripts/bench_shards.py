@@ -1,8 +1,9 @@
-"""Benchmark shard generation: samples/s per core, time per stage against the distance-transform floor,
-peak memory, bytes per sample and per field, and the projected time of a whole manifest.
+"""Benchmark shard generation: samples/s per core, time per stage, peak memory, bytes per sample and per
+field, what a reader pays to make the heatmaps, and the projected time of a whole manifest.
 
     python scripts/bench_shards.py                       # a few shards of demo.yaml, one process
-    python scripts/bench_shards.py --shards 6 --project data_manifests/paper.yaml
+    python scripts/bench_shards.py --manifest data_manifests/paper.yaml --shards 2
+    python scripts/bench_shards.py --manifest data_manifests/paper.yaml --shards 2 --format 1   # format 1
 
 Prints figures only; nothing here is a test.
 """
@@ -22,6 +23,8 @@ import numpy as np
 from colonbench.heatmaps import distance_to
 from colonbench.shards.build import build_shard
 from colonbench.shards.manifest import load, units
+from colonbench.shards.reader import Shard
+from colonbench.shards.schema import FORMAT_VERSION
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -70,6 +73,8 @@ def main(argv=None):
     ap.add_argument("--shards", type=int, default=3, help="shards to build (from the train split first)")
     ap.add_argument("--project", default=str(ROOT / "data_manifests" / "paper.yaml"),
                     help="manifest whose total time to project from the measured stage times")
+    ap.add_argument("--format", type=int, default=FORMAT_VERSION, choices=(1, 2),
+                    help="shard format to write (1: heatmaps stored, as before format 2)")
     args = ap.parse_args(argv)
 
     resolved = load(args.manifest)
@@ -79,7 +84,7 @@ def main(argv=None):
     with tempfile.TemporaryDirectory() as tmp:
         t0 = time.perf_counter()
         for u in todo:
-            info = build_shard(resolved, u, tmp)
+            info = build_shard(resolved, u, tmp, version=args.format)
             for k, v in info["seconds"].items():
                 stages[k] = stages.get(k, 0.0) + v
             n_samples += info["samples"]
@@ -89,15 +94,19 @@ def main(argv=None):
         sizes = field_bytes(files)
         total_bytes = sum(f.stat().st_size for f in files)
         peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+        with Shard(files[0]) as shard:
+            t = time.perf_counter()
+            for i in range(len(shard)):
+                shard.heatmaps(i)
+            read_ms = (time.perf_counter() - t) / len(shard) * 1000
     print(f"manifest {resolved['name']}: {len(todo)} shards, {n_segments} segments, {n_samples} samples, one process")
     print(f"  wall {wall:.1f} s -> {n_samples / wall:.2f} samples/s per core, {wall / n_samples * 1000:.0f} ms/sample")
     print("  stage                  total s   per sample ms")
-    for k in ("colon", "segment", "sample", "heatmaps", "write"):
+    for k in ("colon", "segment", "sample", "grids", "write"):
         v = stages.get(k, 0.0)
         print(f"  {k:<20} {v:9.2f} {v / n_samples * 1000:13.1f}")
-    hm = stages.get("heatmaps", 0.0) / n_samples
-    print(f"  distance-transform floor (3 x edt 64^3): {floor * 1000:.1f} ms/sample; heatmap stage = "
-          f"{hm / floor:.2f} x floor")
+    print(f"  distance-transform floor (3 x edt 64^3): {floor * 1000:.1f} ms/sample")
+    print(f"  a reader's heatmaps (Shard.heatmaps, format {args.format}): {read_ms:.1f} ms/sample")
     print(f"  peak memory (max RSS): {peak:.0f} MiB")
     print(f"  bytes per sample: {total_bytes / n_samples / 1024:.1f} KiB (files), by field (compressed):")
     for name, b in sorted(sizes.items(), key=lambda kv: -kv[1])[:10]:
@@ -107,11 +116,11 @@ def main(argv=None):
     shards, segs, smps = projected_counts(proj)
     per_shard = stages.get("colon", 0.0) / len(todo)
     per_seg = stages.get("segment", 0.0) / n_segments
-    per_smp = sum(stages.get(k, 0.0) for k in ("sample", "heatmaps", "write")) / n_samples
+    per_smp = sum(stages.get(k, 0.0) for k in ("sample", "grids", "write")) / n_samples
     core_s = shards * per_shard + segs * per_seg + smps * per_smp
     print(f"projection for {proj['name']}: {shards} shards, {segs} segments, {smps} samples -> "
-          f"{core_s / 3600:.1f} core-hours ({core_s / 3600 / 2:.1f} h on 2 cores), "
-          f"{smps * total_bytes / n_samples / 2**30:.0f} GiB")
+          f"{core_s / 3600:.1f} core-hours ({core_s / 3600 / 2:.1f} h on 2 cores, {core_s / 60 / 32:.0f} min on 32), "
+          f"{smps * total_bytes / n_samples / 2**30:.1f} GiB")
     return 0
 
 

@@ -3,7 +3,7 @@
 from colonbench.augment import AugmentConfig
 from colonbench.datagen.config import describe as describe_config
 from colonbench.shards.schema import (ATTRIBUTES, COLON_ATTRIBUTES, COLON_FIELDS, COLON_OPTIONAL_ATTRIBUTES,
-                                      OPTIONAL_ATTRIBUTES, describe)
+                                      HEATMAP_FIELDS, OPTIONAL_ATTRIBUTES, describe)
 
 
 def tables() -> str:
@@ -12,6 +12,10 @@ def tables() -> str:
     out += ["", "| file attribute | meaning |", "|---|---|"]
     out += [f"| `{k}` | {v} |" for k, v in ATTRIBUTES.items()]
     out += [f"| `{k}` (optional) | {v} |" for k, v in OPTIONAL_ATTRIBUTES.items()]
+    out += ["", "Format 1 (read, no longer written) stored two heatmaps where format 2 stores `s0`, `s1`, `c`, and "
+            "float32 points in every split:", "",
+            "| dataset | shape | dtype | unit | frame | meaning |", "|---|---|---|---|---|---|"]
+    out += [f"| {p} | {s} | {d} | {u} | {f} | {m} |" for p, s, d, u, f, m in describe(HEATMAP_FIELDS)]
     out += ["", "Whole-colon shards (`task: colon` manifests, `colonbench.shards.colonshard`):", "",
             "| dataset | shape | dtype | unit | frame | meaning |", "|---|---|---|---|---|---|"]
     out += [f"| {p} | {s} | {d} | {u} | {f} | {m} |" for p, s, d, u, f, m in describe(COLON_FIELDS)]

@@ -26,7 +26,7 @@ from colonbench.datagen.generate import GeneratorConfig, PreparedColon, procedur
 from colonbench.datagen.sample import make_sample
 from colonbench.errors import ColonbenchError
 from colonbench.grid import fit_grid
-from colonbench.heatmaps import HEATMAP_SCALE, sample_heatmaps
+from colonbench.heatmaps import HEATMAP_SCALE, pack_occupancy, sample_occupancy
 from colonbench.shards import schema
 from colonbench.shards.manifest import Unit, config_hash, draw_mix, manifest_hash, pick_segments
 from colonbench.shards.schema import sha256_file
@@ -78,7 +78,7 @@ class _Stages:
         return now
 
 
-def build_shard(resolved: dict, unit: Unit, out_dir) -> dict:
+def build_shard(resolved: dict, unit: Unit, out_dir, version: int = schema.FORMAT_VERSION) -> dict:
     """Generate and write one shard; returns what was done.
 
     Parameters
@@ -88,6 +88,9 @@ def build_shard(resolved: dict, unit: Unit, out_dir) -> dict:
     unit : Unit
     out_dir : path
         Dataset folder; the shard goes to ``out_dir / unit.name``.
+    version : int
+        Shard format (:mod:`colonbench.shards.schema`); 1, which stores the
+        heatmaps, only to compare with the current format.
 
     Returns
     -------
@@ -115,7 +118,7 @@ def build_shard(resolved: dict, unit: Unit, out_dir) -> dict:
     n = len(picks) * perms
     lmm = int(round(unit.length_mm * 1000))
 
-    attrs = {"format": schema.FORMAT, "format_version": schema.FORMAT_VERSION, "generator_version": __version__,
+    attrs = {"format": schema.FORMAT, "format_version": int(version), "generator_version": __version__,
              "manifest_name": resolved["name"], "manifest_sha256": manifest_hash(resolved),
              "config_sha256": config_hash(resolved), "seed": seed, "split": unit.split, "colon_id": unit.colon_id,
              "length_mm": unit.length_mm, "grid_size": size, "grid_margin": margin,
@@ -127,10 +130,11 @@ def build_shard(resolved: dict, unit: Unit, out_dir) -> dict:
         attrs["colon_source"] = unit.mesh
         attrs["skipped_segments"] = json.dumps(skipped)
     sample_info = []
-    with ShardWriter(Path(out_dir) / unit.name, n, size) as writer:
+    quantize = unit.split in schema.QUANTIZED_SPLITS
+    with ShardWriter(Path(out_dir) / unit.name, n, size, version=version, quantize=quantize) as writer:
         for k in picks:
             surface = prepared.segment(*wins[k])
-            # heatmaps are made from the geometry as stored (float32), so they can be remade from the file
+            # the grids are made from the geometry as stored (float32), so they can be remade from the file
             verts = surface.mesh.vertices.astype(np.float32)
             faces = surface.mesh.faces.astype(np.int32)
             centerline = surface.centerline.astype(np.float32)
@@ -150,11 +154,16 @@ def build_shard(resolved: dict, unit: Unit, out_dir) -> dict:
                 partial64 = partial.astype(float)
                 t = stages.add("sample", t)
                 grid = fit_grid(partial64, size=size, margin=margin, min_extent_mm=min_extent, axes=axes)
-                hm = sample_heatmaps(grid, partial64, verts64, faces, centerline64)
-                t = stages.add("heatmaps", t)
-                writer.add_sample(hm.input, hm.target, grid_affine=grid.affine, segment=row, permutation=p,
+                occ = sample_occupancy(grid, partial64, verts64, faces, centerline64)
+                if version == 1:
+                    hm = occ.heatmaps()
+                    grids = {"input": hm.input, "target": hm.target}
+                else:
+                    grids = {name: pack_occupancy(getattr(occ, name)) for name in schema.OCCUPANCIES}
+                t = stages.add("grids", t)
+                writer.add_sample(grids, grid_affine=grid.affine, segment=row, permutation=p,
                                   hole_model=schema.HOLE_MODEL_CODES[hole_model], noise_mm=sigma,
-                                  coverage=s.coverage, outside_grid=hm.outside["complete"],
+                                  coverage=s.coverage, outside_grid=occ.outside["complete"],
                                   observed_faces=s.observed_faces, partial_points=partial,
                                   hole_points=s.hole_points, hole_areas_mm2=s.hole_areas)
                 t = stages.add("write", t)

@@ -159,6 +159,13 @@ def _generate_locked(resolved, digest, out: Path, workers, scheduler, splits, pr
                              f"{resolved['name']!r}); generate into an empty folder")
     else:
         saved.write_text(dumps(resolved))
+    if (out / LOCK_NAME).exists():
+        wrote = json.loads((out / LOCK_NAME).read_text()).get("shard_format_version", 1)
+        writes = schema.COLON_FORMAT_VERSION if task(resolved) == "colon" else schema.FORMAT_VERSION
+        if wrote != writes:
+            raise InputError(f"{out} holds shards of format {wrote}; this colonbench writes format {writes}, and a "
+                             "dataset is one format. Generate into a new folder (the old one stays readable: "
+                             "colonbench verify, evaluate and train read both)")
     for tmp in out.rglob(f"*.h5{TMP_SUFFIX}*"):
         tmp.unlink()  # left by a killed run; never a finished shard
 

@@ -1,7 +1,6 @@
 """Packs: a generated dataset's training samples as compact voxel occupancies, for training elsewhere.
 
-A shard sample holds two float heatmaps and its geometry (about 413 KiB). The
-heatmaps are functions of three occupancy grids (:mod:`colonbench.heatmaps`):
+A sample's heatmaps are functions of three occupancy grids (:mod:`colonbench.heatmaps`):
 
 ``s0``
     voxels holding a partial point (where the input heatmap is 0);
@@ -12,12 +11,15 @@ heatmaps are functions of three occupancy grids (:mod:`colonbench.heatmaps`):
     shard's centerline polyline: where it crosses the surface the target
     is 0, not 1).
 
-A pack stores just these, bit-packed and compressed (about 5 KiB per
-sample), so that tens of thousands of samples travel to a GPU machine in one
-upload and the heatmaps are made again there with exact distance transforms
-(:mod:`colonbench.completion.packdata`). It cannot hold the geometry, so the
-geometric augmentations (:mod:`colonbench.augment`) need shards; a pack
-supports only the exact symmetries of the grid (axis flips).
+Format-2 shards store them beside the geometry (about 130 KiB per sample);
+a pack is their view without the geometry: the same bit-packed grids (about
+5 KiB per sample), so that tens of thousands of samples travel to a GPU
+machine in one upload and the heatmaps are made there with exact distance
+transforms (:mod:`colonbench.completion.packdata`). Training reads the same
+grids from format-2 shards directly (:func:`read_shard_bits`); a pack is
+only for carrying. It cannot hold the geometry, so the geometric
+augmentations (:mod:`colonbench.augment`) need shards; a pack supports only
+the exact symmetries of the grid (axis flips, transposes).
 
 Layout of a pack folder::
 
@@ -28,9 +30,10 @@ Layout of a pack folder::
                        of the (S, S, S) bool grid in C order; gzip level 9,
                        one chunk per sample
 
-``colonbench pack DATA --out PACK`` writes one. Every written sample is
-checked: the heatmaps recomputed from the occupancies must equal the stored
-ones to float16 rounding.
+``colonbench pack DATA --out PACK`` writes one, from format-2 shards by
+copying their grids, from format-1 shards (which stored heatmaps) by reading
+the grids off the heatmaps, each sample checked: the heatmaps recomputed from
+the occupancies must equal the stored ones to float16 rounding.
 """
 
 from __future__ import annotations
@@ -66,51 +69,27 @@ def is_pack(path) -> bool:
     return (Path(path) / PACK_NAME).is_file()
 
 
-def occupancies(input_heatmap: np.ndarray, target_heatmap: np.ndarray, centerline: np.ndarray) -> dict:
-    """The three occupancy grids of a sample from its stored heatmaps and its voxelized centerline.
-
-    Parameters
-    ----------
-    input_heatmap, target_heatmap : (S, S, S) float
-        As stored in a shard.
-    centerline : (S, S, S) bool
-        The voxelized GT centerline, as generation made it
-        (:func:`colonbench.heatmaps.voxelize_polyline` on the sample's grid).
-
-    Returns
-    -------
-    dict
-        ``s0``, ``s1``, ``c``: (S, S, S) bool.
-
-    Notes
-    -----
-    The centerline is not read from the target (``== 1``): a centerline
-    voxel that is also a surface voxel has target 0, and the widened
-    generator makes such voxels (a stalked polyp's head or a flattened
-    section across the centerline); without them the centerline's distances,
-    and so the target, come out otherwise.
-    """
-    return {"s0": input_heatmap == 0, "s1": target_heatmap == 0, "c": np.asarray(centerline, dtype=bool)}
-
-
 def _pack_shard(path) -> tuple[dict, float]:
-    """Packed occupancies (``GRIDS`` -> (n, S^3 / 8) uint8) of one shard, and the largest heatmap difference."""
-    from colonbench.heatmaps import heatmaps_from_occupancy, voxelize_polyline
+    """Packed occupancies (``GRIDS`` -> (n, S^3 / 8) uint8) of one shard, and the largest heatmap difference
+    (format 1: the stored heatmaps against those remade from the grids read off them; format 2: 0)."""
+    from colonbench.heatmaps import heatmaps_from_occupancy, pack_occupancy
     from colonbench.shards.reader import Shard
 
     rows = {g: [] for g in GRIDS}
     worst = 0.0
     with Shard(path) as shard:
+        if shard.version > 1:  # the grids as stored: a pack is their view
+            return {g: shard.h5["samples"][g][()] for g in GRIDS}, 0.0
         for i in range(len(shard)):
-            x, y = shard.heatmaps(i)
-            occ = occupancies(x, y, voxelize_polyline(shard.grid(i), shard.centerline(i))[0])
+            occ = shard.occupancy(i)
             if not occ["s0"].any() or not occ["s1"].any() or not occ["c"].any():
                 raise InputError(f"{path}: sample {i} has an empty partial surface, surface or centerline grid; "
                                  "the dataset is damaged (run colonbench verify)")
+            x, y = shard.heatmaps(i)
             h_in, h_t = heatmaps_from_occupancy(occ["s0"], occ["s1"], occ["c"])
             worst = max(worst, float(np.abs(h_in - x).max()), float(np.abs(h_t - y).max()))
             for g in GRIDS:
-                rows[g].append(np.packbits(occ[g].ravel()))
+                rows[g].append(pack_occupancy(occ[g]))
     return {g: np.stack(r) for g, r in rows.items()}, worst
 
 
@@ -259,6 +238,37 @@ def process_pool(workers: int):
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
     return ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"))
+
+
+def read_shard_bits(data_dir, split: str) -> tuple[dict, dict]:
+    """One split of a format-2 dataset folder as a pack's split: its occupancy grids, read from the shards.
+
+    Returns
+    -------
+    info : dict
+        As a ``pack.json``: ``grid_options``, ``train_coverage_mean``, ``manifest_sha256``, ``manifest_name``.
+    bits : dict
+        ``s0``, ``s1``, ``c``: (n, S^3 / 8) uint8, the samples in the lock's shard order.
+    """
+    from colonbench.shards.reader import Shard, dataset_files
+
+    data_dir = Path(data_dir)
+    lock = dataset_lock(data_dir, [split])
+    shards = [Shard(f) for f in dataset_files(data_dir, split)]
+    old = [str(sh.path) for sh in shards if sh.version < 2]
+    if old:
+        raise InputError(f"{old[0]}: a format-1 shard (heatmaps stored, no occupancy grids); make a pack of "
+                         f"{data_dir} (colonbench pack) or generate it again")
+    parts = {g: [] for g in GRIDS}
+    for sh in shards:
+        with sh:
+            for g in GRIDS:
+                parts[g].append(sh.h5["samples"][g][()])
+    info = {"grid_options": shards[0].grid_options, "manifest_sha256": lock["manifest_sha256"],
+            "manifest_name": lock.get("manifest_name"),
+            "train_coverage_mean": lock["splits"].get("train", {}).get("statistics", {}).get("coverage", {})
+            .get("mean")}
+    return info, {g: np.concatenate(p) for g, p in parts.items()}
 
 
 def read_pack(pack_dir, split: str) -> tuple[dict, dict]:

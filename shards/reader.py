@@ -28,11 +28,22 @@ from colonbench.grid import Grid
 from colonbench.shards import schema
 from colonbench.shards.schema import LOCK_NAME
 
+
+def decode_points(ds: h5py.Dataset, rows: np.ndarray) -> np.ndarray:
+    """Rows of a point set as float32 mm: int32 micrometres (a training split's) decoded, float32 as stored."""
+    if "scale_mm" not in ds.attrs:
+        return rows
+    scale, offset = float(ds.attrs["scale_mm"]), np.asarray(ds.attrs["offset_mm"], dtype=np.float64)
+    return (rows * scale + offset).astype(np.float32)
+
+
 def ragged_row(group, name: str, i: int) -> np.ndarray:
-    """Row ``i`` of the ragged field ``name`` of an open HDF5 group (through ``<name>_offsets``)."""
+    """Row ``i`` of the ragged field ``name`` of an open HDF5 group (through ``<name>_offsets``); point sets
+    stored as micrometres come back as float32 mm (:func:`decode_points`)."""
     off = group[name + "_offsets"]
     a, b = int(off[i]), int(off[i + 1])
-    return group[name][a:b]
+    ds = group[name]
+    return decode_points(ds, ds[a:b])
 
 
 def read_attrs(path: Path) -> dict:
@@ -60,9 +71,10 @@ class Shard:
         self.attrs = read_attrs(self.path)
         if self.attrs.get("format") != schema.FORMAT:
             raise InputError(f"{self.path}: not a colonbench shard")
-        if int(self.attrs.get("format_version", -1)) != schema.FORMAT_VERSION:
-            raise InputError(f"{self.path}: shard format version {self.attrs.get('format_version')}, "
-                             f"this colonbench reads version {schema.FORMAT_VERSION}")
+        self.version = int(self.attrs.get("format_version", -1))
+        if self.version not in schema.READ_VERSIONS:
+            raise InputError(f"{self.path}: shard format version {self.attrs.get('format_version')}; this colonbench "
+                             f"reads versions {', '.join(map(str, schema.READ_VERSIONS))} (a newer one wrote it)")
 
     @property
     def h5(self) -> h5py.File:
@@ -105,10 +117,51 @@ class Shard:
                 "axes": str(self.attrs.get("grid_axes", "pca"))}
 
     def heatmaps(self, i: int) -> tuple[np.ndarray, np.ndarray]:
-        """(input, target), each (S, S, S) float32, of sample ``i``."""
+        """(input, target), each (S, S, S) float32, of sample ``i``.
+
+        Format 1 stored them; format 2 stores the occupancy grids and they are
+        made here (:func:`colonbench.heatmaps.heatmaps_from_occupancy`, three
+        ``edt`` distance transforms), rounded to float16 as format 1 stored
+        them, so both formats give the same values.
+        """
         i = self._check(i)
         smp = self.h5["samples"]
-        return smp["input"][i].astype(np.float32), smp["target"][i].astype(np.float32)
+        if self.version == 1:
+            return smp["input"][i].astype(np.float32), smp["target"][i].astype(np.float32)
+        from colonbench.heatmaps import heatmaps_from_occupancy
+
+        occ = self.occupancy(i)
+        return tuple(h.astype(np.float16).astype(np.float32) for h in heatmaps_from_occupancy(
+            occ["s0"], occ["s1"], occ["c"]))
+
+    def occupancy_bits(self, i: int) -> dict:
+        """``s0``, ``s1``, ``c`` of sample ``i`` as stored in format 2: (S^3 / 8,) uint8, bit-packed."""
+        i = self._check(i)
+        if self.version == 1:
+            from colonbench.heatmaps import pack_occupancy
+
+            return {k: pack_occupancy(v) for k, v in self.occupancy(i).items()}
+        smp = self.h5["samples"]
+        return {name: smp[name][i] for name in schema.OCCUPANCIES}
+
+    def occupancy(self, i: int) -> dict:
+        """``s0``, ``s1``, ``c`` of sample ``i``: (S, S, S) bool, the grids its heatmaps are functions of.
+
+        Format 1 stored no occupancy: ``s0`` and ``s1`` are read as the stored
+        heatmaps' zeros and ``c`` voxelized again from the segment's
+        centerline on the sample's grid, as generation did (not read as the
+        target's ones: a centerline voxel on the surface has target 0).
+        """
+        i = self._check(i)
+        if self.version == 1:
+            from colonbench.heatmaps import voxelize_polyline
+
+            x, y = self.heatmaps(i)
+            return {"s0": x == 0, "s1": y == 0, "c": voxelize_polyline(self.grid(i), self.centerline(i))[0]}
+        from colonbench.heatmaps import unpack_occupancy
+
+        size = int(self.attrs["grid_size"])
+        return {k: unpack_occupancy(v, size) for k, v in self.occupancy_bits(i).items()}
 
     def grid(self, i: int) -> Grid:
         """The :class:`~colonbench.grid.Grid` of sample ``i``'s heatmaps."""
@@ -144,10 +197,25 @@ class Shard:
         return out
 
     def sample(self, i: int) -> dict:
-        """Every stored field of sample ``i``: :meth:`geometry` plus ``input`` and ``target`` (S, S, S) float32."""
+        """Every stored field of sample ``i``: :meth:`geometry`, ``input`` and ``target`` (S, S, S) float32
+        (:meth:`heatmaps`) and, in format 2, the stored grids ``s0``, ``s1``, ``c`` (:meth:`occupancy_bits`)."""
         out = self.geometry(i)
         out["input"], out["target"] = self.heatmaps(i)
+        if self.version > 1:
+            out.update(self.occupancy_bits(i))
         return out
+
+
+def available_memory_mib() -> float:
+    """Memory available to new allocations, MiB (Linux ``MemAvailable``; 0 where it cannot be read)."""
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) / 1024
+    except OSError:
+        pass
+    return 0.0
 
 
 def dataset_files(root, split=None) -> list[Path]:
@@ -230,6 +298,12 @@ class ShardDataset(ShardSamples):
     augment_prob : float
         Share of items augmented (drawn per item from the same stream); the
         others return their stored heatmaps.
+    cache_mib : float or "auto"
+        Keep the heatmaps made from format-2 occupancies (float16, 1 MiB per
+        sample at S = 64) in this process, up to this much memory, so that
+        later epochs do not make them again; ``"auto"``: an eighth of the
+        memory available when the dataset is made, at most 4 GiB. Each
+        DataLoader worker keeps its own. 0: none.
 
     Items
     -----
@@ -239,12 +313,27 @@ class ShardDataset(ShardSamples):
     """
 
     def __init__(self, source, split=None, geometry: bool = False, augment=None, seed: int = 0,
-                 augment_prob: float = 1.0):
+                 augment_prob: float = 1.0, cache_mib="auto"):
         super().__init__(source, split)
         self.geometry = geometry
         self.augment = augment
         self.seed = int(seed)
         self.augment_prob = float(augment_prob)
+        if cache_mib == "auto":
+            cache_mib = min(4096.0, available_memory_mib() / 8)
+        self.cache_mib = float(cache_mib)
+        self._cache = {}
+
+    def stored_heatmaps(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """(input, target) (S, S, S) float32 of item ``k`` without augmentation, from the cache where kept."""
+        shard, i = self.locate(k)
+        k = int(k % len(self))
+        if k in self._cache:
+            return tuple(h.astype(np.float32) for h in self._cache[k])
+        h_in, h_t = shard.heatmaps(i)
+        if shard.version > 1 and (len(self._cache) + 1) * 2 * h_in.size * 2 <= self.cache_mib * 2 ** 20:
+            self._cache[k] = (h_in.astype(np.float16), h_t.astype(np.float16))
+        return h_in, h_t
 
     def __getitem__(self, k: int) -> dict:
         shard, i = self.locate(k)
@@ -259,7 +348,7 @@ class ShardDataset(ShardSamples):
                                        shard.grid_options)
             h_in, h_t = hm.input, hm.target
         else:
-            h_in, h_t = shard.heatmaps(i)
+            h_in, h_t = self.stored_heatmaps(k)
         item["input"] = h_in[None].astype(np.float32, copy=False)
         item["target"] = h_t[None].astype(np.float32, copy=False)
         item["coverage"] = float(shard.h5["samples/coverage"][i])

@@ -9,8 +9,9 @@ length for one split. It has two groups:
     permutations the segment has.
 ``samples/``
     One row per sample (``N`` rows) = one hole permutation of one segment: the
-    64^3 heatmaps, the grid transform, the partial points, GT hole points,
-    coverage, ...; ``samples/segment`` gives its row in ``segments/``.
+    three 64^3 occupancy grids the heatmaps are functions of (bit-packed),
+    the grid transform, the partial points, GT hole points, coverage, ...;
+    ``samples/segment`` gives its row in ``segments/``.
 
 A field whose rows have different lengths (point sets, meshes) is *ragged*: it
 is stored as one flat array, and ``<name>_offsets`` (rows + 1 int64 values,
@@ -18,9 +19,17 @@ starting at 0) gives where each row starts and ends: row ``i`` is
 ``flat[offsets[i]:offsets[i + 1]]``.
 
 Geometry is in mm in the colon's frame (the frame of the partial points).
-Heatmaps are in voxel space; ``samples/grid_affine`` maps a voxel index
-``(i, j, k, 1)`` of ``input[n]`` and ``target[n]`` to mm (see
-:class:`colonbench.grid.Grid`).
+Occupancies are in voxel space; ``samples/grid_affine`` maps a voxel index
+``(i, j, k, 1)`` of ``s0[n]``, ``s1[n]`` and ``c[n]`` to mm (see
+:class:`colonbench.grid.Grid`). The heatmaps are not stored: readers make them
+(:meth:`colonbench.shards.reader.Shard.heatmaps`). Format 1 stored them
+(float16 ``input`` and ``target``) instead of the occupancies; readers read
+both (:data:`FIELDS_V1`).
+
+In the ``train`` and ``validation`` splits the partial and hole points are
+stored as int32 micrometres (:data:`POINT_SCALE_MM`; the dataset attributes
+``scale_mm`` and ``offset_mm`` give ``mm = int * scale_mm + offset_mm``); the
+``test`` split, the benchmark's inputs, keeps them as float32 exactly as made.
 
 The docs table (``docs/shards.md``) is written from :data:`FIELDS` by
 :func:`describe`; :func:`check` is what ``colonbench verify`` runs.
@@ -29,6 +38,7 @@ The docs table (``docs/shards.md``) is written from :data:`FIELDS` by
 from __future__ import annotations
 
 import hashlib
+import json
 from dataclasses import dataclass
 
 import h5py
@@ -50,7 +60,15 @@ def sha256_file(path, block: int = 1 << 22) -> str:
 #: Value of the file attribute ``format``.
 FORMAT = "colonbench-shard"
 #: Bumped whenever a field is added, removed or changes meaning.
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+#: The versions this colonbench reads (1: heatmaps stored; 2: occupancies stored).
+READ_VERSIONS = (1, 2)
+#: The splits whose point sets are stored in micrometres (int32); others keep float32.
+QUANTIZED_SPLITS = ("train", "validation")
+#: One stored point unit in a quantized split, mm (1 µm: 1/1400 of a voxel, 1/500 of the 0.5 mm noise).
+POINT_SCALE_MM = 1e-3
+#: The occupancy grids a format-2 sample stores, in this order (packs store the same).
+OCCUPANCIES = ("s0", "s1", "c")
 
 #: Hole models, as stored in the enum ``samples/hole_model``.
 HOLE_MODEL_CODES = {"camera": 0, "spheres": 1, "camera+spheres": 2, "camera+end": 3, "spheres+end": 4,
@@ -71,10 +89,13 @@ class Field:
         numpy dtype string as stored.
     shape : tuple
         ``"rows"`` for the group's row count, ``"S"`` for the grid side,
-        ``"flat"`` for the total length of a ragged field, or an int.
+        ``"S^3/8"`` for a bit-packed grid's bytes, ``"flat"`` for the total
+        length of a ragged field, or an int.
     unit, frame, doc : str
     ragged : bool
         Stored flat with ``<name>_offsets``.
+    quantized : bool
+        A point set stored as int32 micrometres in the :data:`QUANTIZED_SPLITS`.
     """
 
     group: str
@@ -85,6 +106,7 @@ class Field:
     frame: str
     doc: str
     ragged: bool = False
+    quantized: bool = False
 
     @property
     def path(self) -> str:
@@ -104,10 +126,13 @@ FIELDS = (
     Field("segments", "centerline", "float32", ("flat", 3), "mm", "colon",
           "GT centerline inside the segment, ordered from s0 to s1, spacing <= 0.5 mm", True),
     # --- samples/: one row per sample (segment x hole permutation) ---
-    Field("samples", "input", "float16", ("rows", "S", "S", "S"), "-", "grid (i, j, k)",
-          "input heatmap tanh(0.2 d(v, S0)), d in voxels"),
-    Field("samples", "target", "float16", ("rows", "S", "S", "S"), "-", "grid (i, j, k)",
-          "target heatmap tanh(0.2 d(v,S1)) / (tanh(0.2 d(v,S1)) + tanh(0.2 d(v,C)))"),
+    Field("samples", "s0", "uint8", ("rows", "S^3/8"), "-", "grid (i, j, k)",
+          "S0: voxels holding a partial point (the input heatmap's zeros); numpy.packbits of the (S, S, S) grid "
+          "in C order"),
+    Field("samples", "s1", "uint8", ("rows", "S^3/8"), "-", "grid (i, j, k)",
+          "S1: voxels the complete surface passes through (the target's zeros); packed as s0"),
+    Field("samples", "c", "uint8", ("rows", "S^3/8"), "-", "grid (i, j, k)",
+          "C: voxels the GT centerline passes through; packed as s0"),
     Field("samples", "grid_affine", "float64", ("rows", 4, 4), "mm per voxel", "grid -> colon",
           "maps voxel index (i, j, k, 1) to (x, y, z, 1) mm; fitted to the partial points alone"),
     Field("samples", "segment", "int32", ("rows",), "-", "-", "row of the sample's segment in segments/"),
@@ -124,12 +149,31 @@ FIELDS = (
     Field("samples", "observed_faces", "uint8", ("flat",), "-", "-",
           "1 where the face of the segment's complete mesh was observed; one value per face", True),
     Field("samples", "partial_points", "float32", ("flat", 3), "mm", "colon",
-          "partial point cloud (the method's input), noise included", True),
+          "partial point cloud (the method's input), noise included; int32 µm in train and validation splits",
+          True, True),
     Field("samples", "hole_points", "float32", ("flat", 3), "mm", "colon",
-          "GT hole points: dense samples (4/mm^2) of the unobserved part of the complete surface", True),
+          "GT hole points: dense samples (4/mm^2) of the unobserved part of the complete surface; int32 µm in "
+          "train and validation splits", True, True),
     Field("samples", "hole_areas_mm2", "float32", ("flat",), "mm^2", "-",
           "area of each hole (connected unobserved region), largest first", True),
 )
+
+#: Format 1's heatmaps, stored where format 2 stores the occupancies (read, never written).
+HEATMAP_FIELDS = (
+    Field("samples", "input", "float16", ("rows", "S", "S", "S"), "-", "grid (i, j, k)",
+          "input heatmap tanh(0.2 d(v, S0)), d in voxels"),
+    Field("samples", "target", "float16", ("rows", "S", "S", "S"), "-", "grid (i, j, k)",
+          "target heatmap tanh(0.2 d(v,S1)) / (tanh(0.2 d(v,S1)) + tanh(0.2 d(v,C)))"),
+)
+#: The fields of a format-1 shard.
+FIELDS_V1 = (tuple(f for f in FIELDS if f.group == "segments") + HEATMAP_FIELDS
+             + tuple(f for f in FIELDS if f.group == "samples" and f.name not in OCCUPANCIES))
+
+
+def fields_of(version: int) -> tuple:
+    """The fields of a shard of format ``version`` (1 or 2)."""
+    return FIELDS_V1 if int(version) == 1 else FIELDS
+
 
 #: File attributes every shard carries, with their meaning.
 ATTRIBUTES = {
@@ -215,13 +259,16 @@ COLON_OPTIONAL_ATTRIBUTES = {
                     "lumen is narrower than the import's limit; their surface stays in the truth)",
 }
 
-#: Options of every dataset: per-sample heatmap chunks, gzip level 4 with shuffle, no timestamps.
+#: Options of every dataset but the occupancies: gzip level 4 with shuffle, no timestamps.
 COMPRESSION = {"compression": "gzip", "compression_opts": 4, "shuffle": True}
+#: Options of the occupancy grids: one chunk per sample, gzip level 4 (level 9 saves 0.6 KiB a sample for 17 ms
+#: of writing; decision 0417).
+OCCUPANCY_COMPRESSION = {"compression": "gzip", "compression_opts": 4}
 
 
 def field(path: str) -> Field:
     """The :class:`Field` stored at ``group/name``."""
-    for f in FIELDS:
+    for f in FIELDS + HEATMAP_FIELDS:
         if f.path == path:
             return f
     raise KeyError(path)
@@ -245,13 +292,14 @@ def describe(fields=FIELDS) -> list[tuple[str, str, str, str, str, str]]:
     return rows
 
 
-def check(h5: h5py.File) -> list[str]:
+def check(h5: h5py.File, deep: bool = True) -> list[str]:
     """Every way in which an open shard departs from the schema; an empty list when it conforms.
 
-    Checks the attributes, the presence, dtype and shape of every field, the
-    offsets of ragged fields, that segment references and per-face masks
-    line up, and that heatmaps and coverages are finite and within [0, 1].
-    Heatmap values are read one sample at a time.
+    Checks the attributes, the presence, dtype and shape of every field (of
+    format 1 or 2), the offsets of ragged fields, that segment references and
+    per-face masks line up, and that coverages are finite and within [0, 1];
+    with ``deep``, one sample at a time, that format 1's heatmaps are within
+    [0, 1] and that none of format 2's occupancy grids is empty.
     """
     if h5.attrs.get("format") == COLON_FORMAT:
         return check_colon(h5)
@@ -263,13 +311,15 @@ def check(h5: h5py.File) -> list[str]:
         return faults
     if h5.attrs["format"] != FORMAT:
         return [f"attribute format is {h5.attrs['format']!r}, not {FORMAT!r}"]
-    if int(h5.attrs["format_version"]) != FORMAT_VERSION:
-        return [f"format_version {int(h5.attrs['format_version'])} is not {FORMAT_VERSION}, the version this "
-                f"colonbench reads"]
+    version = int(h5.attrs["format_version"])
+    if version not in READ_VERSIONS:
+        return [f"format_version {version} is not one this colonbench reads ({', '.join(map(str, READ_VERSIONS))}); "
+                "a newer colonbench wrote it"]
     rows = {"samples": int(h5.attrs["n_samples"]), "segments": int(h5.attrs["n_segments"])}
     size = int(h5.attrs["grid_size"])
+    quantized = version >= 2 and str(h5.attrs["split"]) in QUANTIZED_SPLITS
     offsets = {}
-    for f in FIELDS:
+    for f in fields_of(version):
         if f.path not in h5:
             faults.append(f"{f.path} is missing")
             continue
@@ -277,8 +327,12 @@ def check(h5: h5py.File) -> list[str]:
         if not isinstance(ds, h5py.Dataset):
             faults.append(f"{f.path} is not a dataset")
             continue
-        if ds.dtype != np.dtype(f.dtype):
-            faults.append(f"{f.path} has dtype {ds.dtype}, expected {f.dtype}")
+        dtype = "int32" if f.quantized and quantized else f.dtype
+        if ds.dtype != np.dtype(dtype):
+            faults.append(f"{f.path} has dtype {ds.dtype}, expected {dtype}")
+        elif f.quantized and quantized and not (ds.attrs.get("scale_mm") == POINT_SCALE_MM
+                                       and np.shape(ds.attrs.get("offset_mm")) == (3,)):
+            faults.append(f"{f.path} lacks its scale_mm ({POINT_SCALE_MM}) and offset_mm (3 values) attributes")
         n_flat = None
         if f.ragged:
             opath = f.path + "_offsets"
@@ -294,7 +348,8 @@ def check(h5: h5py.File) -> list[str]:
                 continue
             offsets[f.path] = off
             n_flat = ds.shape[0]
-        expected = tuple({"rows": rows[f.group], "S": size, "flat": n_flat}.get(s, s) for s in f.shape)
+        expected = tuple({"rows": rows[f.group], "S": size, "S^3/8": size ** 3 // 8, "flat": n_flat}.get(s, s)
+                         for s in f.shape)
         if ds.shape != expected:
             faults.append(f"{f.path} has shape {ds.shape}, expected {expected}")
     if faults:
@@ -316,12 +371,19 @@ def check(h5: h5py.File) -> list[str]:
     cov = h5["samples/coverage"][()]
     if not np.all(np.isfinite(cov) & (cov >= 0) & (cov <= 1)):
         faults.append("samples/coverage has values outside [0, 1]")
-    for name in ("input", "target"):
+    if not deep:
+        return faults
+    kept = h5.attrs.get("kept_samples")  # a subset (colonbench.shards.subset): only these rows hold data
+    rows_with_data = json.loads(kept) if kept is not None else range(rows["samples"])
+    for name in (("input", "target") if version == 1 else OCCUPANCIES):
         ds = h5["samples/" + name]
-        for i in range(ds.shape[0]):
+        for i in rows_with_data:
             v = ds[i]
-            if not (np.all(np.isfinite(v)) and v.min() >= 0 and v.max() <= 1):
+            if version == 1 and not (np.all(np.isfinite(v)) and v.min() >= 0 and v.max() <= 1):
                 faults.append(f"samples/{name}[{i}] has values outside [0, 1]")
+                break
+            if version > 1 and not v.any():
+                faults.append(f"samples/{name}[{i}] is empty (no occupied voxel: no heatmap can be made)")
                 break
     return faults
 

@@ -3,7 +3,8 @@
 The copy keeps the schema and every row, so that a sample keeps its index (and
 its sample id) and every reader works on it unchanged; the rows that are not
 kept are emptied: their point sets, masks and meshes have no entries and their
-heatmaps are never written (HDF5 stores no chunk for them; they read as 0).
+occupancy grids (format 1: heatmaps) are never written (HDF5 stores no chunk
+for them; they read as 0).
 Segments that no kept sample uses are emptied the same way. The file attribute
 ``kept_samples`` (a JSON list of the kept row indices) says which rows hold data, and a dataset lock that
 lists subsets names them under ``kept_samples`` too, so that every reader of the folder
@@ -36,7 +37,9 @@ def _copy_ragged(src: h5py.Group, dst: h5py.Group, name: str, keep: np.ndarray) 
     data = np.concatenate(rows) if rows else np.zeros((0,) + flat.shape[1:], flat.dtype)
     opts = dict(schema.COMPRESSION) if len(data) else {}
     chunks = (min(len(data), 65536),) + data.shape[1:] if len(data) else None
-    dst.create_dataset(name, data=data.astype(flat.dtype, copy=False), chunks=chunks, track_times=False, **opts)
+    out = dst.create_dataset(name, data=data.astype(flat.dtype, copy=False), chunks=chunks, track_times=False, **opts)
+    for key, value in flat.attrs.items():  # a quantized point set's scale and offset
+        out.attrs[key] = value
     dst.create_dataset(name + "_offsets", data=new_offsets, track_times=False)
 
 
@@ -71,15 +74,16 @@ def write_subset(src, dst, samples) -> Path:
         seg_keep[a["samples/segment"][()][keep]] = True
         for group, rows in (("segments", seg_keep), ("samples", keep)):
             g = b.create_group(group)
-            for f in schema.FIELDS:
+            for f in schema.fields_of(int(a.attrs["format_version"])):
                 if f.group != group or f.path not in a:
                     continue
                 ds = a[f.path]
                 if f.ragged:
                     _copy_ragged(a[group], g, f.name, rows)
-                elif f.name in ("input", "target"):
+                elif f.name in ("input", "target") + schema.OCCUPANCIES:
+                    opts = schema.COMPRESSION if f.name in ("input", "target") else schema.OCCUPANCY_COMPRESSION
                     out = g.create_dataset(f.name, shape=ds.shape, dtype=ds.dtype, chunks=ds.chunks,
-                                           track_times=False, **schema.COMPRESSION)
+                                           track_times=False, **opts)
                     for r in np.flatnonzero(rows):
                         out[r] = ds[r]
                 else:

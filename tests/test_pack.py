@@ -42,8 +42,8 @@ def test_a_pack_remakes_every_stored_heatmap(smoke_pack):
 def test_a_centerline_voxel_on_the_surface_is_kept_from_the_shards_polyline():
     # a stalked polyp's head across the centerline: voxels that are both surface and centerline have
     # target 0, so the target alone loses them and remakes other targets; the polyline gives them back
-    from colonbench.heatmaps import heatmaps_from_occupancy
-    from colonbench.shards.pack import CHECK_TOLERANCE, occupancies
+    from colonbench.heatmaps import heatmaps_from_occupancy, pack_occupancy, unpack_occupancy
+    from colonbench.shards.pack import CHECK_TOLERANCE
 
     s0 = np.zeros((32, 32, 32), bool)
     s1 = np.zeros((32, 32, 32), bool)
@@ -56,8 +56,11 @@ def test_a_centerline_voxel_on_the_surface_is_kept_from_the_shards_polyline():
     from_target = y == 1                          # the centerline read from the target alone
     assert (c & ~from_target).sum() == 4          # the centerline voxels inside the head are lost
     assert np.abs(heatmaps_from_occupancy(x == 0, y == 0, from_target)[1] - y).max() > CHECK_TOLERANCE
-    again = occupancies(x, y, c)
-    _, y2 = heatmaps_from_occupancy(again["s0"], again["s1"], again["c"])
+    # format 2 stores the centerline's own grid (a format-1 reader voxelizes the polyline again:
+    # test_shard_format2): bit-packed and back, it remakes the target exactly
+    again = unpack_occupancy(pack_occupancy(c), 32)
+    assert pack_occupancy(c).shape == (32 ** 3 // 8,) and np.array_equal(again, c)
+    _, y2 = heatmaps_from_occupancy(x == 0, y == 0, again)
     np.testing.assert_array_equal(y2, y)
 
 
@@ -161,13 +164,18 @@ def test_erased_patches_are_balls_of_the_drawn_radii_and_leave_the_target_alone(
     s0 = packdata.erase_patches(split.grids([0])[0, 0], packdata.erasure(0, 0, 0, 1.0))
     assert not torch.equal(ex[0], x[0])
     assert torch.allclose(ex[0, 0], packdata.heatmaps(s0[None], s0[None], s0[None])[0][0])
-    # training erases; a shard folder is refused with what to do
+    # training erases, on the pack and on the shards it was made of: the same grids, the same weights
     cfg = TrainConfig(epochs=1, batch_size=2, workers=0, augment_prob=0.0, erase=0.5)
     assert train(out, tmp_path / "run", cfg, device="cpu", progress=False)["steps"] == 2
-    assert load_model(tmp_path / "run" / "best.safetensors")[2]["train_config"]["erase"] == 0.5
+    net, _, meta = load_model(tmp_path / "run" / "best.safetensors")
+    assert meta["train_config"]["erase"] == 0.5
     data, *_ = smoke_pack
-    with pytest.raises(InputError, match="colonbench pack"):
-        train(data, tmp_path / "shards", cfg, device="cpu", progress=False)
+    assert train(data, tmp_path / "shards", cfg, device="cpu", progress=False)["steps"] == 2
+    from_shards = load_model(tmp_path / "shards" / "best.safetensors")[0].state_dict()
+    assert all(torch.equal(v, from_shards[k]) for k, v in net.state_dict().items())
+    # geometric augmentation needs the geometry: erasing then is refused with what to do
+    with pytest.raises(InputError, match="--augment-prob 0"):
+        train(data, tmp_path / "aug", dataclasses.replace(cfg, augment_prob=0.5), device="cpu", progress=False)
     with pytest.raises(InputError, match="erase must be"):
         TrainConfig(erase=1.5).check()
 

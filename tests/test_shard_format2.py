@@ -1,0 +1,136 @@
+"""Format-2 shards: occupancy grids stored in place of the heatmaps, training splits' points in micrometres.
+
+The smoke manifest is generated in both formats by the real generator; the heatmaps a reader makes from the
+stored grids must be format 1's stored ones, and everything else the same data.
+"""
+
+import json
+
+import h5py
+import numpy as np
+import pytest
+
+from colonbench.errors import InputError
+from colonbench.shards import schema
+from colonbench.shards.build import build_shard
+from colonbench.shards.manifest import load, units
+from colonbench.shards.reader import Shard, ShardDataset
+from colonbench.shards.verify import check_shard
+from colonbench.shards.writer import quantize_points
+
+from conftest import MANIFESTS
+
+
+@pytest.fixture(scope="module")
+def both_formats(smoke_dataset, tmp_path_factory):
+    """(format-2 folder, format-1 folder, shard names): smoke.yaml made by generate and by format 1's writer."""
+    data, _ = smoke_dataset
+    old = tmp_path_factory.mktemp("format1")
+    resolved = load(MANIFESTS / "smoke.yaml")
+    names = []
+    for u in units(resolved):
+        build_shard(resolved, u, old, version=1)
+        names.append(u.name)
+    return data, old, names
+
+
+def test_a_readers_heatmaps_are_format_1s_stored_ones_on_every_sample(both_formats):
+    new, old, names = both_formats
+    n = 0
+    for name in names:
+        with Shard(new / name) as a, Shard(old / name) as b:
+            assert (a.version, b.version) == (2, 1)
+            with h5py.File(old / name) as h5:
+                stored = h5["samples/input"][()], h5["samples/target"][()]
+            for i in range(len(a)):
+                x, y = a.heatmaps(i)
+                assert x.dtype == np.float32 and np.array_equal(x, stored[0][i].astype(np.float32))
+                assert np.array_equal(y, stored[1][i].astype(np.float32))
+                bits_a, bits_b = a.occupancy_bits(i), b.occupancy_bits(i)
+                assert all(np.array_equal(bits_a[g], bits_b[g]) for g in schema.OCCUPANCIES)
+                n += 1
+    assert n == 8
+    ds = ShardDataset(new, split="train")
+    first = ds[1]["target"].copy()
+    assert len(ds._cache) >= 1 and np.array_equal(ds[1]["target"], first)  # the second read comes from the cache
+    shard, i = ds.locate(1)
+    assert np.array_equal(first[0], Shard(old / shard.path.relative_to(new)).heatmaps(i)[1])
+
+
+def test_the_geometry_is_the_same_and_training_points_are_micrometres(both_formats):
+    new, old, names = both_formats
+    for name in names:
+        with Shard(new / name) as a, Shard(old / name) as b:
+            quantized = a.attrs["split"] in schema.QUANTIZED_SPLITS
+            assert a.h5["samples/partial_points"].dtype == (np.int32 if quantized else np.float32)
+            for i in range(len(a)):
+                ga, gb = a.geometry(i), b.geometry(i)
+                for key in ("partial_points", "hole_points"):
+                    assert ga[key].dtype == np.float32 and ga[key].shape == gb[key].shape
+                    if quantized:  # half a micrometre, plus float32's rounding of the decoded value
+                        assert np.abs(ga[key].astype(float) - gb[key].astype(float)).max(initial=0) <= 0.5e-3 + 2e-5
+                    else:  # the benchmark's inputs, bit for bit
+                        assert np.array_equal(ga[key], gb[key])
+                for key in ("vertices", "faces", "centerline", "observed_faces", "hole_areas_mm2", "grid_affine"):
+                    assert np.array_equal(ga[key], gb[key]), key
+                assert ga["coverage"] == gb["coverage"] and ga["outside_grid"] == gb["outside_grid"]
+
+
+def test_quantized_points_hold_at_the_last_bit():
+    rng = np.random.default_rng(3)
+    x = (rng.random((5000, 3)) * 300 - 50).astype(np.float32)
+    x[:10] = np.float32(12.0005)  # on a half-micrometre tie
+    for moved in (x, np.nextafter(x, np.float32(np.inf)), np.nextafter(x, np.float32(-np.inf))):
+        q, offset = quantize_points(moved)
+        back = (q * schema.POINT_SCALE_MM + offset).astype(np.float32)
+        assert q.dtype == np.int32 and np.all(offset == np.floor(offset))
+        assert np.abs(back.astype(float) - moved.astype(float)).max() <= 0.5e-3 + 2e-5
+    with pytest.raises(ValueError, match="too far"):
+        quantize_points(np.array([[0, 0, 0], [3e6, 0, 0]], np.float32))
+
+
+def test_verify_reads_both_formats_and_names_what_is_damaged(both_formats, tmp_path):
+    new, old, names = both_formats
+    for name in names:
+        assert check_shard(new / name) == [] and check_shard(old / name) == []
+    train = next(n for n in names if n.startswith("train/"))
+    bad = tmp_path / "bad.h5"
+    bad.write_bytes((new / train).read_bytes())
+    with h5py.File(bad, "r+") as h5:
+        h5["samples/s1"][1] = 0
+        del h5["samples/hole_points"].attrs["offset_mm"]
+    faults = check_shard(bad)
+    assert any("hole_points lacks its scale_mm" in f for f in faults)
+    with h5py.File(bad, "r+") as h5:
+        h5["samples/hole_points"].attrs["offset_mm"] = np.zeros(3)
+    assert check_shard(bad) == ["samples/s1[1] is empty (no occupied voxel: no heatmap can be made)"]
+    with h5py.File(bad, "r+") as h5:
+        h5.attrs["format_version"] = 3
+    assert "a newer colonbench wrote it" in check_shard(bad)[0]
+    with pytest.raises(InputError, match="reads versions 1, 2"):
+        Shard(bad)
+
+
+def test_generation_will_not_mix_formats_in_one_folder(both_formats, tmp_path):
+    from colonbench.shards.dataset import generate
+
+    new, _, _ = both_formats
+    folder = tmp_path / "data"
+    folder.mkdir()
+    (folder / "manifest.yaml").write_bytes((new / "manifest.yaml").read_bytes())
+    lock = json.loads((new / schema.LOCK_NAME).read_text())
+    (folder / schema.LOCK_NAME).write_text(json.dumps({**lock, "shard_format_version": 1}))
+    with pytest.raises(InputError, match="holds shards of format 1; this colonbench writes format 2"):
+        generate(MANIFESTS / "smoke.yaml", folder, progress=False)
+
+
+def test_a_pack_of_format_2_shards_is_their_grids(smoke_pack):
+    from colonbench.shards.pack import read_pack, read_shard_bits
+
+    data, _, out, info = smoke_pack
+    for split in ("train", "validation"):
+        _, bits = read_pack(out, split)
+        shard_info, shard_bits = read_shard_bits(data, split)
+        assert all(np.array_equal(bits[g], shard_bits[g]) for g in schema.OCCUPANCIES)
+        assert shard_info["grid_options"] == info["grid_options"]
+        assert info["splits"][split]["max_heatmap_difference"] == 0.0
