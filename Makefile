@@ -30,7 +30,7 @@ demo: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/python scripts/bench_datagen.py
-	$(BIN)/python scripts/bench_shards.py
+	$(BIN)/python scripts/bench_shards.py --manifest data_manifests/paper.yaml --shards 2
 
 clean:
 	rm -rf $(VENV) out .pytest_cache *.egg-info

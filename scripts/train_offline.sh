@@ -13,6 +13,9 @@
 #   split -b 30M packs/wide/train.h5 PARTS_DIR/wide/train.h5.part-; cp packs/train-real/* PARTS_DIR/train-real/
 #   cp packs/bends/* PARTS_DIR/bends/
 # and, when monai or edt is missing there, their wheels in PARTS_DIR/wheels (docs/training.md).
+# A folder of format-2 shards (colonbench generate) trains the same as its pack, but weighs about 25 times
+# more (130 against 5.2 KiB per sample): at 64 MiB per upload, about 500 samples of shards travel against
+# about 12 000 packed ones, so the wide + real + bends data (about 22 000 samples) travels as packs.
 # Each pack's train.h5.part-* pieces are joined into train.h5; pack.json's sha256 refuses a wrong join.
 # Rerun with the same RUN_DIR to resume (colonbench train resumes from RUN_DIR/last.pt); it stops cleanly
 # after MINUTES. The run's settings are those of docs/training.md: the shipped small network's

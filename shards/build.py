@@ -169,5 +169,6 @@ def build_shard(resolved: dict, unit: Unit, out_dir, version: int = schema.FORMA
                 t = stages.add("write", t)
         if any(i is not None for i in sample_info):
             attrs["sample_info"] = json.dumps(sample_info)
-        writer.close(attrs)
+        writer.close(attrs)  # compresses and writes the rows kept until now
+        stages.add("write", t)
     return {"name": unit.name, "samples": n, "segments": len(picks), "seconds": stages.t}

@@ -54,6 +54,11 @@ def _job(resolved: dict, out_dir: str, unit):
     return info
 
 
+def _each(fn, jobs) -> list:
+    """``fn`` of each job, in order, in one process."""
+    return [fn(j) for j in jobs]
+
+
 def _execute(fn, jobs, workers: int, scheduler):
     """Run ``fn`` over ``jobs``; yields results as they complete."""
     if scheduler is not None:
@@ -71,10 +76,15 @@ def _execute(fn, jobs, workers: int, scheduler):
             if isinstance(scheduler, str):
                 client.close()
     elif workers > 1 and len(jobs) > 1:
+        # a colon's shards go to one process, in order, so that it makes the colon once (build keeps it)
+        groups = {}
+        for j in jobs:
+            groups.setdefault(getattr(j, "colon_key", id(j)), []).append(j)
         ctx = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(max_workers=min(workers, len(jobs)), mp_context=ctx) as pool:
-            for fut in as_completed([pool.submit(fn, j) for j in jobs]):
-                yield fut.result()
+        with ProcessPoolExecutor(max_workers=min(workers, len(groups)), mp_context=ctx) as pool:
+            futures = [pool.submit(_each, fn, g) for g in sorted(groups.values(), key=len, reverse=True)]
+            for fut in as_completed(futures):
+                yield from fut.result()
     else:
         for j in jobs:
             yield fn(j)

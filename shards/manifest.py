@@ -94,6 +94,11 @@ class Unit:
     whole: bool = False
 
     @property
+    def colon_key(self) -> tuple:
+        """What the units of one colon share (a process that makes them in turn makes the colon once)."""
+        return (self.colon_id, self.mesh, self.whole)
+
+    @property
     def name(self) -> str:
         """Path of the shard below the dataset folder, e.g. ``train/colon-00012-60mm.h5``, ``test/mesh-x-60mm.h5``;
         whole-colon shards ``test/colon-00012.h5``, ``test/mesh-x.h5``."""

@@ -164,7 +164,8 @@ def write_pack(data_dir, out_dir, splits=("train", "validation"), workers: int =
 
         with process_pool(workers) as pool:
             entry = write_split(out, split, size, n, GRIDS, checked(files, pool.map(_pack_shard, files)), progress)
-        info["splits"][split] = {**entry, "max_heatmap_difference": worst[0]}
+        info["splits"][split] = {**entry, "max_heatmap_difference": worst[0],
+                                 "shard_format": max(sh.version for sh in ds.shards)}
     tmp = out / (PACK_NAME + ".tmp")
     tmp.write_text(json.dumps(info, indent=1) + "\n")
     os.replace(tmp, out / PACK_NAME)

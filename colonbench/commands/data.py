@@ -136,7 +136,8 @@ def cmd_pack(args):
     for split, meta in info["splits"].items():
         print(f"{split}: {meta['samples']} samples, {meta['bytes'] / 2**20:.1f} MiB "
               f"({meta['bytes'] / meta['samples'] / 1024:.1f} KiB/sample)"
-              + ("" if args.context else ", heatmaps remade from the occupancies within "
+              + ("" if args.context else ", the shards' grids copied" if meta.get("shard_format", 1) > 1
+                 else ", heatmaps remade from the occupancies within "
                  f"{meta['max_heatmap_difference']:.1e} of the stored ones"))
     print(f"wrote {Path(args.out)}; train on it with colonbench train {args.out} --augment-prob 0 --flips ...")
 
@@ -179,7 +180,7 @@ def add_parsers(sub) -> None:
 
     p = sub.add_parser("verify", help="check a dataset folder (or one shard): checksums, schema, completeness")
     p.add_argument("path", help="dataset folder or .h5 shard")
-    p.add_argument("--quick", action="store_true", help="checksums and counts only, skip reading every heatmap")
+    p.add_argument("--quick", action="store_true", help="checksums and counts only, skip reading every occupancy grid (format 1: heatmap)")
     p.set_defaults(func=cmd_verify)
 
     p = sub.add_parser("pack", help="write a dataset's samples as compact voxel occupancies (~5 KiB/sample) "
