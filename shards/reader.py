@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import json
 import os
+import sys
 from pathlib import Path
 
 import h5py
@@ -302,8 +303,8 @@ class ShardDataset(ShardSamples):
         Keep the heatmaps made from format-2 occupancies (float16, 1 MiB per
         sample at S = 64) in this process, up to this much memory, so that
         later epochs do not make them again; ``"auto"``: an eighth of the
-        memory available when the dataset is made, at most 4 GiB. Each
-        DataLoader worker keeps its own. 0: none.
+        memory available when the dataset is made, at most 4 GiB. DataLoader
+        workers each keep their own, with an equal share of it. 0: none.
 
     Items
     -----
@@ -321,8 +322,16 @@ class ShardDataset(ShardSamples):
         self.augment_prob = float(augment_prob)
         if cache_mib == "auto":
             cache_mib = min(4096.0, available_memory_mib() / 8)
+        if isinstance(cache_mib, str) or not cache_mib >= 0:
+            raise InputError(f"cache_mib: a size in MiB (0 or more) or 'auto', not {cache_mib!r}")
         self.cache_mib = float(cache_mib)
         self._cache = {}
+
+    def _cache_budget(self) -> float:
+        """MiB this process may keep: ``cache_mib`` shared out among a DataLoader's worker processes."""
+        torch_data = sys.modules.get("torch.utils.data")
+        info = torch_data.get_worker_info() if torch_data is not None else None
+        return self.cache_mib / (info.num_workers if info is not None else 1)
 
     def stored_heatmaps(self, k: int) -> tuple[np.ndarray, np.ndarray]:
         """(input, target) (S, S, S) float32 of item ``k`` without augmentation, from the cache where kept."""
@@ -331,7 +340,7 @@ class ShardDataset(ShardSamples):
         if k in self._cache:
             return tuple(h.astype(np.float32) for h in self._cache[k])
         h_in, h_t = shard.heatmaps(i)
-        if shard.version > 1 and (len(self._cache) + 1) * 2 * h_in.size * 2 <= self.cache_mib * 2 ** 20:
+        if shard.version > 1 and (len(self._cache) + 1) * 2 * h_in.size * 2 <= self._cache_budget() * 2 ** 20:
             self._cache[k] = (h_in.astype(np.float16), h_t.astype(np.float16))
         return h_in, h_t
 

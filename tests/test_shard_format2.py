@@ -55,6 +55,14 @@ def test_a_readers_heatmaps_are_format_1s_stored_ones_on_every_sample(both_forma
     assert len(ds._cache) >= 1 and np.array_equal(ds[1]["target"], first)  # the second read comes from the cache
     shard, i = ds.locate(1)
     assert np.array_equal(first[0], Shard(old / shard.path.relative_to(new)).heatmaps(i)[1])
+    # the cache holds what its size allows (1 MiB a sample: two 64^3 float16 heatmaps), and nothing at 0
+    for mib, kept in ((1.5, 1), (0, 0)):
+        small = ShardDataset(new, split="train", cache_mib=mib)
+        for k in range(len(small)):
+            small[k]
+        assert len(small._cache) == kept
+    with pytest.raises(InputError, match="cache_mib"):
+        ShardDataset(new, split="train", cache_mib="lots")
 
 
 def test_the_geometry_is_the_same_and_training_points_are_micrometres(both_formats):
