@@ -60,9 +60,10 @@ def _data_lock(data_dir: Path) -> dict:
                          "make it with them")
     coverage = lock["train_coverage_mean"] if pack else lock["splits"]["train"]["statistics"]["coverage"]["mean"]
     samples = lock["splits"]["train"].get("samples")
+    both = sum(lock["splits"][s].get("samples") or 0 for s in ("train", "validation"))
     occupancies = pack or int(lock.get("shard_format_version", 1)) >= 2
     return {"manifest_sha256": lock["manifest_sha256"], "train_coverage_mean": coverage, "pack": pack,
-            "occupancies": occupancies, "train_samples": samples}
+            "occupancies": occupancies, "train_samples": samples, "samples": both}
 
 
 def data_locks(data_dirs: list[Path], repeat=()) -> dict:
@@ -84,4 +85,5 @@ def data_locks(data_dirs: list[Path], repeat=()) -> dict:
     hashes = [lk["manifest_sha256"] for lk in locks]
     return {"manifest_sha256": hashlib.sha256("+".join(hashes).encode()).hexdigest(), "manifests": hashes,
             "train_coverage_mean": float(np.average([lk["train_coverage_mean"] for lk in locks], weights=weights)),
-            "pack": locks[0]["pack"], "occupancies": all(lk["occupancies"] for lk in locks), "train_samples": sum(n)}
+            "pack": locks[0]["pack"], "occupancies": all(lk["occupancies"] for lk in locks), "train_samples": sum(n),
+            "samples": sum(lk["samples"] for lk in locks)}

@@ -259,8 +259,12 @@ def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "a
         dev = torch.device("cuda", int(os.environ.get("LOCAL_RANK", "0")))
         torch.cuda.set_device(dev)
     out.mkdir(parents=True, exist_ok=True)
-    # the grids alone, heatmaps made on the device: a pack, or format-2 shards when no geometry is deformed
-    on_device = lock["pack"] or (lock["occupancies"] and cfg.augment_prob == 0)
+    # the grids alone, heatmaps made on the device: a pack, or format-2 shards when no geometry is deformed and
+    # their grids (96 KiB a sample at S = 64, held packed) take under half the memory available; else streamed
+    from colonbench.shards.reader import available_memory_mib
+
+    grids_fit = lock["samples"] * 3 * 64 ** 3 / 8 < 0.5 * available_memory_mib() * 2 ** 20
+    on_device = lock["pack"] or (lock["occupancies"] and cfg.augment_prob == 0 and grids_fit)
     if on_device:
         if cfg.augment_prob > 0:
             raise InputError(f"{data_dir} is a pack: it holds voxel occupancies, not the geometry the augmentations "
@@ -275,8 +279,11 @@ def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "a
         from colonbench.shards.reader import ShardDataset, dataset_files
         aug = AugmentConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in cfg.augment.items()})
         if cfg.erase > 0:
-            raise InputError("--erase takes patches out of the partial-surface occupancies: train with "
-                             "--augment-prob 0 on format-2 shards or on a pack (colonbench pack)"
+            raise InputError(("--erase takes patches out of the partial-surface occupancies held in memory, and "
+                              f"the grids of {lock['samples']} samples take more than half of it"
+                              if cfg.augment_prob == 0 else "--erase takes patches out of the partial-surface "
+                              "occupancies: train with --augment-prob 0 on format-2 shards or on a pack "
+                              "(colonbench pack)")
                              if lock["occupancies"] else "--erase takes patches out of the partial-surface "
                              f"occupancies, which format-1 shards do not store; make a pack of {data_dir} first "
                              "(colonbench pack) and train on it")

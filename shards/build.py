@@ -155,6 +155,10 @@ def build_shard(resolved: dict, unit: Unit, out_dir, version: int = schema.FORMA
                 t = stages.add("sample", t)
                 grid = fit_grid(partial64, size=size, margin=margin, min_extent_mm=min_extent, axes=axes)
                 occ = sample_occupancy(grid, partial64, verts64, faces, centerline64)
+                empty = [name for name in schema.OCCUPANCIES if not getattr(occ, name).any()]
+                if empty:
+                    raise ColonbenchError(f"{unit.name}: segment {k}, permutation {p}: nothing of its "
+                                          f"{' and '.join(empty)} falls inside its grid (no heatmap can be made)")
                 if version == 1:
                     hm = occ.heatmaps()
                     grids = {"input": hm.input, "target": hm.target}

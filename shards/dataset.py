@@ -80,6 +80,8 @@ def _execute(fn, jobs, workers: int, scheduler):
         groups = {}
         for j in jobs:
             groups.setdefault(getattr(j, "colon_key", id(j)), []).append(j)
+        if len(groups) < workers:  # fewer colons than workers: a shard a task, the colon made in each
+            groups = {k: [j] for k, j in enumerate(jobs)}
         ctx = multiprocessing.get_context("spawn")
         with ProcessPoolExecutor(max_workers=min(workers, len(groups)), mp_context=ctx) as pool:
             futures = [pool.submit(_each, fn, g) for g in sorted(groups.values(), key=len, reverse=True)]
@@ -94,7 +96,10 @@ def _shard_ok(path: Path, digest: str) -> bool:
     """Whether an existing file under a shard's name is a finished shard of this manifest."""
     try:
         with h5py.File(path, "r") as h5:
-            return (h5.attrs.get("format") in (schema.FORMAT, schema.COLON_FORMAT)
+            current = {schema.FORMAT: schema.FORMAT_VERSION, schema.COLON_FORMAT: schema.COLON_FORMAT_VERSION}
+            fmt = h5.attrs.get("format")
+            # a shard of an older format (an interrupted run of an older colonbench) is made again: one format a folder
+            return (fmt in current and int(h5.attrs.get("format_version", -1)) == current[fmt]
                     and h5.attrs.get("manifest_sha256") == digest
                     and "n_samples" in h5.attrs)
     except OSError:
@@ -170,9 +175,12 @@ def _generate_locked(resolved, digest, out: Path, workers, scheduler, splits, pr
     else:
         saved.write_text(dumps(resolved))
     if (out / LOCK_NAME).exists():
-        wrote = json.loads((out / LOCK_NAME).read_text()).get("shard_format_version", 1)
+        try:
+            wrote = json.loads((out / LOCK_NAME).read_text()).get("shard_format_version", 1)
+        except (ValueError, AttributeError):
+            wrote = None  # a damaged lock: written anew when the run ends
         writes = schema.COLON_FORMAT_VERSION if task(resolved) == "colon" else schema.FORMAT_VERSION
-        if wrote != writes:
+        if wrote is not None and wrote != writes:
             raise InputError(f"{out} holds shards of format {wrote}; this colonbench writes format {writes}, and a "
                              "dataset is one format. Generate into a new folder (the old one stays readable: "
                              "colonbench verify, evaluate and train read both)")

@@ -79,7 +79,9 @@ def _pack_shard(path) -> tuple[dict, float]:
     worst = 0.0
     with Shard(path) as shard:
         if shard.version > 1:  # the grids as stored: a pack is their view
-            return {g: shard.h5["samples"][g][()] for g in GRIDS}, 0.0
+            bits = {g: shard.h5["samples"][g][()] for g in GRIDS}
+            _check_not_empty(path, bits)
+            return bits, 0.0
         for i in range(len(shard)):
             occ = shard.occupancy(i)
             if not occ["s0"].any() or not occ["s1"].any() or not occ["c"].any():
@@ -241,6 +243,15 @@ def process_pool(workers: int):
     return ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"))
 
 
+def _check_not_empty(path, bits: dict) -> None:
+    """An :class:`InputError` naming the first sample with an empty grid (no heatmap can be made of it)."""
+    for g, rows in bits.items():
+        empty = np.flatnonzero(~rows.any(axis=1))
+        if len(empty):
+            raise InputError(f"{path}: sample {int(empty[0])} has an empty {g} grid; the dataset is damaged "
+                             "(run colonbench verify)")
+
+
 def read_shard_bits(data_dir, split: str) -> tuple[dict, dict]:
     """One split of a format-2 dataset folder as a pack's split: its occupancy grids, read from the shards.
 
@@ -263,8 +274,10 @@ def read_shard_bits(data_dir, split: str) -> tuple[dict, dict]:
     parts = {g: [] for g in GRIDS}
     for sh in shards:
         with sh:
+            bits = {g: sh.h5["samples"][g][()] for g in GRIDS}
+            _check_not_empty(sh.path, bits)
             for g in GRIDS:
-                parts[g].append(sh.h5["samples"][g][()])
+                parts[g].append(bits[g])
     info = {"grid_options": shards[0].grid_options, "manifest_sha256": lock["manifest_sha256"],
             "manifest_name": lock.get("manifest_name"),
             "train_coverage_mean": lock["splits"].get("train", {}).get("statistics", {}).get("coverage", {})

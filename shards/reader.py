@@ -34,6 +34,9 @@ def decode_points(ds: h5py.Dataset, rows: np.ndarray) -> np.ndarray:
     """Rows of a point set as float32 mm: int32 micrometres (a training split's) decoded, float32 as stored."""
     if "scale_mm" not in ds.attrs:
         return rows
+    if "offset_mm" not in ds.attrs:
+        raise InputError(f"{ds.file.filename}: {ds.name} is in micrometres but has no offset_mm attribute; the shard "
+                         "is damaged (colonbench verify)")
     scale, offset = float(ds.attrs["scale_mm"]), np.asarray(ds.attrs["offset_mm"], dtype=np.float64)
     return (rows * scale + offset).astype(np.float32)
 
@@ -132,6 +135,10 @@ class Shard:
         from colonbench.heatmaps import heatmaps_from_occupancy
 
         occ = self.occupancy(i)
+        empty = [name for name, grid in occ.items() if not grid.any()]
+        if empty:
+            raise InputError(f"{self.path}: sample {i} has an empty {' and '.join(empty)} grid, so no heatmap can be "
+                             "made (a row a subset does not keep, or a damaged shard: colonbench verify)")
         return tuple(h.astype(np.float16).astype(np.float32) for h in heatmaps_from_occupancy(
             occ["s0"], occ["s1"], occ["c"]))
 
@@ -322,10 +329,15 @@ class ShardDataset(ShardSamples):
         self.augment_prob = float(augment_prob)
         if cache_mib == "auto":
             cache_mib = min(4096.0, available_memory_mib() / 8)
-        if isinstance(cache_mib, str) or not cache_mib >= 0:
+        if not isinstance(cache_mib, (int, float)) or not cache_mib >= 0:
             raise InputError(f"cache_mib: a size in MiB (0 or more) or 'auto', not {cache_mib!r}")
         self.cache_mib = float(cache_mib)
         self._cache = {}
+
+    def __getstate__(self):
+        state = dict(self.__dict__)
+        state["_cache"] = {}  # a worker process makes its own
+        return state
 
     def _cache_budget(self) -> float:
         """MiB this process may keep: ``cache_mib`` shared out among a DataLoader's worker processes."""

@@ -359,7 +359,9 @@ def check(h5: h5py.File, deep: bool = True) -> list[str]:
         faults.append("samples/segment points outside segments/")
     else:
         n_faces = np.diff(offsets["segments/faces"])[seg]
-        if not np.array_equal(np.diff(offsets["samples/observed_faces"]), n_faces):
+        with_data = np.asarray(json.loads(h5.attrs["kept_samples"]), dtype=np.int64) \
+            if "kept_samples" in h5.attrs else np.arange(rows["samples"])  # a subset's other rows are emptied
+        if not np.array_equal(np.diff(offsets["samples/observed_faces"])[with_data], n_faces[with_data]):
             faults.append("samples/observed_faces does not hold one value per face of each sample's segment")
     n_vert = np.diff(offsets["segments/vertices"])
     foff = offsets["segments/faces"]
@@ -373,8 +375,7 @@ def check(h5: h5py.File, deep: bool = True) -> list[str]:
         faults.append("samples/coverage has values outside [0, 1]")
     if not deep:
         return faults
-    kept = h5.attrs.get("kept_samples")  # a subset (colonbench.shards.subset): only these rows hold data
-    rows_with_data = json.loads(kept) if kept is not None else range(rows["samples"])
+    rows_with_data = json.loads(h5.attrs["kept_samples"]) if "kept_samples" in h5.attrs else range(rows["samples"])
     for name in (("input", "target") if version == 1 else OCCUPANCIES):
         ds = h5["samples/" + name]
         for i in rows_with_data:

@@ -41,6 +41,9 @@ def quantize_points(flat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         half a step of the input, plus float rounding.
     """
     x = np.asarray(flat, dtype=np.float64).reshape(-1, 3)
+    if not np.isfinite(x).all():
+        raise ValueError(f"{int((~np.isfinite(x).all(axis=1)).sum())} point(s) are NaN or infinite: they have no "
+                         "micrometre value")
     offset = np.floor(x.min(axis=0)) if len(x) else np.zeros(3)
     q = np.rint((x - offset) / schema.POINT_SCALE_MM)
     if len(q) and q.max() >= 2 ** 31:
@@ -91,7 +94,7 @@ class ShardWriter:
         if self.version == 1:  # 2 MiB per sample: written as it comes
             self.grids = {name: self._dataset(f"samples/{name}", shape=(self.n,) + (self.size,) * 3,
                                               chunks=(1,) + (self.size,) * 3) for name in ("input", "target")}
-        else:  # 12 KiB per sample: kept, and written at close in one go (a flush per sample costs 6 ms)
+        else:  # 96 KiB per sample (3 x 64^3 bits): kept, and written at close in one go (a flush per sample: 6 ms)
             self.grids = {name: np.zeros((self.n, self.size ** 3 // 8), np.uint8) for name in schema.OCCUPANCIES}
         self.segments = {k: [] for k in _SEGMENT_FIELDS}
         self.samples = {k: [] for k in _SAMPLE_FIELDS}

@@ -142,3 +142,81 @@ def test_a_pack_of_format_2_shards_is_their_grids(smoke_pack):
         assert all(np.array_equal(bits[g], shard_bits[g]) for g in schema.OCCUPANCIES)
         assert shard_info["grid_options"] == info["grid_options"]
         assert info["splits"][split]["max_heatmap_difference"] == 0.0
+
+
+def test_a_format_1_dataset_packs_to_the_same_grids_and_is_not_read_as_grids(both_formats, smoke_pack, tmp_path):
+    from colonbench.shards.pack import CHECK_TOLERANCE, read_pack, read_shard_bits, write_pack
+
+    new, old, _ = both_formats
+    lock = json.loads((new / schema.LOCK_NAME).read_text())
+    (old / schema.LOCK_NAME).write_text(json.dumps({**lock, "shard_format_version": 1}))
+    info = write_pack(old, tmp_path / "pack1", progress=False)
+    *_, pack2, _ = smoke_pack
+    for split in ("train", "validation"):
+        assert info["splits"][split]["shard_format"] == 1
+        assert 0 < info["splits"][split]["max_heatmap_difference"] <= CHECK_TOLERANCE  # float16 against float32
+        one, two = read_pack(tmp_path / "pack1", split)[1], read_pack(pack2, split)[1]
+        assert all(np.array_equal(one[g], two[g]) for g in schema.OCCUPANCIES)
+    with pytest.raises(InputError, match="a format-1 shard"):
+        read_shard_bits(old, "train")
+
+
+def _old_voxels(size, ijk):
+    """Format 1's voxel rounding and occupancy, as they were written before the column-wise rewrite."""
+    with np.errstate(invalid="ignore"):  # NaN and inf cast to int, as it did
+        idx = np.rint(ijk).astype(np.int64)
+    keep = np.all((idx >= 0) & (idx < size), axis=1)
+    idx = idx[keep]
+    occ = np.zeros((size,) * 3, dtype=bool)
+    occ[idx[:, 0], idx[:, 1], idx[:, 2]] = True
+    return occ, float(1.0 - keep.mean()) if len(keep) else 0.0
+
+
+def test_voxel_rounding_is_the_one_format_1_was_made_with():
+    from colonbench.grid import Grid
+    from colonbench.heatmaps import occupancy, voxel_indices
+
+    rng = np.random.default_rng(5)
+    grid = Grid(np.eye(4), 16)
+    ijk = rng.uniform(-3, 19, (4000, 3))
+    ijk[:200] = np.round(ijk[:200] * 2) / 2                        # on the half-voxel ties rint rounds to even
+    ijk[200:210] = [np.nan, 1, 1]
+    ijk[210:220] = [np.inf, -np.inf, 2]
+    ijk[220:230] = np.nextafter(15.5, 16)                          # a last-bit step over the far edge
+    ijk[230:240] = np.nextafter(-0.5, -1)                          # and under the near one
+    idx, outside = voxel_indices(grid, ijk)
+    expected, expected_outside = _old_voxels(16, ijk)
+    assert np.array_equal(occupancy(grid, idx), expected) and outside == expected_outside
+
+
+def test_points_that_are_not_finite_are_refused_not_wrapped():
+    with pytest.raises(ValueError, match="NaN or infinite"):
+        quantize_points(np.array([[1, 2, 3], [np.nan, 0, 0]], np.float32))
+
+
+def test_a_subset_of_a_training_shard_keeps_its_micrometres(both_formats, tmp_path):
+    from colonbench.shards.subset import write_subset
+
+    new, _, names = both_formats
+    train = next(n for n in names if n.startswith("train/"))
+    out = write_subset(new / train, tmp_path / "sub.h5", [1])
+    assert check_shard(out) == []
+    with Shard(new / train) as whole, Shard(out) as part:
+        assert np.array_equal(part.geometry(1)["partial_points"], whole.geometry(1)["partial_points"])
+        assert np.array_equal(part.heatmaps(1)[1], whole.heatmaps(1)[1])
+        with pytest.raises(InputError, match="sample 0 has an empty s0 and s1 and c grid"):
+            part.heatmaps(0)
+
+
+def test_an_interrupted_format_1_run_is_finished_in_format_2(both_formats, tmp_path):
+    from colonbench.shards.dataset import generate
+
+    new, old, names = both_formats
+    folder = tmp_path / "data"
+    (folder / "train").mkdir(parents=True)
+    (folder / "manifest.yaml").write_bytes((new / "manifest.yaml").read_bytes())
+    train = next(n for n in names if n.startswith("train/"))
+    (folder / train).write_bytes((old / train).read_bytes())     # left by a run of an older colonbench, no lock
+    lock = generate(MANIFESTS / "smoke.yaml", folder, progress=False)
+    assert lock["shard_format_version"] == 2 and Shard(folder / train).version == 2
+    assert (folder / train).read_bytes() == (new / train).read_bytes()

@@ -139,8 +139,9 @@ def add_parsers(sub) -> None:
                         "each as likely; exact, like --flips): the tube then runs along another axis than the "
                         "first, which the grid always gives it (default 0)")
     p.add_argument("--erase", type=finite, default=0.0, metavar="P",
-                   help="share of a pack's training samples whose partial surface loses 1-3 ball-shaped patches "
-                        "before its input heatmap is made: larger holes to complete (default 0)")
+                   help="share of the training samples (of a pack, or of format-2 shards with --augment-prob 0) "
+                        "whose partial surface loses 1-3 ball-shaped patches before its input heatmap is made: "
+                        "larger holes to complete (default 0)")
     p.add_argument("--repeat", type=repeats, default=None, metavar="N,N,...",
                    help="times each dataset's training samples come up per epoch, one whole number per dataset in "
                         "the order given (default 1 each): e.g. 1,8 gives a small real-colon set eight times its "
