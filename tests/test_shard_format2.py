@@ -182,6 +182,36 @@ def _old_voxels(size, ijk):
     return occ, float(1.0 - keep.mean()) if len(keep) else 0.0
 
 
+def _old_lattice(a, b, c, spacing):
+    """Format 1's triangle lattice, as it was written before the rewrite (one triangle's points together)."""
+    edges = np.stack([np.linalg.norm(b - a, axis=1), np.linalg.norm(c - b, axis=1),
+                      np.linalg.norm(a - c, axis=1)], axis=1)
+    n_sub = np.maximum(np.ceil(edges.max(axis=1) / spacing), 1).astype(np.int64)
+    out = []
+    for n in np.unique(n_sub):
+        sel = n_sub == n
+        i, j = np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij")
+        ok = (i + j) <= n
+        u, v = (i[ok] / n)[:, None], (j[ok] / n)[:, None]
+        w = 1.0 - u - v
+        pts = w[None] * a[sel][:, None] + u[None] * b[sel][:, None] + v[None] * c[sel][:, None]
+        out.append(pts.reshape(-1, 3))
+    return np.concatenate(out)
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_the_triangle_lattice_is_format_1s_point_for_point(dtype):
+    from colonbench.heatmaps import triangle_lattice
+
+    rng = np.random.default_rng(9)
+    a, b, c = (rng.normal(0, 2, (3000, 3)).astype(dtype) for _ in range(3))
+    new, old = triangle_lattice(a, b, c, 0.5), _old_lattice(a, b, c, 0.5)
+    assert new.dtype == old.dtype and new.shape == old.shape
+    # the same points to the bit, in another order (a set, as voxelization takes it)
+    assert np.array_equal(np.unique(new, axis=0), np.unique(old, axis=0))
+    assert np.array_equal(np.sort(new.view(np.int64), axis=0), np.sort(old.view(np.int64), axis=0))
+
+
 def test_voxel_rounding_is_the_one_format_1_was_made_with():
     from colonbench.grid import Grid
     from colonbench.heatmaps import occupancy, voxel_indices
