@@ -248,6 +248,11 @@ class Occupancy:
     c: np.ndarray
     outside: dict
 
+    @property
+    def grids(self) -> dict:
+        """``s0``, ``s1``, ``c`` by name."""
+        return {"s0": self.s0, "s1": self.s1, "c": self.c}
+
     def heatmaps(self) -> Heatmaps:
         """The sample's input and target heatmaps, float32."""
         h_in, h_t = heatmaps_from_occupancy(self.s0, self.s1, self.c)
@@ -260,6 +265,12 @@ def sample_occupancy(grid: Grid, partial, vertices, faces, centerline) -> Occupa
     occ_s, out_s = voxelize_mesh(grid, vertices, faces)
     occ_c, out_c = voxelize_polyline(grid, centerline)
     return Occupancy(occ_p, occ_s, occ_c, {"partial": out_p, "complete": out_s, "centerline": out_c})
+
+
+def empty_grids(grids: dict) -> list:
+    """The names of the grids (bool or bit-packed) with no occupied voxel: none can have a heatmap
+    (:func:`distance_to`)."""
+    return [name for name, grid in grids.items() if not np.any(grid)]
 
 
 def pack_occupancy(occupied: np.ndarray) -> np.ndarray:

@@ -46,8 +46,10 @@ def epoch_slots(sizes, repeat=()) -> np.ndarray:
 
 def _data_lock(data_dir: Path) -> dict:
     """What the run needs to know of its data: ``manifest_sha256``, ``train_coverage_mean``, ``pack``,
-    ``occupancies`` (a pack, or shards of format 2: the occupancy grids can be read without the geometry)."""
-    from colonbench.shards.pack import PACK_NAME, is_pack
+    ``occupancies`` (a pack, or shards of format 2: the occupancy grids can be read without the geometry),
+    ``train_samples``, ``samples`` (train and validation) and ``grid_mib`` (their grids held bit-packed)."""
+    from colonbench.shards.pack import GRIDS, PACK_NAME, is_pack
+    from colonbench.shards.reader import dataset_files, read_attrs
     pack = is_pack(data_dir)
     lock = data_dir / (PACK_NAME if pack else LOCK_NAME)
     if not lock.exists():
@@ -62,8 +64,10 @@ def _data_lock(data_dir: Path) -> dict:
     samples = lock["splits"]["train"].get("samples")
     both = sum(lock["splits"][s].get("samples") or 0 for s in ("train", "validation"))
     occupancies = pack or int(lock.get("shard_format_version", 1)) >= 2
+    size = int(lock["grid_options"]["size"] if pack else read_attrs(dataset_files(data_dir, "train")[0])["grid_size"])
     return {"manifest_sha256": lock["manifest_sha256"], "train_coverage_mean": coverage, "pack": pack,
-            "occupancies": occupancies, "train_samples": samples, "samples": both}
+            "occupancies": occupancies, "train_samples": samples, "samples": both,
+            "grid_mib": both * len(GRIDS) * size ** 3 / 8 / 2 ** 20}
 
 
 def data_locks(data_dirs: list[Path], repeat=()) -> dict:
@@ -86,4 +90,4 @@ def data_locks(data_dirs: list[Path], repeat=()) -> dict:
     return {"manifest_sha256": hashlib.sha256("+".join(hashes).encode()).hexdigest(), "manifests": hashes,
             "train_coverage_mean": float(np.average([lk["train_coverage_mean"] for lk in locks], weights=weights)),
             "pack": locks[0]["pack"], "occupancies": all(lk["occupancies"] for lk in locks), "train_samples": sum(n),
-            "samples": sum(lk["samples"] for lk in locks)}
+            "samples": sum(lk["samples"] for lk in locks), "grid_mib": sum(lk["grid_mib"] for lk in locks)}

@@ -263,7 +263,7 @@ def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "a
     # their grids (96 KiB a sample at S = 64, held packed) take under half the memory available; else streamed
     from colonbench.shards.reader import available_memory_mib
 
-    grids_fit = lock["samples"] * 3 * 64 ** 3 / 8 < 0.5 * available_memory_mib() * 2 ** 20
+    grids_fit = lock["grid_mib"] < 0.5 * available_memory_mib()
     on_device = lock["pack"] or (lock["occupancies"] and cfg.augment_prob == 0 and grids_fit)
     if on_device:
         if cfg.augment_prob > 0:

@@ -26,7 +26,7 @@ from colonbench.datagen.generate import GeneratorConfig, PreparedColon, procedur
 from colonbench.datagen.sample import make_sample
 from colonbench.errors import ColonbenchError
 from colonbench.grid import fit_grid
-from colonbench.heatmaps import HEATMAP_SCALE, pack_occupancy, sample_occupancy
+from colonbench.heatmaps import HEATMAP_SCALE, empty_grids, pack_occupancy, sample_occupancy
 from colonbench.shards import schema
 from colonbench.shards.manifest import Unit, config_hash, draw_mix, manifest_hash, pick_segments
 from colonbench.shards.schema import sha256_file
@@ -155,7 +155,7 @@ def build_shard(resolved: dict, unit: Unit, out_dir, version: int = schema.FORMA
                 t = stages.add("sample", t)
                 grid = fit_grid(partial64, size=size, margin=margin, min_extent_mm=min_extent, axes=axes)
                 occ = sample_occupancy(grid, partial64, verts64, faces, centerline64)
-                empty = [name for name in schema.OCCUPANCIES if not getattr(occ, name).any()]
+                empty = empty_grids(occ.grids)
                 if empty:
                     raise ColonbenchError(f"{unit.name}: segment {k}, permutation {p}: nothing of its "
                                           f"{' and '.join(empty)} falls inside its grid (no heatmap can be made)")
@@ -163,7 +163,7 @@ def build_shard(resolved: dict, unit: Unit, out_dir, version: int = schema.FORMA
                     hm = occ.heatmaps()
                     grids = {"input": hm.input, "target": hm.target}
                 else:
-                    grids = {name: pack_occupancy(getattr(occ, name)) for name in schema.OCCUPANCIES}
+                    grids = {name: pack_occupancy(grid) for name, grid in occ.grids.items()}
                 t = stages.add("grids", t)
                 writer.add_sample(grids, grid_affine=grid.affine, segment=row, permutation=p,
                                   hole_model=schema.HOLE_MODEL_CODES[hole_model], noise_mm=sigma,

@@ -174,13 +174,11 @@ def _generate_locked(resolved, digest, out: Path, workers, scheduler, splits, pr
                              f"{resolved['name']!r}); generate into an empty folder")
     else:
         saved.write_text(dumps(resolved))
-    if (out / LOCK_NAME).exists():
-        try:
-            wrote = json.loads((out / LOCK_NAME).read_text()).get("shard_format_version", 1)
-        except (ValueError, AttributeError):
-            wrote = None  # a damaged lock: written anew when the run ends
+    saved_lock = _saved_lock(out)  # {} when none, or damaged (written anew when the run ends)
+    if saved_lock:
+        wrote = saved_lock.get("shard_format_version", 1)
         writes = schema.COLON_FORMAT_VERSION if task(resolved) == "colon" else schema.FORMAT_VERSION
-        if wrote is not None and wrote != writes:
+        if wrote != writes:
             raise InputError(f"{out} holds shards of format {wrote}; this colonbench writes format {writes}, and a "
                              "dataset is one format. Generate into a new folder (the old one stays readable: "
                              "colonbench verify, evaluate and train read both)")
@@ -229,12 +227,18 @@ def dataset_manifest(data_dir) -> dict:
     return manifest
 
 
+def _saved_lock(out: Path) -> dict:
+    """The lock in ``out`` ({} when there is none or it is unreadable)."""
+    try:
+        lock = json.loads((out / LOCK_NAME).read_text())
+    except (OSError, json.JSONDecodeError):
+        return {}
+    return lock if isinstance(lock, dict) else {}
+
+
 def _locked_shards(out: Path) -> dict:
     """The ``shards`` entries of the lock in ``out`` ({} when there is none or it is unreadable)."""
-    try:
-        shards = json.loads((out / LOCK_NAME).read_text()).get("shards", {})
-    except (OSError, json.JSONDecodeError, AttributeError):
-        return {}
+    shards = _saved_lock(out).get("shards", {})
     return shards if isinstance(shards, dict) else {}
 
 

@@ -72,22 +72,21 @@ def is_pack(path) -> bool:
 def _pack_shard(path) -> tuple[dict, float]:
     """Packed occupancies (``GRIDS`` -> (n, S^3 / 8) uint8) of one shard, and the largest heatmap difference
     (format 1: the stored heatmaps against those remade from the grids read off them; format 2: 0)."""
-    from colonbench.heatmaps import heatmaps_from_occupancy, pack_occupancy
+    from colonbench.heatmaps import empty_grids, heatmaps_from_occupancy, pack_occupancy
     from colonbench.shards.reader import Shard
 
     rows = {g: [] for g in GRIDS}
     worst = 0.0
     with Shard(path) as shard:
         if shard.version > 1:  # the grids as stored: a pack is their view
-            bits = {g: shard.h5["samples"][g][()] for g in GRIDS}
-            _check_not_empty(path, bits)
-            return bits, 0.0
+            return _stored_bits(shard), 0.0
         for i in range(len(shard)):
-            occ = shard.occupancy(i)
-            if not occ["s0"].any() or not occ["s1"].any() or not occ["c"].any():
-                raise InputError(f"{path}: sample {i} has an empty partial surface, surface or centerline grid; "
-                                 "the dataset is damaged (run colonbench verify)")
             x, y = shard.heatmaps(i)
+            occ = shard.occupancy(i, heatmaps=(x, y))
+            empty = empty_grids(occ)
+            if empty:
+                raise InputError(f"{path}: sample {i} has an empty {' and '.join(empty)} grid; the dataset is damaged "
+                                 "(run colonbench verify)")
             h_in, h_t = heatmaps_from_occupancy(occ["s0"], occ["s1"], occ["c"])
             worst = max(worst, float(np.abs(h_in - x).max()), float(np.abs(h_t - y).max()))
             for g in GRIDS:
@@ -243,13 +242,16 @@ def process_pool(workers: int):
     return ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"))
 
 
-def _check_not_empty(path, bits: dict) -> None:
-    """An :class:`InputError` naming the first sample with an empty grid (no heatmap can be made of it)."""
+def _stored_bits(shard) -> dict:
+    """A format-2 shard's stored grids, ``GRIDS`` -> (n, S^3 / 8) uint8; an :class:`InputError` naming the first
+    sample with an empty grid (no heatmap can be made of it)."""
+    bits = {g: shard.h5["samples"][g][()] for g in GRIDS}
     for g, rows in bits.items():
         empty = np.flatnonzero(~rows.any(axis=1))
         if len(empty):
-            raise InputError(f"{path}: sample {int(empty[0])} has an empty {g} grid; the dataset is damaged "
+            raise InputError(f"{shard.path}: sample {int(empty[0])} has an empty {g} grid; the dataset is damaged "
                              "(run colonbench verify)")
+    return bits
 
 
 def read_shard_bits(data_dir, split: str) -> tuple[dict, dict]:
@@ -274,8 +276,7 @@ def read_shard_bits(data_dir, split: str) -> tuple[dict, dict]:
     parts = {g: [] for g in GRIDS}
     for sh in shards:
         with sh:
-            bits = {g: sh.h5["samples"][g][()] for g in GRIDS}
-            _check_not_empty(sh.path, bits)
+            bits = _stored_bits(sh)
             for g in GRIDS:
                 parts[g].append(bits[g])
     info = {"grid_options": shards[0].grid_options, "manifest_sha256": lock["manifest_sha256"],

@@ -41,6 +41,33 @@ def decode_points(ds: h5py.Dataset, rows: np.ndarray) -> np.ndarray:
     return (rows * scale + offset).astype(np.float32)
 
 
+def format1_occupancy(input_heatmap: np.ndarray, target_heatmap: np.ndarray, centerline: np.ndarray) -> dict:
+    """The three occupancy grids of a format-1 sample from its stored heatmaps and its voxelized centerline.
+
+    Parameters
+    ----------
+    input_heatmap, target_heatmap : (S, S, S) float
+        As format 1 stored them.
+    centerline : (S, S, S) bool
+        The voxelized GT centerline, as generation made it
+        (:func:`colonbench.heatmaps.voxelize_polyline` on the sample's grid).
+
+    Returns
+    -------
+    dict
+        ``s0``, ``s1``, ``c``: (S, S, S) bool.
+
+    Notes
+    -----
+    The centerline is not read from the target (``== 1``): a centerline
+    voxel that is also a surface voxel has target 0, and the widened
+    generator makes such voxels (a stalked polyp's head or a flattened
+    section across the centerline); without them the centerline's distances,
+    and so the target, come out otherwise.
+    """
+    return {"s0": input_heatmap == 0, "s1": target_heatmap == 0, "c": np.asarray(centerline, dtype=bool)}
+
+
 def ragged_row(group, name: str, i: int) -> np.ndarray:
     """Row ``i`` of the ragged field ``name`` of an open HDF5 group (through ``<name>_offsets``); point sets
     stored as micrometres come back as float32 mm (:func:`decode_points`)."""
@@ -132,10 +159,10 @@ class Shard:
         smp = self.h5["samples"]
         if self.version == 1:
             return smp["input"][i].astype(np.float32), smp["target"][i].astype(np.float32)
-        from colonbench.heatmaps import heatmaps_from_occupancy
+        from colonbench.heatmaps import empty_grids, heatmaps_from_occupancy
 
         occ = self.occupancy(i)
-        empty = [name for name, grid in occ.items() if not grid.any()]
+        empty = empty_grids(occ)
         if empty:
             raise InputError(f"{self.path}: sample {i} has an empty {' and '.join(empty)} grid, so no heatmap can be "
                              "made (a row a subset does not keep, or a damaged shard: colonbench verify)")
@@ -152,20 +179,19 @@ class Shard:
         smp = self.h5["samples"]
         return {name: smp[name][i] for name in schema.OCCUPANCIES}
 
-    def occupancy(self, i: int) -> dict:
+    def occupancy(self, i: int, heatmaps=None) -> dict:
         """``s0``, ``s1``, ``c`` of sample ``i``: (S, S, S) bool, the grids its heatmaps are functions of.
 
-        Format 1 stored no occupancy: ``s0`` and ``s1`` are read as the stored
-        heatmaps' zeros and ``c`` voxelized again from the segment's
-        centerline on the sample's grid, as generation did (not read as the
-        target's ones: a centerline voxel on the surface has target 0).
+        Format 1 stored no occupancy: they are read off its stored heatmaps
+        (:func:`format1_occupancy`; pass them as ``heatmaps`` where they
+        were read already).
         """
         i = self._check(i)
         if self.version == 1:
             from colonbench.heatmaps import voxelize_polyline
 
-            x, y = self.heatmaps(i)
-            return {"s0": x == 0, "s1": y == 0, "c": voxelize_polyline(self.grid(i), self.centerline(i))[0]}
+            x, y = self.heatmaps(i) if heatmaps is None else heatmaps
+            return format1_occupancy(x, y, voxelize_polyline(self.grid(i), self.centerline(i))[0])
         from colonbench.heatmaps import unpack_occupancy
 
         size = int(self.attrs["grid_size"])

@@ -62,6 +62,11 @@ def test_a_centerline_voxel_on_the_surface_is_kept_from_the_shards_polyline():
     assert pack_occupancy(c).shape == (32 ** 3 // 8,) and np.array_equal(again, c)
     _, y2 = heatmaps_from_occupancy(x == 0, y == 0, again)
     np.testing.assert_array_equal(y2, y)
+    # a format-1 shard's grids are read off its heatmaps with the polyline's own voxels: the same target
+    from colonbench.shards.reader import format1_occupancy
+
+    read = format1_occupancy(x, y, c)
+    np.testing.assert_array_equal(heatmaps_from_occupancy(read["s0"], read["s1"], read["c"])[1], y)
 
 
 def test_min_plus_distance_transform_is_exact():
