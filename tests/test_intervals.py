@@ -82,9 +82,9 @@ def test_estimate_writes_the_interval_and_takes_a_known_length(demo_data, tmp_pa
     assert main(["estimate", str(tmp_path / "seg.npy"), "--out-dir", str(tmp_path / "b"), "--length-mm", "500"]) == 0
     b = json.loads((tmp_path / "b" / "seg.json").read_text())
     assert b["coverage"] < 0.2 and b["signals"]["extent"] == "known" and "counted unobserved" in b["review"][0]
-    from colonbench.completion.method import CompletionMethod, model_path
+    from colonbench.completion.method import CompletionMethod, model_path, steps_version
 
-    known = intervals.load(model_path(None), "steps=10").known       # the known-extent interval, not a length group
+    known = intervals.load(model_path(None), steps_version()).known     # the known-extent interval, not a length group
     width = b["coverage_interval"][1] - b["coverage_interval"][0]
     assert width == pytest.approx(min(b["coverage"] + known["high"], 1) - max(b["coverage"] + known["low"], 0), abs=2e-6)
     assert CompletionMethod().intervals is not None
