@@ -332,8 +332,7 @@ class PoissonMethod:
         self.cut_rims = cut_rims
         self.end_level = end_level
         self.valley = float(valley)
-        self.version = (f"poisson-{POISSON_VERSION},depth={self.depth},far={self.far:g},steps={STEPS_VERSION},"
-                        "rim_check=off"
+        self.version = (f"poisson-{POISSON_VERSION},depth={self.depth},far={self.far:g},steps={STEPS_VERSION}"
                         + ("" if self.valley == GAP_VALLEY else f",valley={self.valley:g}")
                         + ("" if self.line == "lumen" else f",line={self.line}"))
 
@@ -361,9 +360,7 @@ class PoissonMethod:
         if len(centerline) == 0:
             return Estimate(float("nan"), np.zeros((0, 3)), np.zeros((0, 3)), self.name,
                             seconds={"check": t1 - t0, "poisson": t2 - t1})
-        # the rims' check (steps 11) was measured on the network's line; the lumen's line curls at its ends, where
-        # the cloud's nearest line points pile up and the check misreads (decision 0145): left out
         est = from_heatmap(heatmap, grid, pts, self.name, centerline_vox=centerline, cut_rims=self.cut_rims,
-                           valley=self.valley, rim_check=False)
+                           valley=self.valley)
         est.seconds = {"check": t1 - t0, "poisson": t2 - t1, "mesh_holes": est.seconds["mesh_holes"]}
         return est

@@ -49,7 +49,7 @@ def threshold_coverage(heatmap: np.ndarray, grid: Grid, points, threshold: float
     cl = extract_centerline(heatmap) if centerline_vox is None else np.asarray(centerline_vox, float)
     vox = np.argwhere(np.asarray(heatmap) < threshold).astype(float)
     partial = grid.to_voxel(np.asarray(points, dtype=float))
-    planes = segment_planes(cl, partial, cut_rims, grid.voxel_size)
+    planes = segment_planes(cl, partial, cut_rims)
     vox = vox[inside_planes(vox, planes, END_INSET)]
     hole = hole_vertices(vox, partial, HOLE_DISTANCE, false_hole_rate=None)  # the baseline as the paper ran it
     coverage = float(1.0 - hole.mean()) if len(vox) else float("nan")

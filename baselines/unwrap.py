@@ -153,7 +153,7 @@ class UnwrapMethod:
 
             cl = p.centerline_vox
             if len(cl) >= 2:  # the line the completion method reports: between the segment's planes
-                cl = line_between(cl, segment_planes(cl, p.grid.to_voxel(pts), voxel_mm=p.grid.voxel_size))
+                cl = line_between(cl, segment_planes(cl, p.grid.to_voxel(pts)))
             return unwrap_coverage(pts, p.grid.to_mm(cl) if len(cl) else np.zeros((0, 3)), self.name)
 
         return on_prediction(self.predictor, points, "unwrap", unwrap_learned)

@@ -177,7 +177,7 @@ def path_for(model: Path) -> Path:
 
 
 def load(model: Path, steps: str | None) -> Intervals | None:
-    """A model's calibration for the steps ``steps`` (``steps=11``, as a method's version names them; None: whatever
+    """A model's calibration for the steps ``steps`` (``steps=10``, as a method's version names them; None: whatever
     steps), or None where it has none: a user's own model before it is calibrated, or other steps than its own."""
     path = path_for(model)
     if not path.is_file():

@@ -30,7 +30,7 @@ import numpy as np
 from colonbench.completion.gaps import GAP_VALLEY
 from colonbench.completion.heatmap_centerline import END_LEVEL, extract_centerline
 from colonbench.completion.intervals import known_length, load as load_intervals
-from colonbench.completion.planes import RIM_MAX_CUT_IN_MM, line_between
+from colonbench.completion.planes import line_between
 from colonbench.completion.steps import STEPS_VERSION, complete
 from colonbench.completion.symmetry import averaged, check_tta
 from colonbench.completion.surface import SHELL_LEVEL, cloud_density
@@ -463,7 +463,7 @@ def steps_version(shell_level: float | None = SHELL_LEVEL, gaps: bool = True,
 def from_heatmap(heatmap: np.ndarray, grid: Grid, points, method: str = "completion",
                  hole_distance: float | None = None, centerline_vox: np.ndarray | None = None,
                  cut_rims: bool = True, shell_level: float | None = SHELL_LEVEL, gaps: bool = True,
-                 valley: float = GAP_VALLEY, rim_check: bool = True) -> Estimate:
+                 valley: float = GAP_VALLEY) -> Estimate:
     """Steps after the network: centerline, completed mesh, holes and coverage of a target heatmap.
 
     Parameters
@@ -483,16 +483,12 @@ def from_heatmap(heatmap: np.ndarray, grid: Grid, points, method: str = "complet
         Add hole patches where the tube has no wall (:func:`colonbench.completion.gaps.wall_gaps`) ...
     valley : float
         ... along rays where the heatmap falls below this (:func:`colonbench.completion.steps.complete`).
-    rim_check : bool
-        Treat a rim whose plane crosses the line well inside the cloud as no rim
-        (:func:`colonbench.completion.planes.rim_planes`, steps version 11); measured on the network's line.
     """
     t0 = time.perf_counter()
     cl_vox = extract_centerline(heatmap) if centerline_vox is None else centerline_vox
     t1 = time.perf_counter()
     pts = np.asarray(points, dtype=float)
-    comp = complete(heatmap, cl_vox, grid.to_voxel(pts), hole_distance, cut_rims, shell_level, gaps, valley,
-                    voxel_mm=grid.voxel_size, max_cut_in_mm=RIM_MAX_CUT_IN_MM if rim_check else None)
+    comp = complete(heatmap, cl_vox, grid.to_voxel(pts), hole_distance, cut_rims, shell_level, gaps, valley)
     t2 = time.perf_counter()
     verts = grid.to_mm(comp.vertices) if len(comp.vertices) else np.zeros((0, 3))
     inside = line_between(cl_vox, comp.planes)

@@ -7,7 +7,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from colonbench.completion.surface import keep_faces
-from colonbench.polyline import arc_length, resample
+from colonbench.polyline import resample
 
 
 #: Faces closer than this to an end plane are dropped, voxels.
@@ -63,12 +63,6 @@ RIM_FIT_DEG = 15.0
 
 #: The rim replaces the centerline's end plane where the line ends at least this far inside or past it, voxels.
 RIM_BEYOND = 1.0
-
-
-#: A rim whose plane crosses the line more than this far inside the cloud's span along the line is no cut rim:
-#: it is the edge of a cloud seen from one side, and clipping there would drop the unseen side (steps version 11,
-#: decision 0145), mm.
-RIM_MAX_CUT_IN_MM = 7.0
 
 
 class Planes(list):
@@ -131,8 +125,7 @@ def cap_directions(axis: np.ndarray, max_deg: float, n: int) -> np.ndarray:
 
 
 def rim_planes(centerline_vox: np.ndarray, partial_vox: np.ndarray, band: float = RIM_BAND,
-               cap_deg: float = RIM_CAP_DEG, min_share: float = RIM_MIN_SHARE, voxel_mm: float = 1.0,
-               max_cut_in_mm: float | None = RIM_MAX_CUT_IN_MM) -> list[tuple[np.ndarray, np.ndarray]]:
+               cap_deg: float = RIM_CAP_DEG, min_share: float = RIM_MIN_SHARE) -> list[tuple[np.ndarray, np.ndarray]]:
     """The segment's cutting planes found from its cloud's cut rims, where they are seen (voxels).
 
     A segment is cut from the colon by two planes, so where an end was
@@ -165,27 +158,6 @@ def rim_planes(centerline_vox: np.ndarray, partial_vox: np.ndarray, band: float 
     :func:`end_planes`' plane, pushed out along its normal to the cloud's
     extent where the cloud runs on past it (:func:`pushed_out`, steps version 7).
 
-    A cut rim is where the cloud stops along the line. A rim whose plane
-    crosses the line more than :data:`RIM_MAX_CUT_IN_MM` inside the cloud's
-    span along it (the arc lengths of the points' nearest line points, less
-    the :data:`RIM_OUTLIERS` farthest at that end) is the edge of a cloud
-    seen from one side: a plane tilted along the tube with every observed
-    point on its inner side, which would clip the unseen side away. It is
-    treated as no rim (steps version 11, :func:`cuts_into_cloud`). The check
-    was measured on the network's line (decision 0145); ``max_cut_in_mm=None``
-    leaves it out (the Poisson baseline, whose lumen line curls at its ends).
-
-    Parameters
-    ----------
-    centerline_vox : (m, 3) float
-        The estimated centerline, voxels.
-    partial_vox : (n, 3) float
-        The partial cloud, voxels.
-    voxel_mm : float
-        Edge of a voxel, mm (1.0 where the inputs are in mm).
-    max_cut_in_mm : float or None
-        The check's distance, mm; None: no check.
-
     Returns
     -------
     Planes
@@ -202,10 +174,6 @@ def rim_planes(centerline_vox: np.ndarray, partial_vox: np.ndarray, band: float 
         near = nearest <= RIM_END_SHARE * len(dense) if k == 0 else nearest >= (1 - RIM_END_SHARE) * len(dense)
         x = pts[near]
         rim = _rim_plane(point, normal, x, band, cap_deg, min_share)
-        # (a rim at the line's own end keeps the line's plane, ``point``: nothing to check)
-        if rim is not None and rim[0] is not point and max_cut_in_mm is not None and \
-                cuts_into_cloud(rim, k, dense, nearest) * voxel_mm > max_cut_in_mm:
-            rim = None
         out.append(pushed_out(point, normal, x) if rim is None else rim)
         out.rims += rim is not None
     return out
@@ -247,37 +215,6 @@ def _rim_plane(point: np.ndarray, normal: np.ndarray, x: np.ndarray, band: float
     # where the line reaches the cut, its own plane is as good (and exact on the GT heatmap); where it
     # runs on past the cut (its ends follow the lumen, which the network may continue), the cut holds
     return (centre, -outward) if abs((centre - point) @ outward) > RIM_BEYOND else (point, normal)
-
-
-def cuts_into_cloud(plane: tuple[np.ndarray, np.ndarray], end: int, dense: np.ndarray, nearest: np.ndarray) -> float:
-    """How far inside the cloud's span along the line a plane at one end of it crosses the line, voxels.
-
-    Parameters
-    ----------
-    plane : (point, inward unit normal)
-        The plane, voxels.
-    end : int
-        0 for the line's first end, 1 for its last.
-    dense : (m, 3) float
-        The line, densely resampled, voxels.
-    nearest : (n,) int
-        Each cloud point's nearest point of ``dense``.
-
-    Returns
-    -------
-    float
-        The arc length from the cloud's end of span (the :data:`RIM_OUTLIERS`-th point from that end, 0-based) to
-        the plane's crossing (the first point of ``dense`` inside it from that end), inwards; negative where the
-        plane crosses beyond the cloud; the line's length where no point of the line is inside the plane.
-    """
-    s = arc_length(dense)
-    inside = np.flatnonzero((dense - plane[0]) @ plane[1] >= 0)
-    if len(inside) == 0 or len(nearest) <= 2 * RIM_OUTLIERS:
-        return float(s[-1])
-    along = np.sort(s[nearest])
-    if end == 0:
-        return float(s[inside[0]] - along[RIM_OUTLIERS])
-    return float(along[-1 - RIM_OUTLIERS] - s[inside[-1]])
 
 
 def pushed_out(point: np.ndarray, normal: np.ndarray, points: np.ndarray,
@@ -348,14 +285,10 @@ def _sectors(offsets: np.ndarray, axes: np.ndarray, members: np.ndarray) -> np.n
     return filled.sum(axis=1)
 
 
-def segment_planes(centerline_vox: np.ndarray, partial_vox: np.ndarray, cut_rims: bool = True,
-                   voxel_mm: float = 1.0, max_cut_in_mm: float | None = RIM_MAX_CUT_IN_MM) -> list:
-    """The planes a completed segment is clipped at: :func:`rim_planes` (``voxel_mm``: a voxel's edge, mm;
-    ``max_cut_in_mm``: its check of the rims), or with ``cut_rims`` off :func:`end_planes` (the caller clips at
-    planes it knows)."""
-    if not cut_rims:
-        return end_planes(centerline_vox)
-    return rim_planes(centerline_vox, partial_vox, voxel_mm=voxel_mm, max_cut_in_mm=max_cut_in_mm)
+def segment_planes(centerline_vox: np.ndarray, partial_vox: np.ndarray, cut_rims: bool = True) -> list:
+    """The planes a completed segment is clipped at: :func:`rim_planes`, or with ``cut_rims`` off
+    :func:`end_planes` (the caller clips at planes it knows)."""
+    return rim_planes(centerline_vox, partial_vox) if cut_rims else end_planes(centerline_vox)
 
 
 def clip_to_segment(vertices: np.ndarray, faces: np.ndarray, centerline_vox: np.ndarray, inset: float = END_INSET,

@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from colonbench.completion.gaps import GAP_VALLEY, wall_gaps
-from colonbench.completion.planes import RIM_MAX_CUT_IN_MM, clip_to_segment, segment_planes
+from colonbench.completion.planes import clip_to_segment, segment_planes
 from colonbench.completion.surface import (HOLE_DISTANCE, SHELL_LEVEL, clip_to_shell, extract_mesh, hole_vertices,
                                            mesh_coverage, resigned_field)
 
@@ -22,7 +22,7 @@ from colonbench.completion.surface import (HOLE_DISTANCE, SHELL_LEVEL, clip_to_s
 #: denser than 3 points/mm^2 thinned to 2 before the method runs (:func:`colonbench.completion.method.thin_dense`),
 #: 10 a cloud taken as its distinct points in lexicographic order before it is thinned (the thinning's draw
 #: depended on the order of the points, and repeated points counted in the cloud's density).
-STEPS_VERSION = "11"
+STEPS_VERSION = "10"
 
 
 @dataclass
@@ -56,8 +56,7 @@ class Completion:
 def complete(heatmap: np.ndarray, centerline_vox: np.ndarray, partial_vox: np.ndarray,
              distance: float | None = None, cut_rims: bool = True,
              shell_level: float | None = SHELL_LEVEL, gaps: bool = True, valley: float = GAP_VALLEY,
-             planes: list | None = None, voxel_mm: float = 1.0,
-             max_cut_in_mm: float | None = RIM_MAX_CUT_IN_MM) -> Completion:
+             planes: list | None = None) -> Completion:
     """Mesh, holes and coverage of a segment from its target heatmap, centerline and partial cloud (voxels).
 
     ``distance`` is the hole distance in voxels (default: the paper's sqrt(2)/2). ``cut_rims``: clip
@@ -67,14 +66,12 @@ def complete(heatmap: np.ndarray, centerline_vox: np.ndarray, partial_vox: np.nd
     (:func:`wall_gaps`), as from version 5; ``valley``: where the heatmap along such a ray falls below this
     (``inf``: every ray that meets no wall, for a surface without faint walls, such as a classical
     reconstruction's). ``planes`` (point, inward normal; voxels): clip at these instead of finding them (a caller
-    that knows the segment's ends). ``voxel_mm``: a voxel's edge, mm; ``max_cut_in_mm``: the rims' check
-    (:func:`rim_planes`; None leaves it out).
+    that knows the segment's ends).
     """
     verts, faces = extract_mesh(*resigned_field(heatmap, centerline_vox))
     if shell_level is not None:
         verts, faces = clip_to_shell(verts, faces, heatmap, shell_level)
-    if planes is None:
-        planes = segment_planes(centerline_vox, partial_vox, cut_rims, voxel_mm, max_cut_in_mm)
+    planes = segment_planes(centerline_vox, partial_vox, cut_rims) if planes is None else planes
     verts, faces = clip_to_segment(verts, faces, centerline_vox, planes=planes)
     hole = hole_vertices(verts, partial_vox, HOLE_DISTANCE if distance is None else distance)
     if gaps and len(faces):

@@ -59,7 +59,7 @@ def variants(method: CompletionMethod, pts: np.ndarray, geo: dict) -> dict:
     true_cl = grid.to_voxel(geo["centerline"].astype(float))
     cl = p.centerline_vox
     steps = {"distance": method.hole_distance, "cut_rims": method.cut_rims, "shell_level": method.shell_level,
-             "gaps": method.gaps, "voxel_mm": grid.voxel_size}           # the method's own settings, as estimate() runs them
+             "gaps": method.gaps}           # the method's own settings, as estimate() runs them
     out = {}
     base = complete(pred, cl, vox, **steps)
     out["base"] = base.coverage

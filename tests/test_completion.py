@@ -256,33 +256,6 @@ def test_cut_rims_give_the_planes_a_short_centerline_misses(tilt):
     assert np.allclose(q0, full[0]) and np.allclose(m0, [0, 0, 1.0], atol=1e-6)
 
 
-@pytest.mark.parametrize("tilt", [15.0, 45.0])
-def test_a_rim_whose_plane_crosses_the_line_inside_the_cloud_is_no_cut_rim(tilt):
-    # a plane through the axis at z = 50 tilted by `tilt` crosses the axis at z = 50, and the cloud runs on past
-    # that along it by R tan(tilt): 5.4 mm at 15 degrees (a cut rim, kept), 20 mm at 45 (as the edge of a cloud
-    # seen from one side, where the cloud does not stop: treated as no rim)
-    from colonbench.completion.planes import RIM_MAX_CUT_IN_MM, cuts_into_cloud, rim_planes
-    from colonbench.polyline import resample
-
-    pts, far = _cut_tube_cloud(tilt_deg=tilt, density=4.0)
-    axis = resample(np.array([[32.0, 32.0, 0.0], [32.0, 32.0, 80.0]]), 0.25)
-    _, nearest = cKDTree(axis).query(pts)
-    run_on = R * np.tan(np.radians(tilt))
-    plane = (np.array([32.0, 32.0, 50.0]), -far)
-    assert cuts_into_cloud(plane, 1, axis, nearest) == pytest.approx(run_on, abs=0.3)
-    assert cuts_into_cloud((plane[0] + [0, 0, 30.0], -far), 1, axis, nearest) < 0     # beyond the cloud
-    # a line that runs past the cut to z = 60 (its last 35 %, where the rim is searched, from z = 45)
-    line = np.stack([np.full(43, 32.0), np.full(43, 32.0), np.linspace(18.0, 60.0, 43)], 1)
-    planes = rim_planes(line, pts)
-    if tilt == 15.0:
-        assert planes.rims == 2 and np.degrees(np.arccos(planes[1][1] @ -far)) < 3.0
-    else:       # the cloud runs on past the plane to the line's end, 10 mm: the line's plane pushed out to the cloud
-        assert planes.rims == 1 and np.allclose(planes[1][1], [0, 0, -1.0], atol=1e-6)
-        assert planes[1][0][2] == pytest.approx(50.0 + R, abs=0.5)
-    # the same cloud in a grid of 2 mm voxels: the cloud runs on twice as far in mm
-    assert rim_planes(line, pts, voxel_mm=2.0).rims == (2 if 2 * run_on < RIM_MAX_CUT_IN_MM else 1)
-
-
 def test_an_end_without_a_rim_keeps_the_line_plane_pushed_out_to_the_cloud():
     # the last 15 voxels before the far cut seen on one side only: no rim there, so the end keeps the
     # centerline's plane; the cloud runs on 8 voxels past the line's end (to z = 50), and every observed
