@@ -127,6 +127,9 @@ class Intervals:
             est.review.append(f"interval {100 * width:.0f} points wide (more than {100 * self.review_width:.0f})")
         if int(est.signals.get("rims", 0)) == 0 and est.signals.get("extent") != "known":
             est.review.append("no cut rim at either end: the segment's ends are the line's own, it may go on unseen")
+        if int(est.signals.get("rims_doubtful", 0)) and est.signals.get("extent") != "known":
+            est.review.append("a cut rim crosses the line well inside the cloud: a cloud seen from one side may have "
+                              "had its unseen side clipped off (over-estimated)")
 
     def to_json(self) -> dict:
         return asdict(self)

@@ -347,16 +347,14 @@ class CompletionMethod:
     device : str
         ``cpu``, ``cuda``, ``auto``.
     hole_distance : float, optional
-        Vertices farther than this from the partial cloud are holes, voxels
-        (default: the paper's sqrt(2)/2).
+        Vertices farther than this from the partial cloud are holes, voxels (default: the paper's sqrt(2)/2).
     cut_rims : bool
         Clip the mesh at the cloud's cut rims where found (docs/method.md step 5).
     shell_level : float or None
         Drop the mesh's faces where the predicted heatmap is above this (docs/method.md step 4);
         None keeps them, as the steps did before their version 4.
     gaps : bool
-        Add hole patches where the completed tube has no wall (docs/method.md step 6); off, as the steps
-        did before their version 5.
+        Add hole patches where the completed tube has no wall (docs/method.md step 6); off: as before steps 5.
     end_level : float or None
         The centerline's ends move to the far ends of the predicted heatmap's voxels at or above this
         (docs/method.md step 3, from steps version 6); None keeps the ends of its ridge.
@@ -370,9 +368,8 @@ class CompletionMethod:
         Average the network's heatmap over this many symmetries of the grid (1, 2, 4, 8 or 16;
         :mod:`colonbench.completion.symmetry`); 1, the default, runs it once.
 
-    The model is loaded once (and shared with the other methods built on the
-    same model in this process); call :meth:`estimate` on as many clouds as
-    needed.
+    The model is loaded once (and shared with the other methods built on the same model in this process);
+    call :meth:`estimate` on as many clouds as needed.
     """
 
     name = "completion"
@@ -488,12 +485,14 @@ def from_heatmap(heatmap: np.ndarray, grid: Grid, points, method: str = "complet
     cl_vox = extract_centerline(heatmap) if centerline_vox is None else centerline_vox
     t1 = time.perf_counter()
     pts = np.asarray(points, dtype=float)
-    comp = complete(heatmap, cl_vox, grid.to_voxel(pts), hole_distance, cut_rims, shell_level, gaps, valley)
+    comp = complete(heatmap, cl_vox, grid.to_voxel(pts), hole_distance, cut_rims, shell_level, gaps, valley,
+                    voxel_mm=grid.voxel_size)
     t2 = time.perf_counter()
     verts = grid.to_mm(comp.vertices) if len(comp.vertices) else np.zeros((0, 3))
     inside = line_between(cl_vox, comp.planes)
     cl = resample(grid.to_mm(inside), CENTERLINE_SPACING_MM) if len(inside) else np.zeros((0, 3))
-    signals = {"rims": int(comp.rims), "length_mm": round(float(arc_length(cl)[-1]), 2) if len(cl) else 0.0,
+    signals = {"rims": int(comp.rims), "rims_doubtful": int(getattr(comp.planes, "doubtful", 0)),
+               "length_mm": round(float(arc_length(cl)[-1]), 2) if len(cl) else 0.0,
                **({} if cut_rims else {"extent": "known"})}     # a caller clipping at planes it knows its ends
     return Estimate(coverage=comp.coverage, holes=verts[comp.hole], centerline=cl, method=method,
                     mesh_vertices=verts, mesh_faces=comp.faces, hole_vertices=comp.hole,

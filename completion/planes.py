@@ -7,7 +7,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from colonbench.completion.surface import keep_faces
-from colonbench.polyline import resample
+from colonbench.polyline import arc_length, resample
 
 
 #: Faces closer than this to an end plane are dropped, voxels.
@@ -65,12 +65,20 @@ RIM_FIT_DEG = 15.0
 RIM_BEYOND = 1.0
 
 
+#: A rim whose plane crosses the line more than this far inside the cloud's span along the line is counted
+#: doubtful (:attr:`Planes.doubtful`): on a cloud seen from one side, its edge can pass for a cut rim, and clipping
+#: there drops the unseen side. Kept as found (treating it as no rim cost the real colon, decision 0145), mm.
+RIM_DOUBT_MM = 7.0
+
+
 class Planes(list):
-    """A segment's end planes, ``(point, inward unit normal)`` each, and ``rims``: how many of them were found at
-    a cut rim of the cloud (:func:`rim_planes`; 0 for planes found otherwise). An end with no rim is one the
-    cloud does not reach, or reaches raggedly: where the segment may go on unseen."""
+    """A segment's end planes, ``(point, inward unit normal)`` each, ``rims``: how many of them were found at
+    a cut rim of the cloud (:func:`rim_planes`; 0 for planes found otherwise), and ``doubtful``: how many of those
+    cross the line more than :data:`RIM_DOUBT_MM` inside the cloud (:func:`cuts_into_cloud`). An end with no rim is
+    one the cloud does not reach, or reaches raggedly: where the segment may go on unseen."""
 
     rims: int = 0
+    doubtful: int = 0
 
 
 def end_planes(centerline_vox: np.ndarray, reach: float = END_REACH) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -125,7 +133,8 @@ def cap_directions(axis: np.ndarray, max_deg: float, n: int) -> np.ndarray:
 
 
 def rim_planes(centerline_vox: np.ndarray, partial_vox: np.ndarray, band: float = RIM_BAND,
-               cap_deg: float = RIM_CAP_DEG, min_share: float = RIM_MIN_SHARE) -> list[tuple[np.ndarray, np.ndarray]]:
+               cap_deg: float = RIM_CAP_DEG, min_share: float = RIM_MIN_SHARE,
+               voxel_mm: float = 1.0) -> list[tuple[np.ndarray, np.ndarray]]:
     """The segment's cutting planes found from its cloud's cut rims, where they are seen (voxels).
 
     A segment is cut from the colon by two planes, so where an end was
@@ -157,6 +166,9 @@ def rim_planes(centerline_vox: np.ndarray, partial_vox: np.ndarray, band: float 
     version 6). Otherwise, an unobserved or ragged end, the end keeps
     :func:`end_planes`' plane, pushed out along its normal to the cloud's
     extent where the cloud runs on past it (:func:`pushed_out`, steps version 7).
+    A rim that replaces the line's plane and crosses the line more than
+    :data:`RIM_DOUBT_MM` inside the cloud (``voxel_mm``: a voxel's edge, mm; 1.0
+    where the inputs are in mm) is counted in ``doubtful``, and kept.
 
     Returns
     -------
@@ -176,6 +188,9 @@ def rim_planes(centerline_vox: np.ndarray, partial_vox: np.ndarray, band: float 
         rim = _rim_plane(point, normal, x, band, cap_deg, min_share)
         out.append(pushed_out(point, normal, x) if rim is None else rim)
         out.rims += rim is not None
+        # a rim at the line's own end keeps the line's plane, ``point``: nothing to doubt
+        out.doubtful += rim is not None and rim[0] is not point and \
+            cuts_into_cloud(rim, k, dense, nearest) * voxel_mm > RIM_DOUBT_MM
     return out
 
 
@@ -215,6 +230,38 @@ def _rim_plane(point: np.ndarray, normal: np.ndarray, x: np.ndarray, band: float
     # where the line reaches the cut, its own plane is as good (and exact on the GT heatmap); where it
     # runs on past the cut (its ends follow the lumen, which the network may continue), the cut holds
     return (centre, -outward) if abs((centre - point) @ outward) > RIM_BEYOND else (point, normal)
+
+
+def cuts_into_cloud(plane: tuple, end: int, dense: np.ndarray, nearest: np.ndarray) -> float:
+    """How far inside the cloud's span along the line a plane at one end of it crosses the line, voxels.
+
+    Parameters
+    ----------
+    plane : ((3,) float, (3,) float)
+        A point on the plane and its inward unit normal, voxels.
+    end : int
+        0 for the line's first end, 1 for its last.
+    dense : (m, 3) float
+        The line, densely resampled, voxels.
+    nearest : (n,) int
+        Each cloud point's nearest point of ``dense``.
+
+    Returns
+    -------
+    float
+        The arc length from the cloud's end of span (its :data:`RIM_OUTLIERS`-th point from that end, 0-based) to the
+        plane's crossing (the first point of ``dense`` inside it from that end), inwards; negative where the plane
+        crosses beyond the cloud; the line's length where no point of the line is inside the plane, or the cloud has
+        too few points to have a span.
+    """
+    s = arc_length(dense)
+    inside = np.flatnonzero((dense - plane[0]) @ plane[1] >= 0)
+    if len(inside) == 0 or len(nearest) <= 2 * RIM_OUTLIERS:
+        return float(s[-1])
+    along = np.sort(s[nearest])
+    if end == 0:
+        return float(s[inside[0]] - along[RIM_OUTLIERS])
+    return float(along[-1 - RIM_OUTLIERS] - s[inside[-1]])
 
 
 def pushed_out(point: np.ndarray, normal: np.ndarray, points: np.ndarray,
@@ -285,10 +332,11 @@ def _sectors(offsets: np.ndarray, axes: np.ndarray, members: np.ndarray) -> np.n
     return filled.sum(axis=1)
 
 
-def segment_planes(centerline_vox: np.ndarray, partial_vox: np.ndarray, cut_rims: bool = True) -> list:
-    """The planes a completed segment is clipped at: :func:`rim_planes`, or with ``cut_rims`` off
-    :func:`end_planes` (the caller clips at planes it knows)."""
-    return rim_planes(centerline_vox, partial_vox) if cut_rims else end_planes(centerline_vox)
+def segment_planes(centerline_vox: np.ndarray, partial_vox: np.ndarray, cut_rims: bool = True,
+                   voxel_mm: float = 1.0) -> list:
+    """The planes a completed segment is clipped at: :func:`rim_planes` (``voxel_mm``: a voxel's edge, mm), or with
+    ``cut_rims`` off :func:`end_planes` (the caller clips at planes it knows)."""
+    return rim_planes(centerline_vox, partial_vox, voxel_mm=voxel_mm) if cut_rims else end_planes(centerline_vox)
 
 
 def clip_to_segment(vertices: np.ndarray, faces: np.ndarray, centerline_vox: np.ndarray, inset: float = END_INSET,

@@ -56,7 +56,7 @@ class Completion:
 def complete(heatmap: np.ndarray, centerline_vox: np.ndarray, partial_vox: np.ndarray,
              distance: float | None = None, cut_rims: bool = True,
              shell_level: float | None = SHELL_LEVEL, gaps: bool = True, valley: float = GAP_VALLEY,
-             planes: list | None = None) -> Completion:
+             planes: list | None = None, voxel_mm: float = 1.0) -> Completion:
     """Mesh, holes and coverage of a segment from its target heatmap, centerline and partial cloud (voxels).
 
     ``distance`` is the hole distance in voxels (default: the paper's sqrt(2)/2). ``cut_rims``: clip
@@ -66,12 +66,12 @@ def complete(heatmap: np.ndarray, centerline_vox: np.ndarray, partial_vox: np.nd
     (:func:`wall_gaps`), as from version 5; ``valley``: where the heatmap along such a ray falls below this
     (``inf``: every ray that meets no wall, for a surface without faint walls, such as a classical
     reconstruction's). ``planes`` (point, inward normal; voxels): clip at these instead of finding them (a caller
-    that knows the segment's ends).
+    that knows the segment's ends). ``voxel_mm``: a voxel's edge, mm (the rims' doubt, :func:`rim_planes`).
     """
     verts, faces = extract_mesh(*resigned_field(heatmap, centerline_vox))
     if shell_level is not None:
         verts, faces = clip_to_shell(verts, faces, heatmap, shell_level)
-    planes = segment_planes(centerline_vox, partial_vox, cut_rims) if planes is None else planes
+    planes = segment_planes(centerline_vox, partial_vox, cut_rims, voxel_mm) if planes is None else planes
     verts, faces = clip_to_segment(verts, faces, centerline_vox, planes=planes)
     hole = hole_vertices(verts, partial_vox, HOLE_DISTANCE if distance is None else distance)
     if gaps and len(faces):

@@ -6,12 +6,13 @@ For every segment of the calibration set (data_manifests/calibration.yaml, valid
 missing) at 0 and 0.5 mm noise (drawn as colonbench evaluate draws it), the rims the search finds
 (:func:`colonbench.completion.planes.rim_planes`) and three features of each: (a) its centre's distance from the
 line over its radius, (b) how far inside the cloud's span along the line its plane crosses the line (mm,
-:func:`cuts_into_cloud`), (c) its normal's angle to the line where it crosses; and the coverage with each subset of
-the rims treated as none. Then, for each feature, the threshold chosen on one half of the colons (by parity) and
-measured on the other, both ways, by the two rules of decision 0145: the lowest MAE (first rule), and the lowest MAE
-among thresholds that raise no hole model's MAE by more than 0.5 points (second rule). Prints both tables; writes
-the per-estimate features to ``--out``. The check that passed the second rule, (b) at 7 mm, failed the record's
-no-harm rule on the suites and did not ship (decision 0145).
+:func:`colonbench.completion.planes.cuts_into_cloud`), (c) its normal's angle to the line where it crosses; and the
+coverage with each subset of the rims treated as none. Then, for each feature, the threshold chosen on one half of
+the colons (by parity) and measured on the other, both ways, by the two rules of decision 0145: the lowest MAE
+(first rule), and the lowest MAE among thresholds that raise no hole model's MAE by more than 0.5 points (second
+rule). Prints both tables; writes the per-estimate features to ``--out``. The check that passed the second rule, (b)
+at 7 mm, failed the record's no-harm rule on the suites and did not ship; it marks a rim doubtful (a reason to
+review the segment) instead (decision 0145).
 """
 
 from __future__ import annotations
@@ -38,25 +39,6 @@ FEATURES = {"centre_off": np.arange(0.3, 3.01, 0.1), "cut_in_mm": np.arange(4.0,
 SUBSETS = ((), (0,), (1,), (0, 1))
 
 
-def cuts_into_cloud(plane, end: int, dense: np.ndarray, nearest: np.ndarray) -> float:
-    """How far inside the cloud's span along the line a plane at one end of it crosses the line, voxels.
-
-    ``plane``: (point (3,), inward unit normal (3,)), voxels; ``end``: 0 for the line's first end, 1 for its last;
-    ``dense`` (m, 3): the line densely resampled; ``nearest`` (n,): each cloud point's nearest point of ``dense``.
-    The arc length from the cloud's end of span (its ``RIM_OUTLIERS``-th point from that end, 0-based) to the
-    plane's crossing (the first point of ``dense`` inside it from that end), inwards; negative where the plane
-    crosses beyond the cloud; the line's length where no point of the line is inside the plane.
-    """
-    s = arc_length(dense)
-    inside = np.flatnonzero((dense - plane[0]) @ plane[1] >= 0)
-    if len(inside) == 0 or len(nearest) <= 2 * P.RIM_OUTLIERS:
-        return float(s[-1])
-    along = np.sort(s[nearest])
-    if end == 0:
-        return float(s[inside[0]] - along[P.RIM_OUTLIERS])
-    return float(along[-1 - P.RIM_OUTLIERS] - s[inside[-1]])
-
-
 def rim_features(plane, rim, end: int, dense: np.ndarray, nearest: np.ndarray, voxel_mm: float) -> dict:
     """The three features of one end's rim (its plane, its touching points; voxels)."""
     centre, normal = plane
@@ -70,7 +52,7 @@ def rim_features(plane, rim, end: int, dense: np.ndarray, nearest: np.ndarray, v
         angle = 90.0
     radius = float(np.median(np.linalg.norm(rim - centre, axis=1)))
     return {"centre_off": cKDTree(dense).query(centre)[0] / radius, "angle": angle,
-            "cut_in_mm": cuts_into_cloud(plane, end, dense, nearest) * voxel_mm}
+            "cut_in_mm": P.cuts_into_cloud(plane, end, dense, nearest) * voxel_mm}
 
 
 def one(method: CompletionMethod, points: np.ndarray) -> dict | None:

@@ -256,6 +256,38 @@ def test_cut_rims_give_the_planes_a_short_centerline_misses(tilt):
     assert np.allclose(q0, full[0]) and np.allclose(m0, [0, 0, 1.0], atol=1e-6)
 
 
+@pytest.mark.parametrize("tilt", [15.0, 45.0])
+@pytest.mark.parametrize("end", [0, 1])
+def test_a_rim_whose_plane_crosses_the_line_inside_the_cloud_is_doubtful(tilt, end):
+    # a plane through the axis at z = 50 tilted by `tilt` crosses the axis at z = 50, and the cloud runs on past
+    # that along it by R tan(tilt): 5.4 mm at 15 degrees, 20 mm at 45 (as at the edge of a cloud seen from one
+    # side, where the cloud does not stop): the rim is kept either way, and counted doubtful past 7 mm;
+    # `end` 0 mirrors the cloud in z
+    from colonbench.completion.planes import RIM_DOUBT_MM, cuts_into_cloud, rim_planes
+    from colonbench.polyline import resample
+
+    pts, far = _cut_tube_cloud(tilt_deg=tilt, density=4.0)
+    mirror = np.array([1.0, 1.0, -1.0 if end == 0 else 1.0])
+    flip = (lambda p: p * mirror + [0, 0, 80.0]) if end == 0 else (lambda p: p)
+    pts, far = flip(pts), far * mirror
+    axis = resample(np.array([[32.0, 32.0, 0.0], [32.0, 32.0, 80.0]]), 0.25)
+    _, nearest = cKDTree(axis).query(pts)
+    run_on = R * np.tan(np.radians(tilt))
+    plane = (flip(np.array([32.0, 32.0, 50.0])), -far)
+    assert cuts_into_cloud(plane, end, axis, nearest) == pytest.approx(run_on, abs=0.3)
+    beyond = (plane[0] + 30.0 * np.array([0, 0, 1.0]) * mirror, -far)
+    assert cuts_into_cloud(beyond, end, axis, nearest) < 0                               # beyond the cloud
+    # a line that runs past the cut to z = 60 (its last 35 %, where the rim is searched, from z = 45)
+    line = flip(np.stack([np.full(43, 32.0), np.full(43, 32.0), np.linspace(18.0, 60.0, 43)], 1))
+    line = line[::-1] if end == 0 else line
+    planes = rim_planes(line, pts)
+    assert planes.rims == 2 and np.degrees(np.arccos(planes[end][1] @ -far)) < 3.0        # kept
+    # the fitted rim crosses the line about 6 mm inside the cloud at 15 degrees, 20 at 45
+    assert planes.doubtful == (0 if tilt == 15.0 else 1) and RIM_DOUBT_MM == 7.0
+    # the same cloud in a grid of 2 mm voxels: it runs on twice as far in mm, past 7 mm at either tilt
+    assert rim_planes(line, pts, voxel_mm=2.0).doubtful == 1
+
+
 def test_an_end_without_a_rim_keeps_the_line_plane_pushed_out_to_the_cloud():
     # the last 15 voxels before the far cut seen on one side only: no rim there, so the end keeps the
     # centerline's plane; the cloud runs on 8 voxels past the line's end (to z = 50), and every observed

@@ -56,6 +56,18 @@ def test_a_known_length_counts_what_the_cloud_does_not_reach_as_unobserved():
         intervals.known_length(near, -1.0)
 
 
+def test_a_doubtful_rim_is_a_reason_to_review_unless_the_extent_is_known():
+    cal = intervals.fit([0.8] * 40, [0.8] * 40, [{"length_mm": 70.0, "rims": 2}] * 40, "length", 0.4)
+    reasons = {}
+    for doubtful, extent in ((0, None), (1, None), (1, "known")):
+        signals = {"length_mm": 70.0, "rims": 2, "rims_doubtful": doubtful, **({"extent": extent} if extent else {})}
+        est = Estimate(0.9, np.zeros((0, 3)), np.zeros((0, 3)), "m", signals=signals)
+        cal.apply(est)
+        reasons[(doubtful, extent)] = est.review
+    assert reasons[(0, None)] == [] and reasons[(1, "known")] == []
+    assert len(reasons[(1, None)]) == 1 and "seen from one side" in reasons[(1, None)][0]
+
+
 def test_intervals_in_the_contract_are_checked():
     est = as_estimate({"coverage": 0.8, "coverage_interval": [0.7, 0.9]}, "m")
     assert est.coverage_interval == (0.7, 0.9) and est.to_json()["coverage_interval"] == [0.7, 0.9]
