@@ -354,13 +354,14 @@ def check(h5: h5py.File, deep: bool = True) -> list[str]:
             faults.append(f"{f.path} has shape {ds.shape}, expected {expected}")
     if faults:
         return faults
+    # a subset (colonbench.shards.subset) keeps data in these rows only; its other rows are emptied
+    with_data = np.asarray(json.loads(h5.attrs["kept_samples"]), dtype=np.int64) \
+        if "kept_samples" in h5.attrs else np.arange(rows["samples"])
     seg = h5["samples/segment"][()]
     if np.any((seg < 0) | (seg >= rows["segments"])):
         faults.append("samples/segment points outside segments/")
     else:
         n_faces = np.diff(offsets["segments/faces"])[seg]
-        with_data = np.asarray(json.loads(h5.attrs["kept_samples"]), dtype=np.int64) \
-            if "kept_samples" in h5.attrs else np.arange(rows["samples"])  # a subset's other rows are emptied
         if not np.array_equal(np.diff(offsets["samples/observed_faces"])[with_data], n_faces[with_data]):
             faults.append("samples/observed_faces does not hold one value per face of each sample's segment")
     n_vert = np.diff(offsets["segments/vertices"])
@@ -375,10 +376,9 @@ def check(h5: h5py.File, deep: bool = True) -> list[str]:
         faults.append("samples/coverage has values outside [0, 1]")
     if not deep:
         return faults
-    rows_with_data = json.loads(h5.attrs["kept_samples"]) if "kept_samples" in h5.attrs else range(rows["samples"])
     for name in (("input", "target") if version == 1 else OCCUPANCIES):
         ds = h5["samples/" + name]
-        for i in rows_with_data:
+        for i in with_data.tolist():
             v = ds[i]
             if version == 1 and not (np.all(np.isfinite(v)) and v.min() >= 0 and v.max() <= 1):
                 faults.append(f"samples/{name}[{i}] has values outside [0, 1]")
