@@ -75,13 +75,14 @@ def intervals_rows(model: Path) -> list[str]:
     if cal is None:
         return []
     src = cal.source
+    manifests = src.get("manifests") or {src.get("manifest"): src.get("manifest_sha256", "")}   # one, before 0147
     out = ["", "## Coverage intervals", "",
            f"`{intervals.path_for(model).name}` (id `{src.get('id')}`): {cal.level:.0%} split-conformal intervals "
            f"for {src.get('steps')}, grouped by {cal.scheme}, calibrated by `python scripts/calibrate_intervals.py` on "
-           f"`{src.get('manifest')}` (sha256 `{src.get('manifest_sha256', '')[:16]}...`), {src.get('segments')} "
+           f"{' and '.join(f'`{name}` (sha256 `{sha[:16]}...`)' for name, sha in manifests.items())}, {src.get('segments')} "
            f"segments at noise {', '.join(f'{x:g}' for x in src.get('noise_mm', []))} mm ({src.get('estimates')} "
            f"estimates); an interval wider than {100 * cal.review_width:.0f} points flags its estimate for review.", "",
-           "| group | calibration segments | interval around the estimate, points |", "|---|---:|---|"]
+           "| group | calibration estimates | interval around the estimate, points |", "|---|---:|---|"]
     rows = [(k, g) for k, g in cal.groups.items() if k != "all"] + ([("extent known", cal.known)] if cal.known else [])
     for key, g in rows:
         out.append(f"| {key} | {g['n']} | {100 * g['low']:+.1f} to {100 * g['high']:+.1f} |")

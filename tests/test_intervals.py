@@ -2,6 +2,7 @@
 scores intervals."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -139,3 +140,16 @@ def test_the_benchmark_scores_intervals_and_says_n_a_for_methods_without(demo_da
     assert f"| sure | 24 | {100 * inside:.1f} % | 20.0 |" in md and "| plain | 0 | n/a | n/a |" in md
     bd = (tmp_path / "lb" / "breakdowns.md").read_text()
     assert "| sure: interval |" in bd and "| plain: interval |" not in bd and "% inside, 20.0 wide" in bd
+
+
+def test_the_calibration_halves_put_each_real_colon_in_its_own_half():
+    # scripts/calibrate_intervals.py measures each scheme fitted on one half of the colons on the other: the widened
+    # colons 0-3 alternate as their ids do, and the real colons (ids 900080 and 900090, both even) are split
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(
+        "calibrate_intervals", Path(__file__).resolve().parents[1] / "scripts" / "calibrate_intervals.py")
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    ids = pd.Series([900090, 0, 0, 1, 2, 3, 900080, 900090])
+    assert script.even_half(ids).tolist() == [False, True, True, False, True, False, True, False]
