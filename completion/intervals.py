@@ -82,11 +82,12 @@ class Intervals:
         ``marginal``, or factors of :func:`group_key` joined by ``+`` (``length+band``).
     level : float
     groups : dict
-        Group key -> ``{"low", "high", "n"}`` (fractions, calibration segments).
+        Group key -> ``{"low", "high", "n"}`` (fractions, calibration estimates: segments times noise levels).
     review_width : float
         An interval wider than this (fraction) flags the estimate for review.
     source : dict
-        What it was calibrated on: model, manifest and its hash, noise levels, samples.
+        What it was calibrated on: model, manifests and their hashes (``known_manifests``: those :attr:`known` was
+        fitted on), noise levels, samples.
     known : dict
         ``{"low", "high", "n"}`` of segments whose extent is known (``signals["extent"] == "known"``: a length
         given to :func:`known_length`, or planes the caller clips at, as ``colonbench map`` does).

@@ -1,16 +1,16 @@
 """Calibrate the completion method's coverage intervals: split-conformal on data_manifests/calibration.yaml and
 calibration-real.yaml.
 
-    python scripts/calibrate_intervals.py [--data data/calibration] [--model small] [--level 0.9]
+    python scripts/calibrate_intervals.py [--data data] [--model small] [--level 0.9]
 
-Generates the calibration set where missing, one folder per manifest under ``--data`` (their validation splits:
-widened colons no manifest trains on with a tenth video partials, and the real training colons, which make up
-about 43 % of the segments: decision record 0147), estimates every segment with the completion method (its intervals
-off) at 0 and 0.5 mm noise (the suites' levels, the noise drawn as colonbench evaluate draws it), and chooses the
-grouping by a rule fixed before the measurement (decision record 0144): each candidate scheme is fitted on the
-colons of one half (the parity of a colon's rank among the colons sorted by id) and measured on the other, both ways; of the schemes whose held-out coverage lies within 4
-points of the level in every group of at least 30 segments, the one with the smallest mean width wins (else the
-marginal one). It is then fitted on all segments and written beside the model (``<model>.intervals.json``).
+Generates the calibration set where missing, ``<data>/calibration`` and ``<data>/calibration-real`` (the two
+manifests' validation splits: widened colons no manifest trains on with a tenth video partials, and the real
+training colons, which make up about 43 % of the segments: decision record 0147), estimates every segment with the
+completion method (its intervals off) at 0 and 0.5 mm noise (the suites' levels, the noise drawn as colonbench
+evaluate draws it), and chooses the grouping by a rule fixed before the measurement (decision record 0144): each
+candidate scheme is fitted on the colons of one half (the parity of a colon's rank among the colons sorted by id)
+and measured on the other, both ways; of the schemes whose held-out coverage lies within 4 points of the level in
+every group of at least 30 segments, the one with the smallest mean width wins (else the marginal one). It is then fitted on all segments and written beside the model (``<model>.intervals.json``).
 Prints the held-out coverage and width of every scheme.
 """
 
@@ -37,8 +37,22 @@ MANIFESTS = tuple(Path(__file__).resolve().parents[1] / "data_manifests" / f"{na
 SCHEMES = ("marginal", "rims", "length", "length+band", "length+rims")
 NOISE_MM = (0.0, 0.5)
 #: An interval wider than this flags its estimate for review: the truth may lie 20 points or more away (the
-#: calibration group of the shortest clouds, whose 90 % interval spans 45 points; the others span 16-34).
+#: calibration groups of the shortest clouds, whose 90 % intervals span 47-51 points; the others span 12-35).
 REVIEW_WIDTH = 0.4
+
+
+def calibration_data(root: Path, workers: int = 2) -> list[tuple[Path, Path]]:
+    """(manifest, folder) of each calibration manifest, generated under ``root`` where missing (``<root>/<name>``)."""
+    root = Path(root)
+    if (root / "manifest.yaml").is_file():
+        raise SystemExit(f"--data {root} is a single dataset: give the folder that holds (or is to hold) "
+                         f"{' and '.join(m.stem + '/' for m in MANIFESTS)}, the calibration's datasets (default: data)")
+    out = []
+    for manifest in MANIFESTS:
+        data = root / manifest.stem
+        generate(manifest, data, workers=workers, splits=["validation"], progress=False)
+        out.append((manifest, data))
+    return out
 
 
 def estimates(data: Path, method: CompletionMethod, cache: Path) -> pd.DataFrame:
@@ -100,7 +114,7 @@ def held_out(df: pd.DataFrame, scheme: str, level: float) -> pd.DataFrame:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--data", default="data/calibration")
+    ap.add_argument("--data", default="data", help="folder of the calibration's datasets (default: data)")
     ap.add_argument("--model", default=None, help="model (default: the shipped one)")
     ap.add_argument("--level", type=float, default=intervals.LEVEL)
     ap.add_argument("--workers", type=int, default=2, help="processes generating the data")
@@ -109,9 +123,7 @@ def main() -> None:
     method.intervals = None
     path = model_path(args.model)
     parts = []
-    for manifest in MANIFESTS:
-        data = Path(args.data) / manifest.stem
-        generate(manifest, data, workers=args.workers, splits=["validation"], progress=False)
+    for manifest, data in calibration_data(Path(args.data), args.workers):
         cache = data / f"completion-estimates-{sha256_file(path)[:12]}-{steps_version()}.csv"   # per model and steps
         parts.append(estimates(data, method, cache).assign(manifest=manifest.stem))
     df = pd.concat(parts, ignore_index=True)
@@ -144,11 +156,14 @@ def main() -> None:
     # segment), which says nothing of the map's segments this group also serves (decision record 0147)
     share = df["length_mm"] / df["segment_mm"]
     known = np.where(share < intervals.SHORT_SHARE, df["estimate"] * share, df["estimate"])
-    for name, sel in (("calibration.yaml", df["manifest"] == "calibration"), ("all", df["manifest"].notna())):
+    first = (df["manifest"] == MANIFESTS[0].stem).to_numpy()
+    for name, sel in ((MANIFESTS[0].name, first), ("all", np.ones(len(df), bool))):
         print(f"\nknown length, {name}: MAE {100 * np.abs(known[sel] - df['true'][sel]).mean():.2f} points (unknown "
               f"{100 * (df['estimate'][sel] - df['true'][sel]).abs().mean():.2f})")
-    first = (df["manifest"] == "calibration").to_numpy()
+    if not first.any():
+        raise SystemExit(f"no estimates of {MANIFESTS[0].name} to fit the known-length interval on")
     intervals.fit_known(cal, df["true"][first], known[first])
+    cal.source["known_manifests"] = [MANIFESTS[0].name]
     print(f"known-length interval width {100 * (cal.known['high'] - cal.known['low']):.1f} points")
     digest = hashlib.sha256(json.dumps(cal.to_json(), sort_keys=True).encode()).hexdigest()[:8]
     cal.source["id"] = f"{best}-{digest}"

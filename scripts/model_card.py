@@ -75,7 +75,8 @@ def intervals_rows(model: Path) -> list[str]:
     if cal is None:
         return []
     src = cal.source
-    manifests = src.get("manifests") or {src.get("manifest"): src.get("manifest_sha256", "")}   # one, before 0147
+    manifests = src.get("manifests") or {src.get("manifest", "?"): src.get("manifest_sha256", "")}  # one before 0147
+    known_on = src.get("known_manifests") or list(manifests)
     out = ["", "## Coverage intervals", "",
            f"`{intervals.path_for(model).name}` (id `{src.get('id')}`): {cal.level:.0%} split-conformal intervals "
            f"for {src.get('steps')}, grouped by {cal.scheme}, calibrated by `python scripts/calibrate_intervals.py` on "
@@ -83,7 +84,8 @@ def intervals_rows(model: Path) -> list[str]:
            f"segments at noise {', '.join(f'{x:g}' for x in src.get('noise_mm', []))} mm ({src.get('estimates')} "
            f"estimates); an interval wider than {100 * cal.review_width:.0f} points flags its estimate for review.", "",
            "| group | calibration estimates | interval around the estimate, points |", "|---|---:|---|"]
-    rows = [(k, g) for k, g in cal.groups.items() if k != "all"] + ([("extent known", cal.known)] if cal.known else [])
+    rows = [(k, g) for k, g in cal.groups.items() if k != "all"] + \
+        ([(f"extent known (on {' and '.join(known_on)})", cal.known)] if cal.known else [])
     for key, g in rows:
         out.append(f"| {key} | {g['n']} | {100 * g['low']:+.1f} to {100 * g['high']:+.1f} |")
     return out

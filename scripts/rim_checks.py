@@ -1,18 +1,19 @@
-"""Checks of the cut rims the completion method clips at, measured on the calibration set (decision record 0145).
+"""Checks of the cut rims the completion method clips at, measured on the calibration set (decision records 0145, 0148).
 
-    python scripts/rim_checks.py [--data data/calibration] [--out rim_checks.csv]
+    python scripts/rim_checks.py [--data data] [--out rim_checks.csv]
 
-For every segment of the calibration set (data_manifests/calibration.yaml, validation split; generated where
-missing) at 0 and 0.5 mm noise (drawn as colonbench evaluate draws it), the rims the search finds
-(:func:`colonbench.completion.planes.rim_planes`) and three features of each: (a) its centre's distance from the
-line over its radius, (b) how far inside the cloud's span along the line its plane crosses the line (mm,
-:func:`colonbench.completion.planes.cuts_into_cloud`), (c) its normal's angle to the line where it crosses; and the
-coverage with each subset of the rims treated as none. Then, for each feature, the threshold chosen on one half of
-the colons (by parity) and measured on the other, both ways, by the two rules of decision 0145: the lowest MAE
-(first rule), and the lowest MAE among thresholds that raise no hole model's MAE by more than 0.5 points (second
-rule). Prints both tables; writes the per-estimate features to ``--out``. The check that passed the second rule, (b)
-at 7 mm, failed the record's no-harm rule on the suites and did not ship; it marks a rim doubtful (a reason to
-review the segment) instead (decision 0145).
+For every segment of the calibration set (data_manifests/calibration.yaml and calibration-real.yaml, validation
+splits, in ``<data>/calibration`` and ``<data>/calibration-real``; generated where missing) at 0 and 0.5 mm noise
+(drawn as colonbench evaluate draws it), the rims the search finds (:func:`colonbench.completion.planes.rim_planes`)
+and four features of each: (a) its centre's distance from the line over its radius, (b) how far inside the cloud's
+span along the line its plane crosses the line (mm, :func:`colonbench.completion.planes.cuts_into_cloud`), (c) its
+normal's angle to the line where it crosses, (d) the share of the sectors around the line, in its plane about the
+crossing, that its points leave empty; and the coverage with each subset of the rims treated as none. Then, for
+each feature, the threshold chosen on one half of the colons (the parity of a colon's rank) and measured on the
+other, both ways, by the two rules of decision 0145: the lowest MAE (first rule), and the lowest MAE among
+thresholds that raise no hole model's MAE by more than 0.5 points (second rule). Prints both tables; writes the
+per-estimate features to ``--out``. Decision 0145 measured (a)-(c) on calibration.yaml alone with the colons halved
+by their ids' parity (this script as of commit 5306dca); 0148 measures all four on both manifests.
 """
 
 from __future__ import annotations
@@ -28,31 +29,32 @@ from colonbench.benchmark.evaluate import noisy, select
 from colonbench.completion import planes as P
 from colonbench.completion.method import CompletionMethod, method_cloud
 from colonbench.completion.steps import complete
-from colonbench.polyline import arc_length, resample
-from colonbench.shards.dataset import generate
+from colonbench.polyline import resample
 from colonbench.shards.reader import Shard
 
-MANIFEST = Path(__file__).resolve().parents[1] / "data_manifests" / "calibration.yaml"
+from calibrate_intervals import calibration_data, even_half
+
 NOISE_MM = (0.0, 0.5)
 FEATURES = {"centre_off": np.arange(0.3, 3.01, 0.1), "cut_in_mm": np.arange(4.0, 30.1, 1.0),
-            "angle": np.arange(10.0, 60.1, 2.5)}
+            "angle": np.arange(10.0, 60.1, 2.5), "empty": np.arange(0.0, 0.701, 0.05)}
 SUBSETS = ((), (0,), (1,), (0, 1))
 
 
 def rim_features(plane, rim, end: int, dense: np.ndarray, nearest: np.ndarray, voxel_mm: float) -> dict:
-    """The three features of one end's rim (its plane, its touching points; voxels)."""
+    """The four features of one end's rim (its plane, its touching points; voxels)."""
     centre, normal = plane
-    s = arc_length(dense)
     inside = np.flatnonzero((dense - centre) @ normal >= 0)
     if len(inside):
         j = inside[0] if end == 0 else inside[-1]
         t = dense[min(j + 1, len(dense) - 1)] - dense[max(j - 1, 0)]
         angle = float(np.degrees(np.arccos(min(1.0, abs(t @ normal) / np.linalg.norm(t)))))
+        axis = normal / np.linalg.norm(normal)
+        empty = 1.0 - P._sectors(rim - dense[j], axis[None], np.ones((1, len(rim)), bool))[0] / P.RIM_SECTORS
     else:
-        angle = 90.0
+        angle, empty = 90.0, 1.0
     radius = float(np.median(np.linalg.norm(rim - centre, axis=1)))
     return {"centre_off": cKDTree(dense).query(centre)[0] / radius, "angle": angle,
-            "cut_in_mm": P.cuts_into_cloud(plane, end, dense, nearest) * voxel_mm}
+            "cut_in_mm": P.cuts_into_cloud(plane, end, dense, nearest) * voxel_mm, "empty": float(empty)}
 
 
 def one(method: CompletionMethod, points: np.ndarray) -> dict | None:
@@ -110,7 +112,7 @@ def choose(df: pd.DataFrame, key: str, constrained: bool) -> float:
 
 
 def report(df: pd.DataFrame, constrained: bool) -> None:
-    half = (df["colon_id"] % 2 == 0).to_numpy()
+    half = even_half(df["colon_id"]).to_numpy()
     print(f"\n{'second' if constrained else 'first'} rule; MAE with every rim as found {mae(df, df['cov']):.2f}")
     for key in FEATURES:
         held, chosen = np.zeros(len(df)), []
@@ -128,24 +130,24 @@ def report(df: pd.DataFrame, constrained: bool) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--data", default="data/calibration")
+    ap.add_argument("--data", default="data", help="folder of the calibration's datasets (default: data)")
     ap.add_argument("--out", default="rim_checks.csv")
     ap.add_argument("--workers", type=int, default=2, help="processes generating the data")
     args = ap.parse_args()
-    data = Path(args.data)
-    generate(MANIFEST, data, workers=args.workers, splits=["validation"], progress=False)
     method = CompletionMethod()
     rows = []
-    _, picks = select(data, "validation")
-    for name, indices in picks:
-        with Shard(data / name) as shard:
-            for i in indices:
-                geo = shard.geometry(i)
-                for sigma in NOISE_MM:
-                    r = one(method, method_cloud(noisy(geo["partial_points"], sigma, 0, name, i)))
-                    if r is not None:
-                        rows.append({"shard": name, "index": i, "colon_id": geo["colon_id"], "noise_mm": sigma,
-                                     "hole_model": geo["hole_model"], "true": geo["coverage"], **r})
+    for manifest, data in calibration_data(Path(args.data), args.workers):
+        _, picks = select(data, "validation")
+        for name, indices in picks:
+            with Shard(data / name) as shard:
+                for i in indices:
+                    geo = shard.geometry(i)
+                    for sigma in NOISE_MM:
+                        r = one(method, method_cloud(noisy(geo["partial_points"], sigma, 0, name, i)))
+                        if r is not None:
+                            rows.append({"manifest": manifest.stem, "shard": name, "index": i,
+                                         "colon_id": geo["colon_id"], "noise_mm": sigma,
+                                         "hole_model": geo["hole_model"], "true": geo["coverage"], **r})
     df = pd.DataFrame(rows)
     df.to_csv(args.out, index=False)
     print(f"{len(df)} estimates; rims checked: {int(df[['cut_in_mm0', 'cut_in_mm1']].notna().sum().sum())}")

@@ -160,7 +160,7 @@ dump("calibration", "Calibration of the completion method's coverage intervals (
      {"validation": split(0, 24, 3, 2, WIDE_NOISE, {**{k: round(0.9 * v, 4) for k, v in WIDE_HOLES.items()}, "video": 0.1},
                           meshes=["gca00090", "gca00080"])}, WIDE, axes="tube", mesh_names=["gca00090", "gca00080"])
 #: The real colons' share of the calibration raised to about 43 % of its segments (decision 0147): the intervals are
-#: for users' own colons, which the widened generator's under-estimate less often than real ones.
+#: for users' own colons, and the method under-estimates real colons more often than generated ones.
 dump("calibration-real", "Real segments of the interval calibration (scripts/calibrate_intervals.py, with "
      "calibration.yaml): the real training colons gca00090 and gca00080 under this manifest's own seed, 24 segments "
      "per length and colon (as many as it has) with 3 hole draws, calibration.yaml's hole models and noise. Validation split only; the "

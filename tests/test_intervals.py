@@ -142,7 +142,7 @@ def test_the_benchmark_scores_intervals_and_says_n_a_for_methods_without(demo_da
     assert "| sure: interval |" in bd and "| plain: interval |" not in bd and "% inside, 20.0 wide" in bd
 
 
-def test_the_calibration_halves_put_each_real_colon_in_its_own_half():
+def test_the_calibration_halves_put_each_real_colon_in_its_own_half(monkeypatch):
     # scripts/calibrate_intervals.py measures each scheme fitted on one half of the colons on the other: the widened
     # colons 0-3 alternate as their ids do, and the real colons (ids 900080 and 900090, both even) are split
     import importlib.util
@@ -151,5 +151,17 @@ def test_the_calibration_halves_put_each_real_colon_in_its_own_half():
         "calibrate_intervals", Path(__file__).resolve().parents[1] / "scripts" / "calibrate_intervals.py")
     script = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(script)
-    ids = pd.Series([900090, 0, 0, 1, 2, 3, 900080, 900090])
-    assert script.even_half(ids).tolist() == [False, True, True, False, True, False, True, False]
+    ids = [900090, 0, 0, 1, 2, 3, 900080, 900090]
+    assert script.even_half(pd.Series(ids)).tolist() == [False, True, True, False, True, False, True, False]
+    fitted_on = []
+    real_fit = script.intervals.fit
+
+    def recording_fit(true, estimated, signals, *args, **kwargs):
+        fitted_on.append(sorted(set(df.loc[true.index, "colon_id"])))
+        return real_fit(true, estimated, signals, *args, **kwargs)
+
+    monkeypatch.setattr(script.intervals, "fit", recording_fit)
+    df = pd.DataFrame({"colon_id": ids, "true": np.linspace(0.5, 0.9, 8), "estimate": np.full(8, 0.7),
+                       "rims": 2, "length_mm": 50.0})
+    script.held_out(df, "marginal", 0.9)
+    assert fitted_on == [[0, 2, 900080], [1, 3, 900090]]
