@@ -123,8 +123,8 @@ def report(df: pd.DataFrame, constrained: bool) -> None:
         per = df.assign(new=held).groupby("hole_model").apply(
             lambda g: pd.Series({"before": mae(g, g["cov"].to_numpy()), "after": mae(g, g["new"].to_numpy())}))
         whole = choose(df, key, constrained)
-        print(f"{key}: thresholds {chosen[0]:.1f} / {chosen[1]:.1f}, held-out MAE {mae(df, held):.2f}, worst rise of "
-              f"a hole model {(per['after'] - per['before']).max():+.2f}; on the whole set {whole:.1f}")
+        print(f"{key}: thresholds {chosen[0]:g} / {chosen[1]:g}, held-out MAE {mae(df, held):.2f}, worst rise of "
+              f"a hole model {(per['after'] - per['before']).max():+.2f}; on the whole set {whole:g}")
         print(per.round(2).T.to_string())
 
 
