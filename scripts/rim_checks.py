@@ -32,9 +32,8 @@ from colonbench.completion.steps import complete
 from colonbench.polyline import resample
 from colonbench.shards.reader import Shard
 
-from calibrate_intervals import calibration_data, even_half
+from calibrate_intervals import NOISE_MM, calibration_data, even_half
 
-NOISE_MM = (0.0, 0.5)
 FEATURES = {"centre_off": np.arange(0.3, 3.01, 0.1), "cut_in_mm": np.arange(4.0, 30.1, 1.0),
             "angle": np.arange(10.0, 60.1, 2.5), "empty": np.arange(0.0, 0.701, 0.05)}
 SUBSETS = ((), (0,), (1,), (0, 1))
