@@ -1,19 +1,20 @@
-"""Checks of the cut rims the completion method clips at, measured on the calibration set (decision records 0145, 0148).
+"""Checks of the cut rims the completion method clips at, measured on the calibration set (decision records 0145, 0148, 0149).
 
     python scripts/rim_checks.py [--data data] [--out rim_checks.csv]
 
 For every segment of the calibration set (data_manifests/calibration.yaml and calibration-real.yaml, validation
 splits, in ``<data>/calibration`` and ``<data>/calibration-real``; generated where missing) at 0 and 0.5 mm noise
 (drawn as colonbench evaluate draws it), the rims the search finds (:func:`colonbench.completion.planes.rim_planes`)
-and four features of each: (a) its centre's distance from the line over its radius, (b) how far inside the cloud's
+and five features of each: (a) its centre's distance from the line over its radius, (b) how far inside the cloud's
 span along the line its plane crosses the line (mm, :func:`colonbench.completion.planes.cuts_into_cloud`), (c) its
 normal's angle to the line where it crosses, (d) the share of the sectors around the line, in its plane about the
-crossing, that its points leave empty; and the coverage with each subset of the rims treated as none. Then, for
-each feature, the threshold chosen on one half of the colons (the parity of a colon's rank) and measured on the
+crossing, that its points leave empty, (e) the same for the whole cloud's points near its plane and the crossing;
+decision 0149's check, (e) where (b) exceeds 7 mm; and the coverage with each subset of the rims treated as none.
+Then, for each feature, the threshold chosen on one half of the colons (the parity of a colon's rank) and measured on the
 other, both ways, by the two rules of decision 0145: the lowest MAE (first rule), and the lowest MAE among
 thresholds that raise no hole model's MAE by more than 0.5 points (second rule). Prints both tables; writes the
 per-estimate features to ``--out``. Decision 0145 measured (a)-(c) on calibration.yaml alone with the colons halved
-by their ids' parity (this script as of commit 5306dca); 0148 measures all four on both manifests.
+by their ids' parity (this script as of commit 5306dca); 0148 measures (a)-(d) on both manifests, 0149 (e).
 """
 
 from __future__ import annotations
@@ -35,12 +36,17 @@ from colonbench.shards.reader import Shard
 from calibrate_intervals import NOISE_MM, calibration_data, even_half
 
 FEATURES = {"centre_off": np.arange(0.3, 3.01, 0.1), "cut_in_mm": np.arange(4.0, 30.1, 1.0),
-            "angle": np.arange(10.0, 60.1, 2.5), "empty": np.arange(0.0, 0.701, 0.05)}
+            "angle": np.arange(10.0, 60.1, 2.5), "empty": np.arange(0.0, 0.701, 0.05),
+            "whole": np.arange(0.0, 0.701, 0.05), "cut_and_whole": np.arange(0.0, 0.701, 0.05)}
+
+#: Decision 0149's check: (e) counts only where the plane crosses the line this far inside the cloud (b), mm.
+CUT_IN_MM = 7.0
 SUBSETS = ((), (0,), (1,), (0, 1))
 
 
-def rim_features(plane, rim, end: int, dense: np.ndarray, nearest: np.ndarray, voxel_mm: float) -> dict:
-    """The four features of one end's rim (its plane, its touching points; voxels)."""
+def rim_features(plane, rim, end: int, dense: np.ndarray, nearest: np.ndarray, cloud: np.ndarray,
+                 voxel_mm: float) -> dict:
+    """The features of one end's rim (its plane, its touching points, the whole cloud; voxels)."""
     centre, normal = plane
     inside = np.flatnonzero((dense - centre) @ normal >= 0)
     if len(inside):
@@ -49,11 +55,17 @@ def rim_features(plane, rim, end: int, dense: np.ndarray, nearest: np.ndarray, v
         angle = float(np.degrees(np.arccos(min(1.0, abs(t @ normal) / np.linalg.norm(t)))))
         axis = normal / np.linalg.norm(normal)
         empty = 1.0 - P._sectors(rim - dense[j], axis[None], np.ones((1, len(rim)), bool))[0] / P.RIM_SECTORS
+        # (e): the whole cloud's points near the plane and near the crossing (decision 0149)
+        reach = 2 * float(np.median(np.linalg.norm(rim - dense[j], axis=1)))
+        near = (np.abs((cloud - centre) @ axis) <= P.RIM_BAND) & (np.linalg.norm(cloud - dense[j], axis=1) <= reach)
+        whole = 1.0 - P._sectors(cloud[near] - dense[j], axis[None], np.ones((1, int(near.sum())), bool))[0] / \
+            P.RIM_SECTORS if near.any() else 1.0
     else:
-        angle, empty = 90.0, 1.0
+        angle, empty, whole = 90.0, 1.0, 1.0
     radius = float(np.median(np.linalg.norm(rim - centre, axis=1)))
     return {"centre_off": cKDTree(dense).query(centre)[0] / radius, "angle": angle,
-            "cut_in_mm": P.cuts_into_cloud(plane, end, dense, nearest) * voxel_mm, "empty": float(empty)}
+            "cut_in_mm": P.cuts_into_cloud(plane, end, dense, nearest) * voxel_mm, "empty": float(empty),
+            "whole": float(whole)}
 
 
 def one(method: CompletionMethod, points: np.ndarray) -> dict | None:
@@ -74,7 +86,8 @@ def one(method: CompletionMethod, points: np.ndarray) -> dict | None:
         fallback.append(P.pushed_out(point, normal, x))
         found.append(fallback[-1] if rim is None else rim)
         checked = rim is not None and rim[0] is not point          # a rim at the line's end keeps its plane
-        feats.append(rim_features(rim, P._touching(x, -rim[1], P.RIM_BAND), k, dense, nearest, grid.voxel_size)
+        feats.append(rim_features(rim, P._touching(x, -rim[1], P.RIM_BAND), k, dense, nearest, vox,
+                                   grid.voxel_size)
                      if checked else None)
     out = {}
     for rejected in SUBSETS:
@@ -83,7 +96,11 @@ def one(method: CompletionMethod, points: np.ndarray) -> dict | None:
             out["cov" + "".join(map(str, rejected))] = complete(p.heatmap, cl, vox, planes=planes).coverage
     for k in (0, 1):
         for key in FEATURES:
-            out[f"{key}{k}"] = feats[k][key] if feats[k] is not None else np.nan
+            if key != "cut_and_whole":
+                out[f"{key}{k}"] = feats[k][key] if feats[k] is not None else np.nan
+        # 0149's check: (e) where (b) exceeds CUT_IN_MM, -1 (never over a threshold) elsewhere
+        out[f"cut_and_whole{k}"] = np.nan if feats[k] is None else \
+            feats[k]["whole"] if feats[k]["cut_in_mm"] > CUT_IN_MM else -1.0
     return out
 
 
