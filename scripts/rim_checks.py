@@ -1,4 +1,4 @@
-"""Checks of the cut rims the completion method clips at, measured on the calibration set (decision records 0145, 0148, 0149).
+"""Checks of the cut rims the completion method clips at, measured on the calibration set (decisions 0145, 0148-0149).
 
     python scripts/rim_checks.py [--data data] [--out rim_checks.csv]
 
@@ -10,8 +10,8 @@ span along the line its plane crosses the line (mm, :func:`colonbench.completion
 normal's angle to the line where it crosses, (d) the share of the sectors around the line, in its plane about the
 crossing, that its points leave empty, (e) the same for the whole cloud's points near its plane and the crossing;
 decision 0149's check, (e) where (b) exceeds 7 mm; and the coverage with each subset of the rims treated as none.
-Then, for each feature, the threshold chosen on one half of the colons (the parity of a colon's rank) and measured on the
-other, both ways, by the two rules of decision 0145: the lowest MAE (first rule), and the lowest MAE among
+Then, for each feature, the threshold chosen on one half of the colons (the parity of a colon's rank) and measured on
+the other, both ways, by the two rules of decision 0145: the lowest MAE (first rule), and the lowest MAE among
 thresholds that raise no hole model's MAE by more than 0.5 points (second rule). Prints both tables; writes the
 per-estimate features to ``--out``. Decision 0145 measured (a)-(c) on calibration.yaml alone with the colons halved
 by their ids' parity (this script as of commit 5306dca); 0148 measures (a)-(d) on both manifests, 0149 (e).
