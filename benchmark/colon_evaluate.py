@@ -58,8 +58,8 @@ ALL_METHODS = ("completion", "thresholding", "unwrap", "poisson", "constant")
 #: Per-segment columns of ``results/segments.csv``.
 SEGMENT_COLUMNS = ["method", "track", "context_mm", "shard", "colon", "index", "hole_model", "noise_mm", "segment",
                    "piece", "start_mm", "end_mm", "true_start_mm", "true_end_mm", "points", "true_coverage",
-                   "coverage", "coverage_error", "area_mm2", "true_area_mm2", "end_seen", "end_unobserved", "seconds",
-                   "error"]
+                   "coverage", "coverage_error", "interval_low", "interval_high", "area_mm2", "true_area_mm2",
+                   "end_seen", "end_unobserved", "seconds", "error"]
 #: Per-map columns of ``results/colons.csv``.
 COLON_COLUMNS = ["method", "track", "context_mm", "shard", "colon", "index", "hole_model", "noise_mm",
                  "colon_length_mm", "segments", "estimated", "interruptions", "true_coverage", "coverage",
@@ -137,11 +137,13 @@ def run_colon_unit(data: str, shard_name: str, index: int, sigma: float, noise_s
                                 sample["observed_faces"], truth["centerline"], face_s=truth["face_arclength"])
             for k, (s, r) in enumerate(zip(segs, rows)):
                 seen = score["end_seen"][k]
+                low, high = s.coverage_interval or (np.nan, np.nan)   # the map's interval, where the method gives one
                 seg_rows.append({**track, **ids, "segment": s.index, "piece": s.piece, "start_mm": r["start_mm"],
                                  "end_mm": r["end_mm"], "true_start_mm": score["true_start_mm"][k],
                                  "true_end_mm": score["true_end_mm"][k], "points": s.points,
                                  "true_coverage": score["segment_truth"][k], "coverage": r["coverage"],
-                                 "coverage_error": score["segment_errors"][k], "area_mm2": r["area_mm2"],
+                                 "coverage_error": score["segment_errors"][k], "interval_low": low,
+                                 "interval_high": high, "area_mm2": r["area_mm2"],
                                  "true_area_mm2": score["true_area_mm2"][k], "end_seen": seen,
                                  "end_unobserved": bool(np.isfinite(seen) and seen < END_SEEN),
                                  "seconds": s.seconds, "error": s.error or ""})

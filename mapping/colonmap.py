@@ -222,6 +222,21 @@ def join_pieces(pieces: list) -> JoinedLine:
                       interruptions, unseen)
 
 
+def moved_interval(method, est, coverage: float) -> list[float]:
+    """The method's interval around the map's ``coverage`` of a segment, where the map's coverage (its completed
+    surface clipped to the segment's stretch) differs from the estimate's.
+
+    A method with a calibration (completion's ``intervals``) gives its interval around ``coverage`` again, from
+    the same group (:meth:`colonbench.completion.intervals.Intervals.interval`); another method's interval is
+    moved by the difference, clipped to [0, 1] (an upper end its method clipped at 1 stays as clipped).
+    """
+    cal = getattr(method, "intervals", None)
+    if callable(getattr(cal, "interval", None)):
+        return [float(x) for x in cal.interval(coverage, est.signals)]
+    shift = coverage - est.coverage
+    return [float(np.clip(x + shift, 0, 1)) for x in est.coverage_interval]
+
+
 def map_colon(points: np.ndarray, method, segment_mm: float = SEGMENT_MM, positions: np.ndarray | None = None,
               progress: bool = True, context_mm: float = 0.0, pieces: list | None = None) -> dict:
     """The coverage map of a reconstruction.
@@ -372,9 +387,8 @@ def map_colon(points: np.ndarray, method, segment_mm: float = SEGMENT_MM, positi
             seg.mesh = (est.mesh_vertices[used], index[faces], est.hole_vertices[used])
         if seg.unreconstructed_mm > 0:
             add_unreconstructed(seg, radius)
-        if est.coverage_interval is not None:  # the method's interval, moved with the segment's own coverage
-            shift = seg.coverage - est.coverage
-            seg.coverage_interval = [float(np.clip(x + shift, 0, 1)) for x in est.coverage_interval]
+        if est.coverage_interval is not None:  # the method's interval, around the segment's own coverage
+            seg.coverage_interval = moved_interval(method, est, seg.coverage)
         seg.review = list(est.review)
         out.append(seg)
     seconds["estimate"] = time.perf_counter() - t0

@@ -26,7 +26,7 @@ from pathlib import Path
 import pandas as pd
 
 from colonbench.benchmark.colon_evaluate import load_colon_results
-from colonbench.benchmark.summary import error_stats
+from colonbench.benchmark.summary import error_stats, interval_stats
 from colonbench.errors import InputError
 from colonbench.reports.leaderboard import add_run, data_line, interval
 
@@ -62,7 +62,9 @@ def colon_table(segments: pd.DataFrame, colons: pd.DataFrame) -> pd.DataFrame:
     ``segment_mae_lo``, ``segment_mae_hi``), ``segment_median``,
     ``segment_bias``, ``segment_q95`` (points, over estimated segments),
     ``end_unobserved``, ``end_unobserved_mae``, ``whole_mae``, ``whole_bias``
-    (points), ``centerline_precision``, ``centerline_recall`` (means),
+    (points), ``interval_covered`` (% of the segments' truths inside the method's
+    interval), ``interval_width`` (its mean width, points; both NaN for a method
+    without intervals), ``centerline_precision``, ``centerline_recall`` (means),
     ``seconds_per_map``.
     """
     from colonbench.benchmark import stats
@@ -82,6 +84,7 @@ def colon_table(segments: pd.DataFrame, colons: pd.DataFrame) -> pd.DataFrame:
                      "end_unobserved": int(ends.sum()),
                      "end_unobserved_mae": error_stats(s[ends]["coverage_error"])["mae"],
                      "whole_mae": whole["mae"], "whole_bias": whole["bias"],
+                     **{k: v for k, v in interval_stats(s).items() if k != "interval_segments"},
                      "centerline_precision": float(ok["centerline_precision"].mean()) if len(ok) else math.nan,
                      "centerline_recall": float(ok["centerline_recall"].mean()) if len(ok) else math.nan,
                      "seconds_per_map": float(ok["seconds"].mean()) if len(ok) else math.nan})
@@ -127,6 +130,13 @@ def _f(x, digits=2) -> str:
     return "n/a" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{x:.{digits}f}"
 
 
+def _interval_cell(r) -> str:
+    """``covered %, width`` of a method's intervals, or n/a for a method without."""
+    if math.isnan(r.get("interval_covered", math.nan)):
+        return "n/a"
+    return f"{r['interval_covered']:.1f} %, {r['interval_width']:.1f}"
+
+
 def colon_markdown(meta: dict, tab: pd.DataFrame, ctx: pd.DataFrame) -> str:
     """The whole-colon leaderboard as Markdown."""
     lines = ["# colonbench whole-colon leaderboard", "",
@@ -139,9 +149,9 @@ def colon_markdown(meta: dict, tab: pd.DataFrame, ctx: pd.DataFrame) -> str:
     for noise, g in tab.groupby("noise_mm", sort=True):
         lines += [f"## Noise sigma = {noise:g} mm", "",
                   "| method | version | track | maps (failed) | segments (estimated) | segment MAE [95 % CI] | median "
-                  "| bias | q95 | unobserved-end segments: n, MAE | whole colon: MAE, bias | centerline P / R | "
-                  "s/map |",
-                  "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+                  "| bias | q95 | unobserved-end segments: n, MAE | whole colon: MAE, bias | truth in interval, width | "
+                  "centerline P / R | s/map |",
+                  "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
         for _, r in g.iterrows():
             version = meta["methods"].get(r["method"], {}).get("version", "")
             lines.append(f"| {r['method']} | {version} | {r['track']} | {r['maps']} ({r['failed_maps']}) | "
@@ -149,7 +159,7 @@ def colon_markdown(meta: dict, tab: pd.DataFrame, ctx: pd.DataFrame) -> str:
                          f"{interval(r['segment_mae_lo'], r['segment_mae_hi'])} | {_f(r['segment_median'])} | "
                          f"{_f(r['segment_bias'])} | {_f(r['segment_q95'])} | {r['end_unobserved']}, "
                          f"{_f(r['end_unobserved_mae'])} | {_f(r['whole_mae'])}, {_f(r['whole_bias'])} | "
-                         f"{_f(r['centerline_precision'])} / {_f(r['centerline_recall'])} | "
+                         f"{_interval_cell(r)} | {_f(r['centerline_precision'])} / {_f(r['centerline_recall'])} | "
                          f"{_f(r['seconds_per_map'], 1)} |")
         lines.append("")
     if len(ctx):

@@ -211,3 +211,30 @@ def test_a_program_maps_whole_colons_through_exec(colon_dataset, tmp_path):
     for name in ("point_eight", "constant"):
         assert rows[name]["samples"] == len(head) and rows[name]["failed"] == len(errors)
         assert rows[name]["first_error"] == (errors.iloc[0] if len(errors) else "")
+
+
+def test_the_colon_task_scores_the_segments_intervals(colon_dataset, tmp_path):
+    from colonbench.benchmark.colon_evaluate import evaluate_colons
+    from colonbench.reports.colon_leaderboard import write_colon_leaderboard
+
+    class Sure:
+        name, version = "sure", "1"
+
+        def estimate(self, points):
+            return {"coverage": 0.8, "coverage_interval": [0.7, 0.9]}
+
+    data, _ = colon_dataset
+    run = evaluate_colons(data, [Sure(), "constant"], tmp_path / "run", noise=[0], contexts=[0], progress=False)
+    seg = pd.read_csv(run / "results" / "segments.csv")
+    sure = seg[seg["method"] == "sure"]
+    assert (sure["interval_low"] == 0.7).all() and (sure["interval_high"] == 0.9).all()
+    assert seg[seg["method"] == "constant"]["interval_low"].isna().all()
+    inside = 100 * sure["true_coverage"].between(0.7, 0.9).mean()
+    assert 0 < inside < 100                             # the maps' segments lie on both sides of [0.7, 0.9]
+    write_colon_leaderboard([run], tmp_path / "board", figures=False)
+    rows = {r["method"]: r for r in json.loads((tmp_path / "board" / "leaderboard.json").read_text())["rows"]}
+    assert rows["sure"]["interval_covered"] == pytest.approx(inside)
+    assert rows["sure"]["interval_width"] == pytest.approx(20.0)
+    assert rows["constant"]["interval_covered"] is None or np.isnan(rows["constant"]["interval_covered"])
+    md = (tmp_path / "board" / "leaderboard.md").read_text()
+    assert f"| {inside:.1f} %, 20.0 |" in md and "| n/a |" in md

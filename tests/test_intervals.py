@@ -165,3 +165,25 @@ def test_the_calibration_halves_put_each_real_colon_in_its_own_half(monkeypatch)
                        "rims": 2, "length_mm": 50.0})
     script.held_out(df, "marginal", 0.9)
     assert fitted_on == [[0, 2, 900080], [1, 3, 900090]]
+
+
+def test_a_map_segment_gets_the_interval_around_its_own_coverage():
+    # the map clips the completed surface to the segment's stretch, so its coverage differs from the estimate's:
+    # completion's interval is made again around it (not the estimate's, clipped at 1, moved down)
+    from colonbench.mapping.colonmap import moved_interval
+
+    cal = intervals.fit([0.8] * 40, [0.8] * 40, [{"length_mm": 70.0}] * 40, "length", 0.4)
+    cal.known = {"low": -0.08, "high": 0.1, "n": 40}
+    est = Estimate(0.97, np.zeros((0, 3)), np.zeros((0, 3)), "m", signals={"length_mm": 70.0, "extent": "known"})
+    cal.apply(est)
+    assert est.coverage_interval == pytest.approx((0.89, 1.0))
+
+    class Method:
+        intervals = cal
+
+    assert moved_interval(Method, est, 0.95) == pytest.approx([0.87, 1.0])     # moved, it would end at 0.98
+
+    class Other:                                                               # a method without a calibration
+        pass
+
+    assert moved_interval(Other, est, 0.95) == pytest.approx([0.87, 0.98])
