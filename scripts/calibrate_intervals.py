@@ -112,6 +112,25 @@ def held_out(df: pd.DataFrame, scheme: str, level: float) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+def choose(name: str, held: dict, level: float) -> tuple[str | None, dict]:
+    """0144's rule on held-out tables (:func:`held_out`'s) of several schemes: of those whose coverage lies within 4
+    points of ``level`` in every group of at least :data:`intervals.MIN_GROUP` rows, the narrowest (None if none
+    does); prints each scheme's table. Also the summary per scheme: ``covered``, ``width`` (fractions), ``ok``."""
+    best, best_width, summary = None, np.inf, {}
+    for scheme, h in held.items():
+        per = h.groupby("group").agg(n=("inside", "size"), covered=("inside", "mean"), width=("width", "mean"))
+        big = per[per["n"] >= intervals.MIN_GROUP]
+        ok = bool((abs(big["covered"] - level) <= 0.04).all())
+        summary[scheme] = {"covered": float(h["inside"].mean()), "width": float(h["width"].mean()), "ok": ok}
+        print(f"\n{name} {scheme}: held-out coverage {100 * h['inside'].mean():.1f} %, mean width "
+              f"{100 * h['width'].mean():.1f} points, every group within 4 points of {level:.0%}: {ok}")
+        print(per.assign(covered=lambda d: (100 * d["covered"]).round(1), width=lambda d: (100 * d["width"]).round(1))
+              .to_string())
+        if ok and h["width"].mean() < best_width:
+            best, best_width = scheme, h["width"].mean()
+    return best, summary
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", default="data", help="folder of the calibration's datasets (default: data)")
@@ -131,20 +150,8 @@ def main() -> None:
           .to_dict())
     print(f"{len(df)} estimates of {df[['manifest', 'shard', 'index']].drop_duplicates().shape[0]} segments; MAE "
           f"{100 * (df['estimate'] - df['true']).abs().mean():.2f} points")
-    best, best_width = "marginal", np.inf
-    summary = {}
-    for scheme in SCHEMES:
-        h = held_out(df, scheme, args.level)
-        per = h.groupby("group").agg(n=("inside", "size"), covered=("inside", "mean"), width=("width", "mean"))
-        big = per[per["n"] >= intervals.MIN_GROUP]
-        ok = bool((abs(big["covered"] - args.level) <= 0.04).all())
-        summary[scheme] = {"covered": float(h["inside"].mean()), "width": float(h["width"].mean()), "ok": ok}
-        print(f"\n{scheme}: held-out coverage {100 * h['inside'].mean():.1f} %, mean width "
-              f"{100 * h['width'].mean():.1f} points, every group within 4 points of {args.level:.0%}: {ok}")
-        print(per.assign(covered=lambda d: (100 * d["covered"]).round(1), width=lambda d: (100 * d["width"]).round(1))
-              .to_string())
-        if ok and h["width"].mean() < best_width:
-            best, best_width = scheme, h["width"].mean()
+    best, summary = choose("segments", {scheme: held_out(df, scheme, args.level) for scheme in SCHEMES}, args.level)
+    best = best or "marginal"
     source = {"model": path.name, "model_sha256": sha256_file(path), "steps": steps_version(),
               "manifests": {m.name: sha256_file(m) for m in MANIFESTS}, "noise_mm": list(NOISE_MM),
               "segments": int(df[["manifest", "shard", "index"]].drop_duplicates().shape[0]), "estimates": len(df),
