@@ -30,9 +30,6 @@ BANDS = (0.8, 1.01)
 #: Bands of the segment's length as the method found it (its line between the planes; upper edges, mm): a cloud
 #: that spans less than a segment's usual length may stop short of an end nobody saw.
 LENGTHS_MM = (45.0, 60.0)
-#: Bands of the share of the completed surface that is wall-gap patches (``signals["gap_share"]``; upper edges):
-#: hole surface the method put where its heatmap holds no wall (decision record 0151).
-GAP_BANDS = (0.02, 0.10)
 #: Fewest calibration segments a group needs; smaller groups use the group of all segments with their rims.
 MIN_GROUP = 30
 #: A line between the planes shorter than this share of the segment's known length stops short of an unseen end
@@ -45,9 +42,7 @@ SUFFIX = ".intervals.json"
 def group_key(coverage: float, signals: dict, scheme: str) -> str:
     """The calibration group of an estimate under a scheme: ``all``, or its factors joined by ``,``:
     ``rims=<k>`` (cut rims found), ``length<<L>`` (the line between the planes shorter than ``L`` mm of
-    :data:`LENGTHS_MM`, or ``length>=<last>``), ``below=<b>`` (the estimate's band of :data:`BANDS`) and
-    ``gaps<<g>`` (the share of the completed surface in wall-gap patches below ``g`` of :data:`GAP_BANDS`, or
-    ``gaps>=<last>``)."""
+    :data:`LENGTHS_MM`, or ``length>=<last>``) and ``below=<b>`` (the estimate's band of :data:`BANDS`)."""
     if scheme == "marginal":
         return "all"
     parts = []
@@ -60,10 +55,6 @@ def group_key(coverage: float, signals: dict, scheme: str) -> str:
             parts.append(f"length<{edge:g}" if edge is not None else f"length>={LENGTHS_MM[-1]:g}")
         elif factor == "band":
             parts.append(f"below={next(b for b in BANDS if coverage < b):g}")
-        elif factor == "gaps":
-            share = float(signals.get("gap_share", 0.0))
-            edge = next((e for e in GAP_BANDS if share < e), None)
-            parts.append(f"gaps<{edge:g}" if edge is not None else f"gaps>={GAP_BANDS[-1]:g}")
         else:
             raise ValueError(f"unknown interval scheme factor {factor!r}")
     return ",".join(parts)

@@ -491,8 +491,8 @@ def from_heatmap(heatmap: np.ndarray, grid: Grid, points, method: str = "complet
     verts = grid.to_mm(comp.vertices) if len(comp.vertices) else np.zeros((0, 3))
     inside = line_between(cl_vox, comp.planes)
     cl = resample(grid.to_mm(inside), CENTERLINE_SPACING_MM) if len(inside) else np.zeros((0, 3))
-    signals = {"rims": int(comp.rims), "rims_doubtful": int(getattr(comp.planes, "doubtful", 0)), "length_mm":
-               round(float(arc_length(cl)[-1]), 2) if len(cl) else 0.0, "gap_share": round(comp.gap_share, 4),
+    signals = {"rims": int(comp.rims), "rims_doubtful": int(getattr(comp.planes, "doubtful", 0)),
+               "length_mm": round(float(arc_length(cl)[-1]), 2) if len(cl) else 0.0,
                **({} if cut_rims else {"extent": "known"})}     # a caller clipping at planes it knows its ends
     return Estimate(coverage=comp.coverage, holes=verts[comp.hole], centerline=cl, method=method,
                     mesh_vertices=verts, mesh_faces=comp.faces, hole_vertices=comp.hole,

@@ -13,7 +13,6 @@ from colonbench.completion.gaps import GAP_VALLEY, wall_gaps
 from colonbench.completion.planes import clip_to_segment, segment_planes
 from colonbench.completion.surface import (HOLE_DISTANCE, SHELL_LEVEL, clip_to_shell, extract_mesh, hole_vertices,
                                            mesh_coverage, resigned_field)
-from colonbench.meshes import triangle_areas
 
 
 #: Revision of the steps after the network, part of the methods' versions: 1 the paper's, 2 the sparse
@@ -44,9 +43,6 @@ class Completion:
     rims : int
         How many of them were found at a cut rim of the cloud (:class:`colonbench.completion.planes.Planes`); with
         ``cut_rims`` off, where the caller knows the segment's ends, all of them.
-    gap_share : float
-        The share of the completed area that is wall-gap patches (:func:`wall_gaps`; 0 without): hole surface put
-        where the heatmap holds no wall, which on real colons is often wall the cloud did see (decision record 0150).
     """
 
     vertices: np.ndarray
@@ -55,7 +51,6 @@ class Completion:
     coverage: float
     planes: list = field(default_factory=list)
     rims: int = 0
-    gap_share: float = 0.0
 
 
 def complete(heatmap: np.ndarray, centerline_vox: np.ndarray, partial_vox: np.ndarray,
@@ -79,13 +74,10 @@ def complete(heatmap: np.ndarray, centerline_vox: np.ndarray, partial_vox: np.nd
     planes = segment_planes(centerline_vox, partial_vox, cut_rims, voxel_mm) if planes is None else planes
     verts, faces = clip_to_segment(verts, faces, centerline_vox, planes=planes)
     hole = hole_vertices(verts, partial_vox, HOLE_DISTANCE if distance is None else distance)
-    gap_f = np.zeros((0, 3), dtype=np.int64)
     if gaps and len(faces):
         gap_v, gap_f = wall_gaps(heatmap, centerline_vox, planes, valley=valley)
         faces = np.concatenate([faces, gap_f + len(verts)])
         verts = np.concatenate([verts, gap_v])
         hole = np.concatenate([hole, np.ones(len(gap_v), bool)])
     rims = getattr(planes, "rims", 0) if cut_rims else len(planes)   # planes the caller knows are the segment's ends
-    area = triangle_areas(verts, faces) if len(faces) else np.zeros(0)
-    gap_share = float(area[len(faces) - len(gap_f):].sum() / area.sum()) if len(gap_f) and area.sum() > 0 else 0.0
-    return Completion(verts, faces, hole, mesh_coverage(verts, faces, hole), planes, rims, gap_share)
+    return Completion(verts, faces, hole, mesh_coverage(verts, faces, hole), planes, rims)

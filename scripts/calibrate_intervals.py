@@ -34,7 +34,7 @@ from colonbench.shards.schema import sha256_file
 
 MANIFESTS = tuple(Path(__file__).resolve().parents[1] / "data_manifests" / f"{name}.yaml"
                   for name in ("calibration", "calibration-real"))
-SCHEMES = ("marginal", "rims", "length", "length+band", "length+rims", "gaps", "length+gaps")
+SCHEMES = ("marginal", "rims", "length", "length+band", "length+rims")
 NOISE_MM = (0.0, 0.5)
 #: An interval wider than this flags its estimate for review: the truth may lie 20 points or more away (the
 #: calibration groups of the shortest clouds, whose 90 % intervals span 47-51 points; the others span 12-35).
@@ -58,9 +58,7 @@ def calibration_data(root: Path, workers: int = 2) -> list[tuple[Path, Path]]:
 def estimates(data: Path, method: CompletionMethod, cache: Path) -> pd.DataFrame:
     """Completion's estimate of every validation segment at every noise level (cached in ``cache``)."""
     if cache.is_file():
-        cached = pd.read_csv(cache)
-        if "gap_share" in cached.columns:              # a cache written before the signal is made again
-            return cached
+        return pd.read_csv(cache)
     _, picks = select(data, "validation")
     rows = []
     for name, indices in picks:
@@ -76,8 +74,7 @@ def estimates(data: Path, method: CompletionMethod, cache: Path) -> pd.DataFrame
                     rows.append({"shard": name, "index": i, "colon_id": geo["colon_id"], "noise_mm": sigma,
                                  "hole_model": geo["hole_model"], "segment_mm": geo["length_mm"],
                                  "true": geo["coverage"], "estimate": est.coverage,
-                                 "rims": est.signals.get("rims", 0), "length_mm": est.signals.get("length_mm"),
-                                 "gap_share": est.signals.get("gap_share", 0.0)})
+                                 "rims": est.signals.get("rims", 0), "length_mm": est.signals.get("length_mm")})
         print(f"{name}: {len(rows)} estimates", flush=True)
     out = pd.DataFrame(rows)
     out = out[np.isfinite(out["estimate"])]             # an empty completed surface gives no estimate
@@ -86,7 +83,7 @@ def estimates(data: Path, method: CompletionMethod, cache: Path) -> pd.DataFrame
 
 
 def signals_of(row) -> dict:
-    return {"rims": int(row["rims"]), "length_mm": float(row["length_mm"]), "gap_share": float(row["gap_share"])}
+    return {"rims": int(row["rims"]), "length_mm": float(row["length_mm"])}
 
 
 def signals(df: pd.DataFrame) -> list[dict]:

@@ -162,7 +162,7 @@ def test_the_calibration_halves_put_each_real_colon_in_its_own_half(monkeypatch)
 
     monkeypatch.setattr(script.intervals, "fit", recording_fit)
     df = pd.DataFrame({"colon_id": ids, "true": np.linspace(0.5, 0.9, 8), "estimate": np.full(8, 0.7),
-                       "rims": 2, "length_mm": 50.0, "gap_share": 0.0})
+                       "rims": 2, "length_mm": 50.0})
     script.held_out(df, "marginal", 0.9)
     assert fitted_on == [[0, 2, 900080], [1, 3, 900090]]
 
@@ -187,9 +187,3 @@ def test_a_map_segment_gets_the_interval_around_its_own_coverage():
         pass
 
     assert moved_interval(Other, est, 0.95) == pytest.approx([0.87, 0.98])
-
-
-def test_the_gap_share_groups_estimates_by_their_bands():
-    key = [intervals.group_key(0.9, {"length_mm": 50.0, "gap_share": g}, "length+gaps") for g in (0.0, 0.02, 0.3)]
-    assert key == ["length<60,gaps<0.02", "length<60,gaps<0.1", "length<60,gaps>=0.1"]
-    assert intervals.group_key(0.9, {}, "gaps") == "gaps<0.02"        # an estimate without the signal: none
