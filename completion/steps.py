@@ -56,7 +56,7 @@ class Completion:
 def complete(heatmap: np.ndarray, centerline_vox: np.ndarray, partial_vox: np.ndarray,
              distance: float | None = None, cut_rims: bool = True,
              shell_level: float | None = SHELL_LEVEL, gaps: bool = True, valley: float = GAP_VALLEY,
-             planes: list | None = None, voxel_mm: float = 1.0, clip_gaps: bool = False) -> Completion:
+             planes: list | None = None, voxel_mm: float = 1.0) -> Completion:
     """Mesh, holes and coverage of a segment from its target heatmap, centerline and partial cloud (voxels).
 
     ``distance`` is the hole distance in voxels (default: the paper's sqrt(2)/2). ``cut_rims``: clip
@@ -76,8 +76,6 @@ def complete(heatmap: np.ndarray, centerline_vox: np.ndarray, partial_vox: np.nd
     hole = hole_vertices(verts, partial_vox, HOLE_DISTANCE if distance is None else distance)
     if gaps and len(faces):
         gap_v, gap_f = wall_gaps(heatmap, centerline_vox, planes, valley=valley)
-        if clip_gaps:               # decision 0150's candidate: clipped as the mesh is
-            gap_v, gap_f = clip_to_segment(gap_v, gap_f, centerline_vox, planes=planes)
         faces = np.concatenate([faces, gap_f + len(verts)])
         verts = np.concatenate([verts, gap_v])
         hole = np.concatenate([hole, np.ones(len(gap_v), bool)])
