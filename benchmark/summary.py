@@ -50,11 +50,13 @@ def error_stats(errors) -> dict:
 def interval_stats(g: pd.DataFrame) -> dict:
     """How a method's coverage intervals did on rows with ``true_coverage``, ``interval_low`` and ``interval_high``
     (fractions): ``interval_covered``, the share of the truths inside (%), ``interval_width``, the mean width
-    (points), over ``interval_segments`` rows with an interval; NaN (n/a) for a method that gives none."""
+    (points), over ``interval_segments`` rows with an interval and a truth; NaN (n/a) for a method that gives
+    none."""
     if "interval_low" not in g.columns:
         return {"interval_covered": np.nan, "interval_width": np.nan, "interval_segments": 0}
     low, high = g["interval_low"].to_numpy(float), g["interval_high"].to_numpy(float)
-    have = ~np.isnan(low) & ~np.isnan(high)
+    have = ~np.isnan(low) & ~np.isnan(high) & np.isfinite(g["true_coverage"].to_numpy(float))   # rows with no truth
+    # (a whole-colon segment whose region holds no true face) are scored by neither the MAE nor the intervals
     if not have.any():
         return {"interval_covered": np.nan, "interval_width": np.nan, "interval_segments": 0}
     true = g["true_coverage"].to_numpy(float)[have]

@@ -223,12 +223,27 @@ def join_pieces(pieces: list) -> JoinedLine:
 
 
 def moved_interval(method, est, coverage: float) -> list[float]:
-    """The method's interval around the map's ``coverage`` of a segment, where the map's coverage (its completed
-    surface clipped to the segment's stretch) differs from the estimate's.
+    """The method's interval around the map's coverage of a segment, which differs from the estimate's where the map
+    clips the completed surface to the segment's stretch (in context).
 
-    A method with a calibration (completion's ``intervals``) gives its interval around ``coverage`` again, from
-    the same group (:meth:`colonbench.completion.intervals.Intervals.interval`); another method's interval is
-    moved by the difference, clipped to [0, 1] (an upper end its method clipped at 1 stays as clipped).
+    Parameters
+    ----------
+    method : object
+        The method as the map runs it; a method with a calibration (completion's ``intervals``, an
+        :class:`~colonbench.completion.intervals.Intervals`) gives its interval around ``coverage`` again
+        (:meth:`~colonbench.completion.intervals.Intervals.interval` with the estimate's signals: for the map's
+        segments, whose extent is known, the known-extent quantiles).
+    est : colonbench.estimate.Estimate
+        The method's estimate of the segment, with its ``coverage_interval``.
+    coverage : float
+        The map's coverage of the segment, fraction.
+
+    Returns
+    -------
+    [low, high] : list of float
+        Fractions in [0, 1]. A method without a calibration gets its own interval moved by ``coverage -
+        est.coverage`` and clipped to [0, 1]; an end it had clipped at 1 moves with it. The estimate's review
+        reasons are kept as they are (the known-extent interval, 18 points wide, is never flagged for its width).
     """
     cal = getattr(method, "intervals", None)
     if callable(getattr(cal, "interval", None)):

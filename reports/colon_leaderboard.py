@@ -3,7 +3,8 @@
 :func:`write_colon_leaderboard` writes, from runs on the same whole-colon data:
 
 * ``leaderboard.md``: per noise level, every method and track ranked by
-  segment coverage MAE, with the whole-colon coverage error, the centerline's
+  segment coverage MAE, with the whole-colon coverage error, how the method's
+  intervals held the segments' truths (where it gives them), the centerline's
   precision / recall at 2 mm and the seconds per map; then the *in-context vs
   segment-only* table: the same segments, one for one, under both tracks, on
   all segments and on those with an unobserved end, per colon source
@@ -64,7 +65,8 @@ def colon_table(segments: pd.DataFrame, colons: pd.DataFrame) -> pd.DataFrame:
     ``end_unobserved``, ``end_unobserved_mae``, ``whole_mae``, ``whole_bias``
     (points), ``interval_covered`` (% of the segments' truths inside the method's
     interval), ``interval_width`` (its mean width, points; both NaN for a method
-    without intervals), ``centerline_precision``, ``centerline_recall`` (means),
+    without intervals), ``interval_segments`` (the segments with an interval and a
+    truth they are over), ``centerline_precision``, ``centerline_recall`` (means),
     ``seconds_per_map``.
     """
     from colonbench.benchmark import stats
@@ -84,7 +86,7 @@ def colon_table(segments: pd.DataFrame, colons: pd.DataFrame) -> pd.DataFrame:
                      "end_unobserved": int(ends.sum()),
                      "end_unobserved_mae": error_stats(s[ends]["coverage_error"])["mae"],
                      "whole_mae": whole["mae"], "whole_bias": whole["bias"],
-                     **{k: v for k, v in interval_stats(s).items() if k != "interval_segments"},
+                     **interval_stats(s),
                      "centerline_precision": float(ok["centerline_precision"].mean()) if len(ok) else math.nan,
                      "centerline_recall": float(ok["centerline_recall"].mean()) if len(ok) else math.nan,
                      "seconds_per_map": float(ok["seconds"].mean()) if len(ok) else math.nan})
@@ -131,26 +133,28 @@ def _f(x, digits=2) -> str:
 
 
 def _interval_cell(r) -> str:
-    """``covered %, width`` of a method's intervals, or n/a for a method without."""
+    """``covered % of n, width`` of a method's intervals, or n/a for a method without."""
     if math.isnan(r.get("interval_covered", math.nan)):
         return "n/a"
-    return f"{r['interval_covered']:.1f} %, {r['interval_width']:.1f}"
+    return f"{r['interval_covered']:.1f} % of {r['interval_segments']}, {r['interval_width']:.1f}"
 
 
 def colon_markdown(meta: dict, tab: pd.DataFrame, ctx: pd.DataFrame) -> str:
     """The whole-colon leaderboard as Markdown."""
     lines = ["# colonbench whole-colon leaderboard", "",
              data_line(meta, "whole-colon reconstructions") + f" Mapped at {meta['segment_mm']:g} mm segments; "
-             "segment MAE with its 95 % bootstrap interval over segments. Input noise: Gaussian, sigma in mm, seed {meta['noise_seed']}. "
-             "Coverage errors in percentage points (estimated - true): each segment against the true coverage of "
-             "the same stretch of the true surface, and the whole colon's; centerline precision / recall at 2 mm "
-             "(docs/mapping.md). Tracks: segment-only (each segment on its own points, the paper's protocol) and "
-             "context-M mm (the neighbours' points up to M mm beyond each plane too).", ""]
+             "segment MAE with its 95 % bootstrap interval over segments. Input noise: Gaussian, sigma in mm, seed "
+             f"{meta['noise_seed']}. Coverage errors in percentage points (estimated - true): each segment against "
+             "the true coverage of the same stretch of the true surface, and the whole colon's; truth in interval: the "
+             "share of the segments whose true coverage lies inside the method's interval (n/a for a method without), "
+             "its mean width in points; centerline precision / recall at 2 mm (docs/mapping.md). Tracks: segment-only "
+             "(each segment on its own points, the paper's protocol) and context-M mm (the neighbours' points up to M "
+             "mm beyond each plane too).", ""]
     for noise, g in tab.groupby("noise_mm", sort=True):
         lines += [f"## Noise sigma = {noise:g} mm", "",
                   "| method | version | track | maps (failed) | segments (estimated) | segment MAE [95 % CI] | median "
-                  "| bias | q95 | unobserved-end segments: n, MAE | whole colon: MAE, bias | truth in interval, width | "
-                  "centerline P / R | s/map |",
+                  "| bias | q95 | unobserved-end segments: n, MAE | whole colon: MAE, bias | truth in interval (of "
+                  "segments), width | centerline P / R | s/map |",
                   "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
         for _, r in g.iterrows():
             version = meta["methods"].get(r["method"], {}).get("version", "")

@@ -4,13 +4,14 @@
 
 Maps ``<data>/colon-val`` (data_manifests/colon-val.yaml's validation split, generated where missing) with completion
 as the whole-colon benchmark maps it (``colonbench evaluate --task colon --split validation``: both tracks, 0 and
-0.5 mm noise; the run kept in ``<data>/colon-val/completion-maps-<model>-<steps>``), and measures three candidate
-intervals for a map's segments by the rule of decision record 0144 (as ``scripts/calibrate_intervals.py`` chooses
-the segments' scheme): ``known``, the known-extent interval the map's segments get (from the model's calibration
-file, not fitted on maps), and split-conformal quantiles of ``true - map coverage`` per ``track`` (in context or
-segment-only) and per ``track+band`` (and the map's coverage below 0.8), each fitted on the colons of one half and
-measured on the other. With ``--score``, each candidate fitted on all of colon-val is scored on the completion rows
-of whole-colon run folders (such as ``colonbench evaluate --task colon``'s on colon-test.yaml, colon-v1), per track,
+0.5 mm noise; the run kept in ``<data>/colon-val/completion-maps-<model sha256>-<manifest sha256>-<steps>``, read
+again by the next call: remove it after changing the map), and measures three candidate intervals for a map's
+segments by the rule of decision record 0144 (as ``scripts/calibrate_intervals.py`` chooses the segments' scheme):
+``known``, the known-extent interval the map's segments get (from the model's calibration file, not fitted on
+maps), and split-conformal quantiles of ``true - map coverage`` per ``track`` (in context or segment-only) and per
+``track+band`` (and the map's coverage below 0.8), each fitted on the colons of one half and measured on the other.
+With ``--score``, each candidate fitted on all of colon-val is scored on the completion rows of whole-colon run
+folders (such as ``colonbench evaluate --task colon``'s on colon-test.yaml, colon-v1), per track,
 noise level and colon source.
 """
 
@@ -40,7 +41,8 @@ def map_segments(root: Path, model, workers: int) -> pd.DataFrame:
     is kept per model and steps and read again)."""
     data = Path(root) / COLON_MANIFEST.stem
     generate(COLON_MANIFEST, data, workers=workers, splits=["validation"], progress=False)
-    run = data / f"completion-maps-{sha256_file(model_path(model))[:12]}-{steps_version()}"
+    key = f"{sha256_file(model_path(model))[:12]}-{sha256_file(COLON_MANIFEST)[:8]}-{steps_version()}"
+    run = data / f"completion-maps-{key}"
     if not (run / "results" / "segments.csv").is_file():
         evaluate_colons(data, ["completion"], run, split="validation", model=model, progress=False)
     return completion_rows(run)
@@ -50,6 +52,8 @@ def completion_rows(run: Path) -> pd.DataFrame:
     """The completion rows of a whole-colon run folder that have a coverage and a truth."""
     seg = read_rows(Path(run) / "results" / "segments.csv")
     seg = seg[(seg["method"] == "completion") & np.isfinite(seg["coverage"]) & np.isfinite(seg["true_coverage"])]
+    if seg.empty:
+        raise SystemExit(f"{run}: no completion rows with a coverage and a truth (a whole-colon run of completion?)")
     return seg.rename(columns={"true_coverage": "true", "coverage": "estimate"}).reset_index(drop=True)
 
 

@@ -237,4 +237,4 @@ def test_the_colon_task_scores_the_segments_intervals(colon_dataset, tmp_path):
     assert rows["sure"]["interval_width"] == pytest.approx(20.0)
     assert rows["constant"]["interval_covered"] is None or np.isnan(rows["constant"]["interval_covered"])
     md = (tmp_path / "board" / "leaderboard.md").read_text()
-    assert f"| {inside:.1f} %, 20.0 |" in md and "| n/a |" in md
+    assert f"| {inside:.1f} % of {sure['true_coverage'].notna().sum()}, 20.0 |" in md and "| n/a |" in md

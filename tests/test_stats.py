@@ -217,6 +217,9 @@ def test_intervals_are_scored_by_the_share_of_truths_inside_and_their_width():
     assert got["interval_segments"] == 4                       # the row without an interval is not counted
     assert got["interval_covered"] == pytest.approx(75.0)      # 0.8 lies below [0.85, 0.95]; 0.9 on an edge counts
     assert got["interval_width"] == pytest.approx(100 * (0.2 + 0.1 + 0.1 + 0.2) / 4)
+    untrue = interval_stats(pd.concat([rows, pd.DataFrame({"true_coverage": [np.nan], "interval_low": [0.1],
+                                                           "interval_high": [0.2]})]))
+    assert untrue == got                                       # a row with no truth (a region without a true face)
     none = interval_stats(rows.assign(interval_low=np.nan, interval_high=np.nan))
     assert none["interval_segments"] == 0 and np.isnan(none["interval_covered"])
     grouped = breakdown(_breakdown_frame().assign(true_coverage=0.5, interval_low=0.4, interval_high=0.6),
