@@ -187,3 +187,32 @@ def test_a_map_segment_gets_the_interval_around_its_own_coverage():
         pass
 
     assert moved_interval(Other, est, 0.95) == pytest.approx([0.87, 0.98])
+
+
+def test_a_calibrated_method_gives_each_segment_its_interval_around_the_maps_coverage():
+    """A method with a calibration (``intervals``, as completion's) gives a map segment its interval around the map's
+    coverage from that calibration; one without keeps the interval of its estimate."""
+    from shapes import straight
+    from test_map import tube_cloud
+
+    line = straight(200.0)
+    pts, _, _ = tube_cloud(line, density=1.0)
+
+    class Calibration:
+        def interval(self, coverage, signals):
+            return coverage - 0.05, min(coverage + 0.3, 1.0)
+
+    class Sure:
+        name, version = "sure", "1"
+
+        def estimate(self, points):
+            return {"coverage": 0.8, "coverage_interval": [0.7, 0.9]}
+
+    class Calibrated(Sure):
+        intervals = Calibration()
+
+    from colonbench.mapping.colonmap import map_colon
+
+    for method, expected in ((Sure(), [0.7, 0.9]), (Calibrated(), [0.75, 1.0])):
+        result = map_colon(pts, method, segment_mm=60.0, positions=line.points[::-20], progress=False)
+        assert [s.coverage_interval for s in result["segments"]] == [pytest.approx(expected)] * 3
