@@ -51,7 +51,8 @@ def merge_colon_runs(run_dirs, extra=()) -> tuple[dict, pd.DataFrame, pd.DataFra
     return meta, pd.concat(segs, ignore_index=True), pd.concat(cols, ignore_index=True)
 
 
-def _source(colon: pd.Series) -> pd.Series:
+def colon_source(colon: pd.Series) -> pd.Series:
+    """Each row's colon source: ``procedural`` for a generated colon (``colon-<k>``), else the imported colon's name."""
     return colon.where(~colon.str.startswith("colon-"), "procedural")
 
 
@@ -104,7 +105,7 @@ def context_table(segments: pd.DataFrame, baseline: str = "segment-only") -> pd.
     ``end_unobserved`` segments.
     """
     ids = ["noise_mm", "method", "shard", "index", "segment"]
-    seg = segments.assign(source=_source(segments["colon"]))
+    seg = segments.assign(source=colon_source(segments["colon"]))
     base = seg[seg["track"] == baseline].set_index(ids)
     rows = []
     for track in sorted(set(seg["track"]) - {baseline}):

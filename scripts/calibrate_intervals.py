@@ -10,8 +10,9 @@ completion method (its intervals off) at 0 and 0.5 mm noise (the suites' levels,
 evaluate draws it), and chooses the grouping by a rule fixed before the measurement (decision record 0144): each
 candidate scheme is fitted on the colons of one half (the parity of a colon's rank among the colons sorted by id)
 and measured on the other, both ways; of the schemes whose held-out coverage lies within 4 points of the level in
-every group of at least 30 segments, the one with the smallest mean width wins (else the marginal one). It is then fitted on all segments and written beside the model (``<model>.intervals.json``).
-Prints the held-out coverage and width of every scheme.
+every group of at least 30 segments, the one with the smallest mean width wins (else the marginal one). It is then
+fitted on all segments and written beside the model (``<model>.intervals.json``). Prints the held-out coverage and
+width of every scheme.
 """
 
 from __future__ import annotations

@@ -27,6 +27,7 @@ from colonbench.benchmark.colon_evaluate import evaluate_colons
 from colonbench.benchmark.runfolder import read_rows
 from colonbench.completion import intervals
 from colonbench.completion.method import model_path, steps_version
+from colonbench.reports.colon_leaderboard import colon_source
 from colonbench.shards.dataset import generate
 from colonbench.shards.schema import sha256_file
 
@@ -117,7 +118,7 @@ def main() -> None:
     print(f"\nthe rule of decision 0144 chooses: {best or 'none'}")
     for run in args.score:
         rows = completion_rows(Path(run))
-        rows["source"] = np.where(rows["colon"].str.startswith("colon-"), "procedural", rows["colon"])
+        rows["source"] = colon_source(rows["colon"])
         for scheme in SCHEMES:
             s = scored(rows, scheme, fit(seg, scheme, cal.known, cal.level))
             table = rows.assign(inside=s["inside"].to_numpy(), width=100 * s["width"].to_numpy())
