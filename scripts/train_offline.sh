@@ -24,22 +24,7 @@
 # A PARTS_DIR without bends/ trains on wide and train-real alone, as planned before bends.yaml.
 set -euo pipefail
 parts=${1:?PARTS_DIR}; run=${2:?RUN_DIR}; minutes=${3:?MINUTES}; device=${4:-cuda}
-site=${SITE:-/tmp/colonbench-site}
-here=$(cd "$(dirname "$0")/.." && pwd)
-
-if ! python3 -c "import colonbench" 2>/dev/null; then
-    wheels=()
-    [ -d "$parts/wheels" ] && wheels=("$parts"/wheels/*.whl)
-    python3 -m pip install -q --no-index --no-deps --no-build-isolation --no-compile --target "$site" \
-        "$here" "${wheels[@]}"
-    export PYTHONPATH="$site${PYTHONPATH:+:$PYTHONPATH}"
-fi
-
-for pack in "$parts"/*/; do
-    if [ ! -f "$pack/train.h5" ] && compgen -G "$pack/train.h5.part-*" > /dev/null; then
-        cat "$pack"/train.h5.part-* > "$pack/train.h5.tmp" && mv "$pack/train.h5.tmp" "$pack/train.h5"
-    fi
-done
+source "$(dirname "$0")/offline_install.sh"
 
 packs=("$parts/wide" "$parts/train-real"); repeat=1,4
 if [ -d "$parts/bends" ]; then packs+=("$parts/bends"); repeat=1,4,1; fi
