@@ -216,25 +216,3 @@ def test_a_calibrated_method_gives_each_segment_its_interval_around_the_maps_cov
     for method, expected in ((Sure(), [0.7, 0.9]), (Calibrated(), [0.75, 1.0])):
         result = map_colon(pts, method, segment_mm=60.0, positions=line.points[::-20], progress=False)
         assert [s.coverage_interval for s in result["segments"]] == [pytest.approx(expected)] * 3
-
-
-def test_the_cross_fitted_calibration_takes_a_model_for_each_real_colon(tmp_path):
-    # scripts/calibrate_intervals.py --crossfit COLON=MODEL: the real colons' segments are estimated by models that
-    # have not seen them (decision record 0152); a colon that is not the calibration's, a missing file or a real
-    # colon left without a model is refused before anything is estimated
-    import importlib.util
-
-    spec = importlib.util.spec_from_file_location(
-        "calibrate_intervals", Path(__file__).resolve().parents[1] / "scripts" / "calibrate_intervals.py")
-    script = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(script)
-    assert script.colon_ids() == {"gca00090": 900090, "gca00080": 900080}
-    a, b = tmp_path / "a.safetensors", tmp_path / "b.safetensors"
-    a.write_bytes(b"x")
-    b.write_bytes(b"x")
-    assert script.crossfit_models([f"gca00080={a}", f"gca00090={b}"]) == {"gca00080": a, "gca00090": b}
-    for bad, says in (([f"gca00060={a}", f"gca00090={b}"], "COLON one of gca00080, gca00090"),
-                      ([f"gca00080={tmp_path / 'none.safetensors'}", f"gca00090={b}"], "no such model file"),
-                      ([f"gca00080={a}"], "a model for each real colon"), ([str(a)], "COLON=MODEL")):
-        with pytest.raises(SystemExit, match=says):
-            script.crossfit_models(bad)
