@@ -169,21 +169,6 @@ dump("calibration-real", "Real segments of the interval calibration (scripts/cal
                                                     "video": 0.1}, meshes=["gca00090", "gca00080"])},
      WIDE, axes="tube", mesh_names=["gca00090", "gca00080"])
 
-#: Cross-fitted calibration (decision 0152): the calibration's real colons are the shipped model's training colons,
-#: so its errors there understate those on a colon it has not seen. Two models, each trained without one of them,
-#: estimate the left-out colon's calibration segments (cross-fitting, as the jackknife+ / CV+ of Barber et al. 2021).
-dump("crossfit-wide", "Widened training data of the cross-fitted calibration models (decision 0152): wide.yaml's "
-     "generator, seed and validation colons with its first 60 train colons (5400 samples), sized for one upload to a "
-     "GPU machine as a pack. Trained together with crossfit-real-gca00090.yaml or crossfit-real-gca00080.yaml.",
-     20261122, {"train": split(0, 60, 10, 3, WIDE_NOISE, WIDE_HOLES),
-                "validation": split(200, 20, 4, 2, WIDE_NOISE, WIDE_HOLES)}, WIDE, axes="tube")
-for kept, left in (("gca00090", "gca00080"), ("gca00080", "gca00090")):
-    dump(f"crossfit-real-{kept}", f"Every segment of the real colon {kept} alone (train-real.yaml's windows, holes and "
-         f"noise): with crossfit-wide.yaml it trains the calibration model that has never seen {left}, whose "
-         f"calibration segments it then estimates (decision 0152). Validated on train-real.yaml's 4 widened colons.",
-         20261125, {"train": split(0, 0, None, 2, WIDE_NOISE, WIDE_HOLES, meshes=[kept]),
-                    "validation": split(212, 4, 2, 1, WIDE_NOISE, WIDE_HOLES)}, WIDE, axes="tube", mesh_names=[kept])
-
 # ------------------------------------------------------------------ whole-colon benchmark (issue 12)
 def whole_colons(first, count, permutations, meshes):
     """A split of whole-colon reconstructions (task: colon): no segments, camera and sphere holes half and half."""
