@@ -24,26 +24,30 @@
 # A PARTS_DIR without bends/ trains on wide and train-real alone, as planned before bends.yaml.
 set -euo pipefail
 parts=${1:?PARTS_DIR}; run=${2:?RUN_DIR}; minutes=${3:?MINUTES}; device=${4:-cuda}
-# Install where colonbench does not import (the wheels in PARTS_DIR/wheels built for this Python), and work from
-# the temporary folder: in the clone's root, python3 -m colonbench.cli would import the clone's colonbench/ folder,
-# not the installed package (No module named colonbench.benchmark). PARTS_DIR and RUN_DIR are made absolute first.
+# Install when colonbench does not import (with the wheels in PARTS_DIR/wheels built for this Python), and work
+# from an empty temporary folder: in the clone's root, python3 -m colonbench.cli would import the clone's
+# colonbench/ folder, not the installed package (No module named colonbench.benchmark). PARTS_DIR and RUN_DIR are
+# made absolute first.
 site=${SITE:-/tmp/colonbench-site}
 here=$(cd "$(dirname "$0")/.." && pwd)
 parts=$(cd "$parts" && pwd)
 mkdir -p "$run"; run=$(cd "$run" && pwd)
-cd "${TMPDIR:-/tmp}"
+cd "$(mktemp -d)"
+
 if ! python3 -c "import colonbench.benchmark" 2>/dev/null; then
     py=$(python3 -c "import sys; print(f'cp{sys.version_info[0]}{sys.version_info[1]}')")
     wheels=()
     for w in "$parts"/wheels/*.whl; do
         [ -e "$w" ] || continue
-        case "$w" in *-cp3*-cp3*) [[ "$w" == *"-$py-"* ]] || continue ;; esac
+        n=${w##*/}
+        if [[ "$n" == *-cp3*-cp3* && "$n" != *"-$py-"* ]]; then echo "skipping $n (not $py)" >&2; continue; fi
         wheels+=("$w")
     done
     python3 -m pip install -q --no-index --no-deps --no-build-isolation --no-compile --target "$site" \
         "$here" "${wheels[@]}"
     export PYTHONPATH="$site${PYTHONPATH:+:$PYTHONPATH}"
 fi
+
 for pack in "$parts"/*/; do
     if [ ! -f "$pack/train.h5" ] && compgen -G "$pack/train.h5.part-*" > /dev/null; then
         cat "$pack"/train.h5.part-* > "$pack/train.h5.tmp" && mv "$pack/train.h5.tmp" "$pack/train.h5"
