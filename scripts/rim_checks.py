@@ -54,12 +54,15 @@ def rim_features(plane, rim, end: int, dense: np.ndarray, nearest: np.ndarray, c
         t = dense[min(j + 1, len(dense) - 1)] - dense[max(j - 1, 0)]
         angle = float(np.degrees(np.arccos(min(1.0, abs(t @ normal) / np.linalg.norm(t)))))
         axis = normal / np.linalg.norm(normal)
-        empty = 1.0 - P._sectors(rim - dense[j], axis[None], np.ones((1, len(rim)), bool))[0] / P.RIM_SECTORS
+
+        def empty_share(pts):   # the share of the sectors about the crossing, in the plane, that pts leave empty
+            return 1.0 - P._sectors(pts - dense[j], axis[None], np.ones((1, len(pts)), bool))[0] / P.RIM_SECTORS
+
+        empty = empty_share(rim)
         # (e): the whole cloud's points near the plane and near the crossing (decision 0149)
         reach = 2 * float(np.median(np.linalg.norm(rim - dense[j], axis=1)))
         near = (np.abs((cloud - centre) @ axis) <= P.RIM_BAND) & (np.linalg.norm(cloud - dense[j], axis=1) <= reach)
-        whole = 1.0 - P._sectors(cloud[near] - dense[j], axis[None], np.ones((1, int(near.sum())), bool))[0] / \
-            P.RIM_SECTORS if near.any() else 1.0
+        whole = empty_share(cloud[near]) if near.any() else 1.0
     else:
         angle, empty, whole = 90.0, 1.0, 1.0
     radius = float(np.median(np.linalg.norm(rim - centre, axis=1)))
