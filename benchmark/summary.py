@@ -55,8 +55,9 @@ def interval_stats(g: pd.DataFrame) -> dict:
     if "interval_low" not in g.columns:
         return {"interval_covered": np.nan, "interval_width": np.nan, "interval_segments": 0}
     low, high = g["interval_low"].to_numpy(float), g["interval_high"].to_numpy(float)
-    have = ~np.isnan(low) & ~np.isnan(high) & np.isfinite(g["true_coverage"].to_numpy(float))   # rows with no truth
-    # (a whole-colon segment whose region holds no true face) are scored by neither the MAE nor the intervals
+    # rows with no truth (a whole-colon segment whose region holds no true face) are scored by neither the MAE nor
+    # the intervals
+    have = ~np.isnan(low) & ~np.isnan(high) & np.isfinite(g["true_coverage"].to_numpy(float))
     if not have.any():
         return {"interval_covered": np.nan, "interval_width": np.nan, "interval_segments": 0}
     true = g["true_coverage"].to_numpy(float)[have]
