@@ -137,17 +137,19 @@ class Intervals:
 
 
 def known_length(est, length_mm: float) -> None:
-    """Use a segment's known arc length (mm): where the method's line between the planes spans less than
-    :data:`SHORT_SHARE` of it, the cloud stops short of an end nobody saw, and the coverage is scaled by the share
-    it spans (the rest of the tube counted unobserved). Marks the estimate's extent as known."""
+    """Use a segment's known arc length (mm): where the segment's span between its planes (``signals["span_mm"]``:
+    the method's line between them, run on straight to a plane beyond its end) is less than :data:`SHORT_SHARE`
+    of it, the cloud stops short of an end nobody saw, and the coverage is scaled by the share it spans (the rest
+    of the tube counted unobserved; decision record 0155). Marks the estimate's extent as known."""
     if not (length_mm > 0 and np.isfinite(length_mm)):
         raise ValueError(f"a segment's length must be a positive number of mm, got {length_mm}")
-    share = float(est.signals.get("length_mm", 0.0)) / float(length_mm)
+    span = float(est.signals["span_mm"])
+    share = span / float(length_mm)
     est.signals.update(extent="known", length_share=round(share, 4))
     if share < SHORT_SHARE and np.isfinite(est.coverage):
         est.coverage = float(est.coverage) * share
-        est.review.append(f"the cloud spans {est.signals['length_mm']:.0f} of the segment's {length_mm:g} mm: the "
-                          "rest is counted unobserved")
+        est.review.append(f"the cloud spans {span:.0f} of the segment's {length_mm:g} mm: the rest is counted "
+                          "unobserved")
 
 
 def fit(true, estimated, signals: list, scheme: str, review_width: float, level: float = LEVEL,

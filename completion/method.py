@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from colonbench.completion.gaps import GAP_VALLEY
+from colonbench.completion.gaps import GAP_VALLEY, reach_planes
 from colonbench.completion.heatmap_centerline import END_LEVEL, extract_centerline
 from colonbench.completion.intervals import known_length, load as load_intervals
 from colonbench.completion.planes import line_between
@@ -493,6 +493,7 @@ def from_heatmap(heatmap: np.ndarray, grid: Grid, points, method: str = "complet
     cl = resample(grid.to_mm(inside), CENTERLINE_SPACING_MM) if len(inside) else np.zeros((0, 3))
     signals = {"rims": int(comp.rims), "rims_doubtful": int(getattr(comp.planes, "doubtful", 0)),
                "length_mm": round(float(arc_length(cl)[-1]), 2) if len(cl) else 0.0,
+               "span_mm": round(float(arc_length(reach_planes(inside, comp.planes))[-1]) * grid.voxel_size, 2),
                **({} if cut_rims else {"extent": "known"})}     # a caller clipping at planes it knows its ends
     return Estimate(coverage=comp.coverage, holes=verts[comp.hole], centerline=cl, method=method,
                     mesh_vertices=verts, mesh_faces=comp.faces, hole_vertices=comp.hole,

@@ -58,7 +58,7 @@ def calibration_data(root: Path, workers: int = 2) -> list[tuple[Path, Path]]:
 
 def estimates(data: Path, method: CompletionMethod, cache: Path) -> pd.DataFrame:
     """Completion's estimate of every validation segment at every noise level (cached in ``cache``)."""
-    if cache.is_file():
+    if cache.is_file() and "span_mm" in pd.read_csv(cache, nrows=0).columns:   # a cache without spans: made again
         return pd.read_csv(cache)
     _, picks = select(data, "validation")
     rows = []
@@ -75,7 +75,8 @@ def estimates(data: Path, method: CompletionMethod, cache: Path) -> pd.DataFrame
                     rows.append({"shard": name, "index": i, "colon_id": geo["colon_id"], "noise_mm": sigma,
                                  "hole_model": geo["hole_model"], "segment_mm": geo["length_mm"],
                                  "true": geo["coverage"], "estimate": est.coverage,
-                                 "rims": est.signals.get("rims", 0), "length_mm": est.signals.get("length_mm")})
+                                 "rims": est.signals.get("rims", 0), "length_mm": est.signals.get("length_mm"),
+                                 "span_mm": est.signals.get("span_mm")})
         print(f"{name}: {len(rows)} estimates", flush=True)
     out = pd.DataFrame(rows)
     out = out[np.isfinite(out["estimate"])]             # an empty completed surface gives no estimate
@@ -159,13 +160,13 @@ def main() -> None:
               "held_out": summary}
     cal = intervals.fit(df["true"], df["estimate"], signals(df), best, REVIEW_WIDTH, args.level, source)
     # segments whose length is known (colonbench estimate --length-mm, the map's segments): the estimate scaled where
-    # the line stops short, as intervals.known_length does, and their own interval, on calibration.yaml's segments
-    # only: on the extra real segments the scaling misfires (the line spans a median 70 % of a complete 70 mm real
-    # segment), which says nothing of the map's segments this group also serves (decision record 0147)
-    share = df["length_mm"] / df["segment_mm"]
+    # the segment's span stops short, as intervals.known_length does, and their own interval, on calibration.yaml's
+    # segments only, as since decision record 0147 (which found the scaling misfiring on the real segments, then
+    # measured against the network's line; 0155 measures it against the span)
+    share = df["span_mm"] / df["segment_mm"]
     known = np.where(share < intervals.SHORT_SHARE, df["estimate"] * share, df["estimate"])
     first = (df["manifest"] == MANIFESTS[0].stem).to_numpy()
-    for name, sel in ((MANIFESTS[0].name, first), ("all", np.ones(len(df), bool))):
+    for name, sel in ((MANIFESTS[0].name, first), (MANIFESTS[1].name, ~first), ("all", np.ones(len(df), bool))):
         print(f"\nknown length, {name}: MAE {100 * np.abs(known[sel] - df['true'][sel]).mean():.2f} points (unknown "
               f"{100 * (df['estimate'][sel] - df['true'][sel]).abs().mean():.2f})")
     if not first.any():

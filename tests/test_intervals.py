@@ -46,13 +46,17 @@ def test_a_calibration_covers_its_level_on_fresh_segments_of_the_same_kind():
 
 
 def test_a_known_length_counts_what_the_cloud_does_not_reach_as_unobserved():
-    est = Estimate(0.9, np.zeros((0, 3)), np.zeros((0, 3)), "m", signals={"length_mm": 30.0, "rims": 2})
+    est = Estimate(0.9, np.zeros((0, 3)), np.zeros((0, 3)), "m", signals={"length_mm": 30.0, "span_mm": 30.0})
     intervals.known_length(est, 60.0)
     assert est.coverage == pytest.approx(0.45) and est.signals["extent"] == "known"
     assert "spans 30 of the segment's 60 mm" in est.review[0]
-    near = Estimate(0.9, np.zeros((0, 3)), np.zeros((0, 3)), "m", signals={"length_mm": 57.0})
+    near = Estimate(0.9, np.zeros((0, 3)), np.zeros((0, 3)), "m", signals={"length_mm": 57.0, "span_mm": 57.0})
     intervals.known_length(near, 60.0)                 # a line a little short of the cut: the cloud reaches it
     assert near.coverage == 0.9 and not near.review
+    # the network's line stops short, but the segment's planes (cut rims) lie at its ends: its span is not short
+    short_line = Estimate(0.9, np.zeros((0, 3)), np.zeros((0, 3)), "m", signals={"length_mm": 20.0, "span_mm": 59.0})
+    intervals.known_length(short_line, 60.0)
+    assert short_line.coverage == 0.9 and short_line.signals["length_share"] == pytest.approx(59 / 60, abs=1e-4)
     with pytest.raises(ValueError, match="positive"):
         intervals.known_length(near, -1.0)
 
@@ -92,6 +96,7 @@ def test_estimate_writes_the_interval_and_takes_a_known_length(demo_data, tmp_pa
     a = json.loads((tmp_path / "a" / "seg.json").read_text())
     assert a["coverage_interval"][0] <= a["coverage"] <= a["coverage_interval"][1]
     assert a["coverage_interval_level"] == 0.9 and isinstance(a["review"], list)
+    assert a["signals"]["span_mm"] >= a["signals"]["length_mm"] - 0.5     # the line, run on to its planes
     assert main(["estimate", str(tmp_path / "seg.npy"), "--out-dir", str(tmp_path / "b"), "--length-mm", "500"]) == 0
     b = json.loads((tmp_path / "b" / "seg.json").read_text())
     assert b["coverage"] < 0.2 and b["signals"]["extent"] == "known" and "counted unobserved" in b["review"][0]
