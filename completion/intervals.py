@@ -32,8 +32,8 @@ BANDS = (0.8, 1.01)
 LENGTHS_MM = (45.0, 60.0)
 #: Fewest calibration segments a group needs; smaller groups use the group of all segments with their rims.
 MIN_GROUP = 30
-#: A line between the planes shorter than this share of the segment's known length stops short of an unseen end
-#: (:func:`known_length`; chosen on the calibration set, decision record 0144).
+#: A span between the planes (``signals["span_mm"]``) shorter than this share of the segment's known length stops
+#: short of an unseen end (:func:`known_length`; chosen on the calibration set, decision records 0144 and 0155).
 SHORT_SHARE = 0.9
 #: Suffix of a model's calibration file.
 SUFFIX = ".intervals.json"
