@@ -10,6 +10,7 @@ pytest.importorskip("monai")
 
 from colonbench.completion.gaps import wall_gaps
 from colonbench.completion.heatmap_centerline import extract_centerline  # noqa: E402
+from colonbench.completion.intervals import known_length
 from colonbench.completion.method import from_heatmap  # noqa: E402
 from colonbench.completion.planes import segment_planes
 from colonbench.completion.steps import complete
@@ -113,6 +114,22 @@ def test_the_reported_centerline_stops_at_the_cut_rims_where_the_line_runs_past_
     assert est.centerline[:, 2].min() > 10.0 - 1.0 and est.centerline[:, 2].max() < 50.0 + 1.0
     assert np.ptp(est.centerline[:, 2]) > 36.0
     assert est.mesh_vertices[:, 2].min() > 10.0 - 0.5 and est.mesh_vertices[:, 2].max() < 50.0 + 0.5
+
+
+def test_a_known_length_is_compared_with_the_span_between_the_planes_not_with_a_short_line():
+    # a 40 mm segment cut at its rims (z = 10 and 50) whose line stops short (z = 22-38), as the network's does on
+    # real colons: the span runs the line on to the rims' planes, so the known length does not scale the segment
+    _, grid, tube_pts, hm = tube_heatmaps(straight(63.0), UNIT)
+    cut = tube_pts[(tube_pts[:, 2] >= 10.0) & (tube_pts[:, 2] <= 50.0)]
+    line = extract_centerline(hm.target)
+    short = line[(line[:, 2] >= 22.0) & (line[:, 2] <= 38.0)]
+    est, longer = (from_heatmap(hm.target, grid, cut, centerline_vox=short) for _ in range(2))
+    assert est.signals["length_mm"] == pytest.approx(16.0, abs=1.0)
+    assert est.signals["span_mm"] == pytest.approx(40.0, abs=1.0)
+    known_length(est, 40.0)
+    assert est.coverage == pytest.approx(1.0, abs=0.02) and not est.review
+    known_length(longer, 80.0)                          # a segment twice as long: the cloud spans half of it
+    assert longer.coverage == pytest.approx(0.5, abs=0.02) and "spans 40 of the segment's 80 mm" in longer.review[0]
 
 
 def test_marching_cubes_on_a_cylinder_heatmap_gives_its_area():
