@@ -31,6 +31,10 @@ from colonbench.polyline import Centerline
 CELL_MM = 1.0
 #: Closing and opening radius, cells.
 MORPH_CELLS = 1
+#: The raster's settings in the methods' versions (``rows=sample``: rows from the nearest line sample's index,
+#: since colonbench 1.1; before, from its arc length in floats, which put points on either side of a row's edge
+#: under another machine's float noise).
+RASTER = f"cell={CELL_MM:g}mm,rows=sample"
 
 
 def pca_axis(points: np.ndarray, spacing: float = 0.5) -> np.ndarray:
@@ -43,7 +47,7 @@ def pca_axis(points: np.ndarray, spacing: float = 0.5) -> np.ndarray:
     return c + np.linspace(t.min(), t.max(), n + 1)[:, None] * axis
 
 
-def unwrap(points: np.ndarray, centerline: np.ndarray):
+def unwrap(points: np.ndarray, centerline: np.ndarray, index: bool = False):
     """Cylindrical coordinates of points around a centerline.
 
     Returns
@@ -58,6 +62,8 @@ def unwrap(points: np.ndarray, centerline: np.ndarray):
         The centerline (resampled every 0.5 mm).
     frames : tuple of (m, 3) arrays
         Tangent, normal, binormal per centerline sample.
+    sample : (n,) int
+        With ``index``: the index of each point's nearest centerline sample.
     """
     line = Centerline.from_points(centerline).resample(0.5)
     t, nrm, bin_ = line.frames()
@@ -66,7 +72,8 @@ def unwrap(points: np.ndarray, centerline: np.ndarray):
     _, idx = cKDTree(line.points).query(points)
     rel = points - line.points[idx]
     x, y = np.einsum("ij,ij->i", rel, nrm[idx]), np.einsum("ij,ij->i", rel, bin_[idx])
-    return line.arclength[idx], np.mod(np.arctan2(y, x), 2 * np.pi), np.hypot(x, y), line, (t, nrm, bin_)
+    out = line.arclength[idx], np.mod(np.arctan2(y, x), 2 * np.pi), np.hypot(x, y), line, (t, nrm, bin_)
+    return (*out, idx) if index else out
 
 
 def _disk(radius: int) -> np.ndarray:
@@ -91,11 +98,14 @@ def unwrap_coverage(points, centerline, method: str = "unwrap", cell_mm: float =
     cl = np.asarray(centerline, dtype=float)
     if len(cl) < 2 or len(pts) == 0:
         return Estimate(float("nan"), np.zeros((0, 3)), cl.reshape(-1, 3), method)
-    s, theta, radius, line, (_, nrm, bin_) = unwrap(pts, cl)
+    s, theta, radius, line, (_, nrm, bin_), sample = unwrap(pts, cl, index=True)
     r_mean = float(np.mean(radius))
     n_rows = max(int(np.ceil(line.length / cell_mm)), 1)
     n_cols = max(int(np.round(2 * np.pi * r_mean / cell_mm)), 4)
-    row = np.clip((s / line.length * n_rows).astype(int), 0, n_rows - 1) if line.length > 0 else np.zeros(len(s), int)
+    # rows from the nearest sample's index in integers: the resampled line's samples are evenly spaced, so
+    # s / length * n_rows is k * n_rows / (samples - 1), which for many k is an integer in exact arithmetic and
+    # lands a last bit either side of a row's edge in floats (another CPU moved whole rows of points)
+    row = np.minimum(sample * n_rows // max(len(line.points) - 1, 1), n_rows - 1)
     col = np.clip((theta / (2 * np.pi) * n_cols).astype(int), 0, n_cols - 1)
     occupied = np.zeros((n_rows, n_cols), bool)
     occupied[row, col] = True
@@ -142,7 +152,7 @@ class UnwrapMethod:
         from colonbench.completion.method import prediction_version, shared_predictor
 
         self.predictor = shared_predictor(model, device, tta)
-        self.version = f"{prediction_version(self.predictor)},cell={CELL_MM:g}mm"
+        self.version = f"{prediction_version(self.predictor)},{RASTER}"
 
     def estimate(self, points) -> Estimate:
         """Coverage, holes and centerline of one partial segment (mm)."""
@@ -163,7 +173,7 @@ class UnwrapPCAMethod:
     """Baseline 3 as Ma et al. ran it: unwrapping around a straight axis, the points' first principal component."""
 
     name = "unwrap-pca"
-    version = f"cell={CELL_MM:g}mm"
+    version = RASTER
 
     def estimate(self, points) -> Estimate:
         """Coverage, holes and (straight) centerline of one partial segment (mm)."""

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from colonbench.baselines.unwrap import CELL_MM, unwrap_coverage
+from colonbench.baselines.unwrap import RASTER, unwrap_coverage
 from colonbench.errors import InputError
 from colonbench.estimate import Estimate
 
@@ -46,7 +46,7 @@ class UnwrapGTMethod:
     """2D unwrapping around the GT centerline."""
 
     name = "unwrap-gt"
-    version = f"cell={CELL_MM:g}mm"
+    version = RASTER
     uses_truth = True
 
     def estimate(self, points, truth: dict) -> Estimate:

@@ -58,3 +58,23 @@ def test_thresholding_the_exact_heatmap_finds_the_window(windowed):
         assert in_window(est.holes, slack=0.1, dz=2.0).mean() > 0.95
     else:  # the paper's point: voxel centres of a thick shell sit too far from a sparse cloud, false holes
         assert truth - 0.1 < est.coverage < truth - 0.02
+
+
+def last_bit(points: np.ndarray) -> np.ndarray:
+    """Every coordinate moved by one unit in its last place, up or down by a bit of its own value (equal points
+    stay equal), as another machine's float arithmetic may move them."""
+    up = (points.view(np.int64) >> 7) & 1 == 1
+    return np.where(up, np.nextafter(points, np.inf), np.nextafter(points, -np.inf))
+
+
+def test_unwrapping_gives_the_same_coverage_for_a_cloud_moved_at_its_last_bit(windowed):
+    """The resampled line's samples sit on row edges in exact arithmetic (a 60 mm line: 120 samples, 60 rows); rows
+    from the samples' indices keep whole rows of points from changing sides under float noise."""
+    colon, pts, _, _ = windowed
+    line = colon.centerline.points
+    for cl in (line, pca_axis(pts)):
+        est = unwrap_coverage(pts, cl)
+        for moved_pts, moved_line in ((last_bit(pts), cl), (pts, last_bit(cl)), (last_bit(pts), last_bit(cl))):
+            again = unwrap_coverage(moved_pts, moved_line)
+            assert again.coverage == est.coverage
+            assert len(again.holes) == len(est.holes)
