@@ -239,7 +239,6 @@ class Predictor:
         self.device = resolve_device(device)
         self.net, self.config, self.meta = load_model(path, self.device)
         self._forward: dict = {}     # grid size -> the network made fast for inputs of that size
-        self._seen: set = set()      # grid sizes predicted once (with the eager network)
         self.path = path
         self.version = f"{path.stem}@{self.meta.get('steps', '?')}" + (f",tta={self.tta}" if self.tta > 1 else "")
         self.grid_options = self.meta.get("grid_options", {})
@@ -281,13 +280,13 @@ class Predictor:
             grid = context_grid(pts, slab, **self.grid_options)
             h_in, _ = input_from_points(grid, pts)
             x_np = np.stack([h_in, slab_occupancy(grid, slab).astype(np.float32)])[None]
-        # the first cloud runs the eager network; from the second on, the network made fast for inference
-        # (its set-up, about 1 s, pays off over a few clouds, not for a single one)
-        if grid.size in self._seen and grid.size not in self._forward:
+        # every cloud runs the network made fast for inference (set up once per grid size, about 1 s): its sums
+        # differ from the eager network's in the last bits, which the steps after it can turn into a whole vertex
+        # or voxel, so a cloud's estimate must not depend on whether it came first in its process
+        if grid.size not in self._forward:
             from colonbench.completion.network import for_inference
 
             self._forward[grid.size] = for_inference(self.net, grid.size, self.device)
-        self._seen.add(grid.size)
         with torch.inference_mode():
             x = torch.from_numpy(x_np).to(self.device)
             pred = averaged(self._forward.get(grid.size, self.net), x, self.tta)[0, 0].float().cpu().numpy()

@@ -222,3 +222,17 @@ def test_the_methods_on_the_network_share_the_averaged_prediction():
     assert averaged.predictor is not CompletionMethod().predictor
     assert "tta=4" in averaged.version and "tta" not in load_method("thresholding").version
     assert load_method("poisson", tta=4).version == load_method("poisson").version   # no network: not offered
+
+
+def test_a_clouds_prediction_does_not_depend_on_what_came_before_it_in_the_process():
+    """The first cloud a predictor sees runs the same network as every later one (the eager network's sums differ
+    from the fast one's in the last bits, which the steps after it can turn into a whole vertex or voxel)."""
+    from colonbench.completion.method import Predictor
+
+    colon = tube_colon(straight(50.0), R, ring_spacing_mm=1.0, n_around=96)
+    a = check_cloud(colon.mesh.vertices[colon.mesh.vertices[:, 0] > -10])
+    b = check_cloud(colon.mesh.vertices[colon.mesh.vertices[:, 2] < 35])
+    first = Predictor()(a).heatmap
+    later = Predictor()
+    later(b)
+    assert np.array_equal(later(a).heatmap, first)
