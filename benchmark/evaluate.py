@@ -36,7 +36,7 @@ import pandas as pd
 
 from colonbench import seeding
 from colonbench.benchmark.exchange import sample_id
-from colonbench.benchmark.metrics import THRESHOLDS_MM, segment_metrics
+from colonbench.benchmark.metrics import COUNT_COLUMNS, THRESHOLDS_MM, point_counts, segment_metrics
 from colonbench.benchmark.parallel import run_units
 from colonbench.benchmark.registry import load_method
 from colonbench.estimate import as_estimate
@@ -55,8 +55,9 @@ ID_COLUMNS = ["method", "shard", "index", "colon_id", "length_mm", "hole_model",
 
 
 def result_columns() -> list[str]:
-    """Columns of a per-segment results CSV."""
-    return ID_COLUMNS + metric_columns() + ["seconds", "error"]
+    """Columns of a per-segment results CSV (the point counts after the metrics: rows made before version 1.1
+    have none)."""
+    return ID_COLUMNS + metric_columns() + list(COUNT_COLUMNS) + ["seconds", "error"]
 
 
 # ---------------------------------------------------------------------------------------------- the data
@@ -199,12 +200,12 @@ def run_unit(data: str, shard_name: str, indices: list[int], sigma: float, noise
                     row.update({"coverage": np.nan, "coverage_error": np.nan, "interval_low": np.nan,
                                 "interval_high": np.nan, "seconds": np.nan,
                                 "error": msg.replace("\n", " ")[:500]})
-                    row.update({c: np.nan for c in metric_columns()})
+                    row.update({c: np.nan for c in (*metric_columns(), *COUNT_COLUMNS)})
                 else:
                     metrics = segment_metrics(est.coverage, est.holes, est.centerline, truth)
                     low, high = est.coverage_interval if est.coverage_interval is not None else (np.nan, np.nan)
                     row.update({"coverage": est.coverage, "interval_low": low, "interval_high": high, **metrics,
-                                "seconds": seconds, "error": ""})
+                                **point_counts(est.holes, est.centerline, truth), "seconds": seconds, "error": ""})
                     if i in examples and len(getattr(est, "mesh_faces", ())):
                         stem = shard_name.replace("/", "_").removesuffix(".h5")
                         _save_example(Path(run_dir) / "examples" / m.name / f"{stem}-{i:03d}-noise{sigma:g}.npz",

@@ -39,6 +39,19 @@ def precision_recall(estimated, truth, threshold_mm: float) -> tuple[float, floa
     return float(np.mean(d_est < threshold_mm)), float(np.mean(d_gt < threshold_mm))
 
 
+#: Columns of :func:`point_counts`: the number of points behind each precision (estimated) and recall (true).
+COUNT_COLUMNS = ("holes_n", "holes_true_n", "centerline_n", "centerline_true_n")
+
+
+def point_counts(holes, centerline, truth: dict) -> dict:
+    """The denominators of a segment's precision and recall: how many estimated and true hole and centerline points
+    there are (:data:`COUNT_COLUMNS`). A threshold metric moves by whole points of these when a distance crosses
+    its threshold under another machine's float arithmetic; docs/benchmark.md, Reproducing, says by how many."""
+    n = lambda p: int(len(np.asarray(p, dtype=float).reshape(-1, 3)))   # noqa: E731
+    return {"holes_n": n(holes), "holes_true_n": n(truth["hole_points"]), "centerline_n": n(centerline),
+            "centerline_true_n": n(truth["centerline"])}
+
+
 def segment_metrics(coverage: float, holes, centerline, truth: dict, thresholds=THRESHOLDS_MM) -> dict:
     """All metrics of one segment.
 

@@ -19,8 +19,10 @@ import json
 import shutil
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
+from colonbench.benchmark.metrics import THRESHOLDS_MM
 from colonbench.benchmark.runfolder import RUN_FILE, read_rows, read_run, write_json
 from colonbench.errors import InputError
 
@@ -28,6 +30,17 @@ from colonbench.errors import InputError
 SHIPPED_DIR = Path(__file__).resolve().parent / "shipped_results"
 #: Significant digits kept of each float in a shipped CSV.
 DIGITS = 10
+#: Columns of a results row that reproduce on another machine to :data:`TOLERANCE` (fractions): another CPU's
+#: float arithmetic moves the network's numbers by about 1e-9, the coverages they give by about 1e-8.
+CONTINUOUS = ("true_coverage", "coverage", "coverage_error", "interval_low", "interval_high")
+TOLERANCE = 1e-6
+#: Points a threshold metric (a precision or recall: a share of points within 1 or 2 mm) or a point count may move
+#: by on another machine: a point whose distance lies within float noise of the threshold falls on either side
+#: (seen: one true hole point of 6,500 in demo-v1, 1.5e-4 of recall). Allowed: this many points of the count.
+FLIPS = 3
+#: Each threshold metric with the count of the points it is a share of.
+SHARE_OF = {f"{what}_{pr}_{th:g}mm": f"{what}_n" if pr == "precision" else f"{what}_true_n"
+            for th in THRESHOLDS_MM for what in ("holes", "centerline") for pr in ("precision", "recall")}
 
 
 def folder(suite) -> Path:
@@ -120,6 +133,51 @@ def publish(run_dir, suite, methods=None) -> Path:
     shutil.rmtree(out, ignore_errors=True)
     staging.rename(out)
     return out
+
+
+def differences(ours: pd.DataFrame, reference: pd.DataFrame, flips: int = FLIPS,
+                tolerance: float = TOLERANCE) -> pd.DataFrame:
+    """Where rows of a method differ from its reference rows (its shipped ones) by more than a reproduction on
+    another machine may: a continuous column (:data:`CONTINUOUS`) by more than ``tolerance``, a point count by
+    more than ``flips``, a threshold metric by more than ``flips`` points of its count (:data:`SHARE_OF`; the
+    count of ``ours``, or of ``reference`` where larger), or a value defined on one side only.
+
+    Parameters
+    ----------
+    ours, reference : DataFrame
+        Results rows (:func:`colonbench.benchmark.evaluate.result_columns`) of one method on the same segments,
+        keyed by ``shard``, ``index`` and ``noise_mm``; rows made before the counts existed compare their threshold
+        metrics with the counts of the other side.
+
+    Returns
+    -------
+    DataFrame
+        One row per differing cell: the key, ``column``, ``ours``, ``reference``, ``allowed``; empty when the rows
+        reproduce. Raises ``ValueError`` where the two do not hold the same segments.
+    """
+    key = ["shard", "index", "noise_mm"]
+    a, b = ours.set_index(key).sort_index(), reference.set_index(key).sort_index()
+    if not a.index.equals(b.index):
+        raise ValueError(f"the rows hold other segments: {len(a.index.difference(b.index))} only in ours, "
+                         f"{len(b.index.difference(a.index))} only in the reference")
+    out = []
+
+    def count(col):
+        n = [t[col].to_numpy(float) for t in (a, b) if col in t.columns]
+        return np.fmax.reduce(n) if n else np.full(len(a), np.nan)
+
+    allowed = {c: np.full(len(a), tolerance) for c in CONTINUOUS}
+    allowed.update({c: np.full(len(a), float(flips)) for c in set(SHARE_OF.values())})
+    allowed.update({c: flips / np.maximum(count(n), 1.0) + 1e-12 for c, n in SHARE_OF.items()})
+    for col, bound in allowed.items():
+        if col not in a.columns or col not in b.columns:
+            continue
+        x, y = a[col].to_numpy(float), b[col].to_numpy(float)
+        bad = (np.isnan(x) != np.isnan(y)) | (np.abs(x - y) > bound + tolerance * np.abs(y))
+        for k in np.flatnonzero(bad):
+            out.append({**dict(zip(key, a.index[k])), "column": col, "ours": x[k], "reference": y[k],
+                        "allowed": bound[k]})
+    return pd.DataFrame(out, columns=[*key, "column", "ours", "reference", "allowed"])
 
 
 def shipped_items(suite, exclude=()) -> list:
