@@ -26,7 +26,7 @@ def split(first, count, per_length, permutations, noise, mix=None, meshes=None):
 
 #: The real colons the project carries (data_manifests/meshes/, CC BY 4.0, see its README), by manifest name.
 REAL = {name: {"id": 900000 + int(name[3:]), "mesh": f"meshes/{name}_large_intestine_mm.ply",
-               "centerline": f"meshes/{name}_path_mm.npy"} for name in ("gca00090", "gca00080", "gca00060")}
+               "centerline": f"meshes/{name}_path_mm.npy"} for name in ("gca00090", "gca00080", "gca00060", "gca00020")}
 
 
 def meshes(*names):
@@ -168,6 +168,18 @@ dump("calibration-real", "Real segments of the interval calibration (scripts/cal
      {"validation": split(0, 0, 24, 3, WIDE_NOISE, {**{k: round(0.9 * v, 4) for k, v in WIDE_HOLES.items()},
                                                     "video": 0.1}, meshes=["gca00090", "gca00080"])},
      WIDE, axes="tube", mesh_names=["gca00090", "gca00080"])
+
+#: The real validation and calibration colon (issue 63): gca00020, which no manifest trains on and no suite is made
+#: of. Every choice of model, step or calibration is judged on data that includes it.
+dump("validation-real", "The real validation and calibration colon gca00020 (CT with the colon inflated): every usable "
+     "segment of 40, 50, 55, 60 and 70 mm (the suites' lengths), two hole draws each, with the suites' hole models "
+     "(camera, spheres, both, an unseen end, video partials) at 2 points/mm^2 as real-test.yaml's; evaluated at 0 and "
+     "0.5 mm noise as the suites are. Validation split only: choose and calibrate on it, never train or test on it.",
+     20261130, {"validation": split(0, 0, None, 2, CLEAN, {"camera": 0.25, "spheres": 0.25, "camera+spheres": 0.1,
+                                                          "camera+end": 0.125, "spheres+end": 0.125, "video": 0.15},
+                                    meshes=["gca00020"])},
+     {"segments": {"lengths_mm": [40.0, 50.0, 55.0, 60.0, 70.0], "end_margin_mm": 10.0}}, axes="tube",
+     mesh_names=["gca00020"])
 
 # ------------------------------------------------------------------ whole-colon benchmark (issue 12)
 def whole_colons(first, count, permutations, meshes):
