@@ -34,6 +34,13 @@ DIGITS = 10
 #: float arithmetic moves the network's numbers by about 1e-9, the coverages they give by about 1e-8.
 CONTINUOUS = ("true_coverage", "coverage", "coverage_error", "interval_low", "interval_high")
 TOLERANCE = 1e-6
+#: A coverage counts vertices or voxels: where one lies within float noise of the hole distance, another machine
+#: puts it on the other side, and the coverage moves by its share of the surface (about 1e-4). Allowed: in at most
+#: :data:`FLIPPED_ROWS` of the rows (at least one), a move of up to :data:`FLIPPED_STEP`. Measured with the eager
+#: network in place of the one made fast for inference (their sums differ as two CPUs' do): one row of real-v1's 172
+#: moved, by 8e-5 (completion) and 1e-4 (thresholding); none of demo-v1's 48.
+FLIPPED_ROWS = 0.02
+FLIPPED_STEP = 2e-3
 #: Points a threshold metric (a precision or recall: a share of points within 1 or 2 mm) or a point count may move
 #: by on another machine: a point whose distance lies within float noise of the threshold falls on either side
 #: (seen: one true hole point of 6,500 in demo-v1, 1.5e-4 of recall). Allowed: this many points of the count.
@@ -138,7 +145,8 @@ def publish(run_dir, suite, methods=None) -> Path:
 def differences(ours: pd.DataFrame, reference: pd.DataFrame, flips: int = FLIPS,
                 tolerance: float = TOLERANCE) -> pd.DataFrame:
     """Where rows of a method differ from its reference rows (its shipped ones) by more than a reproduction on
-    another machine may: a continuous column (:data:`CONTINUOUS`) by more than ``tolerance``, a point count by
+    another machine may: a continuous column (:data:`CONTINUOUS`) by more than ``tolerance`` (a coverage, in a few rows,
+    by up to :data:`FLIPPED_STEP`), a point count by
     more than ``flips``, a threshold metric by more than ``flips`` points of its count (:data:`SHARE_OF`; the
     count of ``ours``, or of ``reference`` where larger), or a value defined on one side only.
 
@@ -169,11 +177,16 @@ def differences(ours: pd.DataFrame, reference: pd.DataFrame, flips: int = FLIPS,
     allowed = {c: np.full(len(a), tolerance) for c in CONTINUOUS}
     allowed.update({c: np.full(len(a), float(flips)) for c in set(SHARE_OF.values())})
     allowed.update({c: flips / np.maximum(count(n), 1.0) + 1e-12 for c, n in SHARE_OF.items()})
+    spare = max(1, int(FLIPPED_ROWS * len(a)))
     for col, bound in allowed.items():
         if col not in a.columns or col not in b.columns:
             continue
         x, y = a[col].to_numpy(float), b[col].to_numpy(float)
         bad = (np.isnan(x) != np.isnan(y)) | (np.abs(x - y) > bound + tolerance * np.abs(y))
+        if col in CONTINUOUS and col != "true_coverage":      # a few rows may move by a vertex's or voxel's share
+            flipped = bad & (np.abs(x - y) <= FLIPPED_STEP)
+            if flipped.sum() <= spare and not (bad & ~flipped).any():
+                bad[:] = False
         for k in np.flatnonzero(bad):
             out.append({**dict(zip(key, a.index[k])), "column": col, "ours": x[k], "reference": y[k],
                         "allowed": bound[k]})

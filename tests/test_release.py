@@ -450,5 +450,11 @@ def test_a_reproduction_may_move_threshold_metrics_by_a_few_points_and_coverages
                         "holes_recall_1mm ": (2, 0.0)}.items():
         diff = shipped.differences(moved(**{col.strip(): (k, v)}), ref)
         assert list(diff["column"]) == [col.strip()] and list(diff["index"]) == [k], col
+    # a coverage counts vertices: one row of the three may move by a few vertices' share, not two, not by more
+    assert shipped.differences(moved(coverage=(1, 0.7 + 1e-3)), ref).empty
+    assert list(shipped.differences(moved(coverage=(1, 0.7 + 3e-3)), ref)["column"]) == ["coverage"]
+    two = moved(coverage=(1, 0.7 + 1e-3))
+    two.loc[2, "coverage"] = 0.9 - 1e-3
+    assert len(shipped.differences(two, ref)) == 2
     with pytest.raises(ValueError, match="other segments"):
         shipped.differences(ref.iloc[:2], ref)
