@@ -445,7 +445,7 @@ def test_a_reproduction_may_move_threshold_metrics_by_a_few_points_and_coverages
     assert shipped.differences(ok, ref).empty
     # rows made before the counts were kept: the counts of the other side
     assert shipped.differences(ok, ref.drop(columns=["holes_true_n", "holes_n"])).empty
-    for col, (k, v) in {"coverage": (0, 0.5 + 2e-6), "holes_recall_1mm": (0, 0.5 + 4 / 1000),
+    for col, (k, v) in {"coverage": (0, 0.5 + 3e-3), "holes_recall_1mm": (0, 0.5 + 4 / 1000),
                         "holes_precision_1mm": (0, 0.5 + 0.4), "holes_n": (1, 204),
                         "holes_recall_1mm ": (2, 0.0)}.items():
         diff = shipped.differences(moved(**{col.strip(): (k, v)}), ref)
