@@ -37,12 +37,59 @@ MIN_GROUP = 30
 SHORT_SHARE = 0.9
 #: Suffix of a model's calibration file.
 SUFFIX = ".intervals.json"
+#: The features of an estimate its interval is scaled by, per scaled scheme (:func:`features`; decision record 0156).
+SCALE_FEATURES = {
+    "scaled": ("one", "estimate", "length", "span_ratio", "no_rim", "one_rim", "doubtful"),
+    "scaled+": ("one", "estimate", "length", "span_ratio", "no_rim", "one_rim", "doubtful", "unwrap_gap",
+                "unwrap_gap_abs", "threshold_gap", "largest_hole", "aspect", "log_density", "roughness"),
+}
+#: Added to ``|true - estimated|`` before its log is fitted: a floor of the scale (fractions).
+SCALE_FLOOR = 0.005
+
+
+def features(coverage: float, signals: dict, names) -> np.ndarray:
+    """The features ``names`` (:data:`SCALE_FEATURES`) of an estimate, from its coverage and its signals
+    (:func:`colonbench.completion.method.from_heatmap` and :func:`sureness_signals`); a signal the estimate lacks
+    counts 0.
+
+    ``estimate``: the coverage; ``length``: the line between the planes / 60 mm; ``span_ratio``: the span between
+    the planes / that line; ``no_rim``, ``one_rim``: how many cut rims were found; ``doubtful``: a doubtful rim;
+    ``unwrap_gap`` (``_abs``): the coverage minus the unwrapping coverage of the cloud around the method's line;
+    ``threshold_gap``: minus the thresholding coverage of the same prediction; ``largest_hole``: the area share of
+    the largest patch of hole faces; ``aspect``: the tube's diameter / the line's length; ``log_density``: the log of
+    the cloud's points/mm^2; ``roughness``: its points' rms distance from their neighbours' plane, mm."""
+    g = lambda k: float(signals.get(k, 0.0) or 0.0)          # noqa: E731
+    length = g("length_mm")
+    rims = int(g("rims"))
+    value = {"one": 1.0, "estimate": float(coverage), "length": length / 60.0,
+             "span_ratio": g("span_mm") / max(length, 1.0), "no_rim": float(rims == 0), "one_rim": float(rims == 1),
+             "doubtful": float(g("rims_doubtful") > 0),
+             "unwrap_gap": float(coverage) - g("unwrap_coverage") if "unwrap_coverage" in signals else 0.0,
+             "threshold_gap": float(coverage) - g("threshold_coverage") if "threshold_coverage" in signals else 0.0,
+             "largest_hole": g("largest_hole"), "aspect": 2.0 * g("radius_mm") / max(length, 1.0),
+             "log_density": float(np.log(max(g("density"), 1e-3))), "roughness": g("roughness_mm")}
+    value["unwrap_gap_abs"] = abs(value["unwrap_gap"])
+    out = np.array([value[n] for n in names], float)
+    return np.where(np.isfinite(out), out, 0.0)
+
+
+def _scaled(scheme: str) -> str | None:
+    """The scaled factor of a scheme (``scaled`` or ``scaled+``), or None."""
+    last = scheme.split("+", 1)[-1] if scheme.startswith("length+") else scheme
+    return last if last in SCALE_FEATURES else None
+
+
+def _groups_of(scheme: str) -> str:
+    """The scheme whose groups a scaled scheme is fitted within (``marginal`` or ``length``)."""
+    return "length" if scheme.startswith("length+") else "marginal"
 
 
 def group_key(coverage: float, signals: dict, scheme: str) -> str:
     """The calibration group of an estimate under a scheme: ``all``, or its factors joined by ``,``:
     ``rims=<k>`` (cut rims found), ``length<<L>`` (the line between the planes shorter than ``L`` mm of
     :data:`LENGTHS_MM`, or ``length>=<last>``) and ``below=<b>`` (the estimate's band of :data:`BANDS`)."""
+    if _scaled(scheme):
+        scheme = _groups_of(scheme)
     if scheme == "marginal":
         return "all"
     parts = []
@@ -102,19 +149,26 @@ class Intervals:
 
     def quantiles(self, coverage: float, signals: dict) -> tuple[float, float]:
         """The residual quantiles of an estimate's group (the coarser scheme's group where its own had too few
-        calibration segments)."""
+        calibration segments), times the estimate's scale in a scaled scheme."""
         if signals.get("extent") == "known" and self.known:
-            return self.known["low"], self.known["high"]
+            return _scale(self.known, coverage, signals)
         for scheme in (self.scheme, self.scheme.split("+")[0], "marginal"):
             g = self.groups.get(group_key(coverage, signals, scheme))
             if g is not None:
-                return g["low"], g["high"]
+                return _scale(g, coverage, signals)
         return -1.0, 1.0
 
     def interval(self, coverage: float, signals: dict) -> tuple[float, float]:
         """The interval (fractions, clipped to [0, 1]) around an estimate with these signals."""
         low, high = self.quantiles(coverage, signals)
         return float(np.clip(coverage + low, 0, 1)), float(np.clip(coverage + high, 0, 1))
+
+    def scale(self, coverage: float, signals: dict) -> float:
+        """The scale of an estimate's interval (1 in a scheme that is not scaled)."""
+        g = self.known if signals.get("extent") == "known" and self.known else next(
+            (self.groups[k] for k in (group_key(coverage, signals, sch) for sch in (self.scheme, "marginal"))
+             if k in self.groups), {})
+        return _scale_of(g, coverage, signals)
 
     def apply(self, est) -> None:
         """Set an :class:`~colonbench.estimate.Estimate`'s ``coverage_interval``, ``interval_level`` and ``review``
@@ -134,6 +188,30 @@ class Intervals:
 
     def to_json(self) -> dict:
         return asdict(self)
+
+
+def _scale_of(group: dict, coverage: float, signals: dict) -> float:
+    """``exp(w . f)`` of a scaled group (its ``weights`` over its ``features``), else 1."""
+    if "weights" not in group:
+        return 1.0
+    return float(np.exp(np.clip(features(coverage, signals, group["features"]) @ np.asarray(group["weights"]), -20, 5)))
+
+
+def _scale(group: dict, coverage: float, signals: dict) -> tuple[float, float]:
+    s = _scale_of(group, coverage, signals)
+    return group["low"] * s, group["high"] * s
+
+
+def _fit_group(residual: np.ndarray, x: np.ndarray | None, names, level: float) -> dict:
+    """A group's quantiles, of the residuals or (``x``: its features) of the residuals over their fitted scale."""
+    if x is None:
+        low, high = conformal_quantiles(residual, level)
+        return {"low": low, "high": high, "n": int(len(residual))}
+    w, *_ = np.linalg.lstsq(x, np.log(np.abs(residual) + SCALE_FLOOR), rcond=None)
+    s = np.exp(np.clip(x @ w, -20, 5))
+    low, high = conformal_quantiles(residual / s, level)
+    return {"low": low, "high": high, "n": int(len(residual)), "features": list(names),
+            "weights": [float(v) for v in w]}
 
 
 def known_length(est, length_mm: float) -> None:
@@ -158,22 +236,27 @@ def fit(true, estimated, signals: list, scheme: str, review_width: float, level:
     add :attr:`Intervals.known` with :func:`fit_known`."""
     true, estimated = np.asarray(true, float), np.asarray(estimated, float)
     residual = true - estimated
+    scaled = _scaled(scheme)
+    names = SCALE_FEATURES[scaled] if scaled else ()
+    x = np.array([features(c, sig, names) for c, sig in zip(estimated, signals)]) if scaled else None
     groups = {}
     for sch in dict.fromkeys(("marginal", scheme.split("+")[0], scheme)):
         keys = np.array([group_key(c, sig, sch) for c, sig in zip(estimated, signals)])
         for key in np.unique(keys):
             sel = keys == key
-            if sel.sum() >= MIN_GROUP:
-                low, high = conformal_quantiles(residual[sel], level)
-                groups[str(key)] = {"low": low, "high": high, "n": int(sel.sum())}
+            if sel.sum() >= MIN_GROUP and str(key) not in groups:
+                groups[str(key)] = _fit_group(residual[sel], x[sel] if scaled else None, names, level)
     return Intervals(scheme, level, groups, review_width, dict(source or {}))
 
 
-def fit_known(cal: Intervals, true, estimated) -> None:
-    """Calibrate :attr:`Intervals.known` on segments estimated with their lengths known (:func:`known_length`)."""
+def fit_known(cal: Intervals, true, estimated, signals: list | None = None) -> None:
+    """Calibrate :attr:`Intervals.known` on segments estimated with their lengths known (:func:`known_length`),
+    scaled as the calibration's scheme is (``signals``: the estimates' signals, needed then)."""
     residual = np.asarray(true, float) - np.asarray(estimated, float)
-    low, high = conformal_quantiles(residual, cal.level)
-    cal.known = {"low": low, "high": high, "n": int(len(residual))}
+    scaled = _scaled(cal.scheme)
+    names = SCALE_FEATURES[scaled] if scaled else ()
+    x = np.array([features(c, sig, names) for c, sig in zip(estimated, signals)]) if scaled else None
+    cal.known = _fit_group(residual, x, names, cal.level)
 
 
 def path_for(model: Path) -> Path:

@@ -233,3 +233,32 @@ def test_several_datasets_train_together(smoke_dataset, tmp_path):
     generate(tmp_path / "c.yaml", tmp_path / "c", workers=1, progress=False)
     with pytest.raises(InputError, match="need the same grid"):
         train([out, tmp_path / "c"], tmp_path / "run-c", cfg, device="cpu", progress=False)
+
+
+def test_the_hole_weighted_loss_weighs_only_the_missing_wall():
+    """train_step's loss with --hole-weight A: the squared error counts 1 + A times on voxels of the complete surface
+    the input holds no point near, once elsewhere; a network whose output is a constant gives it in closed form."""
+    import torch
+
+    from colonbench.completion.train import HOLE_INPUT, HOLE_TARGET, train_step
+
+    class Constant(torch.nn.Module):
+        def __init__(self):
+            super().__init__()
+            self.c = torch.nn.Parameter(torch.tensor(0.5))
+
+        def forward(self, x):
+            return self.c.expand_as(x[:, :1]).clone()
+
+    y = torch.full((1, 1, 4, 4, 4), 0.6)
+    x = torch.zeros(1, 1, 4, 4, 4)
+    y[0, 0, 0, :, :] = 0.0                    # a wall of 16 voxels on the complete surface ...
+    x[0, 0, 0, :2, :] = 0.9                   # ... 8 of them far from every partial point: the missing wall
+    assert HOLE_TARGET > 0.0 and HOLE_INPUT < 0.9
+    for weight in (0.0, 3.0):
+        net = Constant()
+        loss = train_step(net, torch.optim.SGD(net.parameters(), lr=0.0), x, y, hole_weight=weight)
+        expected = (48 * 0.1 ** 2 + 8 * 0.5 ** 2 + 8 * (1 + weight) * 0.5 ** 2) / 64
+        assert float(loss) == pytest.approx(expected, rel=1e-6)
+    with pytest.raises(InputError, match="hole_weight"):
+        TrainConfig(hole_weight=-1.0).check()

@@ -22,7 +22,7 @@ def cmd_train(args):
     cfg = TrainConfig(network=args.network, batch_size=args.batch_size, lr=args.lr, epochs=args.epochs,
                       augment_prob=args.augment_prob, seed=args.seed, workers=args.workers, flips=args.flips,
                       transposes=args.transposes, erase=args.erase, repeat=tuple(args.repeat or ()),
-                      precision=args.precision,
+                      precision=args.precision, hole_weight=args.hole_weight,
                       checkpoint_minutes=args.checkpoint_minutes, max_minutes=args.max_minutes,
                       keep_epochs=args.keep_epochs, init=args.init, init_sha256=model_sha256(args.init))
     command = "colonbench train " + " ".join(sys.argv[2:]) if len(sys.argv) > 2 else ""
@@ -142,6 +142,10 @@ def add_parsers(sub) -> None:
                    help="share of the training samples (of a pack, or of format-2 shards with --augment-prob 0) "
                         "whose partial surface loses 1-3 ball-shaped patches before its input heatmap is made: "
                         "larger holes to complete (default 0)")
+    p.add_argument("--hole-weight", type=finite, default=0.0, metavar="A",
+                   help="each voxel's squared error counts 1 + A times where the complete surface lies and the input "
+                        "has no partial point within 2 voxels: the missing wall weighs more in the loss (default 0, "
+                        "the paper's plain L2)")
     p.add_argument("--repeat", type=repeats, default=None, metavar="N,N,...",
                    help="times each dataset's training samples come up per epoch, one whole number per dataset in "
                         "the order given (default 1 each): e.g. 1,8 gives a small real-colon set eight times its "
@@ -174,6 +178,10 @@ def add_parsers(sub) -> None:
     p.add_argument("--bn-data", nargs="+", required=True, metavar="PACK",
                    help="packs (colonbench pack) whose training samples recompute the batch-norm statistics: those "
                         "the models trained on")
+    p.add_argument("--hole-weight", type=finite, default=0.0, metavar="A",
+                   help="each voxel's squared error counts 1 + A times where the complete surface lies and the input "
+                        "has no partial point within 2 voxels: the missing wall weighs more in the loss (default 0, "
+                        "the paper's plain L2)")
     p.add_argument("--repeat", type=repeats, default=None, metavar="N,N,...",
                    help="weights of the packs' samples, as colonbench train --repeat (default 1 each)")
     p.add_argument("--bn-samples", type=positive(int), default=1000,
