@@ -35,7 +35,7 @@ import numpy as np
 import pandas as pd
 
 from colonbench import seeding
-from colonbench.benchmark.exchange import sample_id
+from colonbench.benchmark.exchange import sample_id, with_sample_ids
 from colonbench.benchmark.metrics import COUNT_COLUMNS, THRESHOLDS_MM, point_counts, segment_metrics
 from colonbench.benchmark.parallel import run_units
 from colonbench.benchmark.registry import load_method
@@ -56,8 +56,8 @@ ID_COLUMNS = ["method", "shard", "index", "colon_id", "length_mm", "hole_model",
 
 def result_columns() -> list[str]:
     """Columns of a per-segment results CSV (the point counts after the metrics: rows made before version 1.1
-    have none)."""
-    return ID_COLUMNS + metric_columns() + list(COUNT_COLUMNS) + ["seconds", "error"]
+    have none; ``sample_id`` last, the id of the input, filled in on reading rows made before it was kept)."""
+    return ID_COLUMNS + metric_columns() + list(COUNT_COLUMNS) + ["seconds", "error", "sample_id"]
 
 
 # ---------------------------------------------------------------------------------------------- the data
@@ -188,19 +188,22 @@ def run_unit(data: str, shard_name: str, indices: list[int], sigma: float, noise
             geo = shard.geometry(i)
             truth = _truth(shard, i, geo, needs_heatmap)
             pts = noisy(geo["partial_points"], sigma, noise_seed, shard_name, i)
+            sid = sample_id(shard_name, i, sigma)
             base = {"shard": shard_name, "index": int(i), "colon_id": geo["colon_id"],
                     "length_mm": geo["length_mm"], "hole_model": geo["hole_model"], "noise_mm": float(sigma),
-                    "true_coverage": geo["coverage"]}
+                    "true_coverage": geo["coverage"], "sample_id": sid}
             for m in chosen:
                 row = {"method": m.name, **base}
                 try:
-                    est, seconds = _one(m, pts, truth, sample_id(shard_name, i, sigma))
+                    est, seconds = _one(m, pts, truth, sid)
                 except Exception as exc:  # noqa: BLE001 - recorded in the row and counted in the tables
                     msg = str(exc) if isinstance(exc, ColonbenchError) else f"{type(exc).__name__}: {exc}"
                     row.update({"coverage": np.nan, "coverage_error": np.nan, "interval_low": np.nan,
                                 "interval_high": np.nan, "seconds": np.nan,
-                                "error": msg.replace("\n", " ")[:500]})
+                                "error": msg.replace("\n", " ")[:1000]})
                     row.update({c: np.nan for c in (*metric_columns(), *COUNT_COLUMNS)})
+                    # the truth's side is known: a failure's precision / recall is scored where it has points
+                    row.update({k: v for k, v in point_counts((), (), truth).items() if k.endswith("_true_n")})
                 else:
                     metrics = segment_metrics(est.coverage, est.holes, est.centerline, truth)
                     low, high = est.coverage_interval if est.coverage_interval is not None else (np.nan, np.nan)
@@ -222,7 +225,7 @@ def _unit_key(shard_name: str, sigma: float) -> str:
 
 
 def _finalize(out: Path, run: dict, name: str, keys: list[str]) -> Path:
-    df = pd.concat([read_rows(out / "parts" / name / f"{k}.csv") for k in keys], ignore_index=True)
+    df = with_sample_ids(pd.concat([read_rows(out / "parts" / name / f"{k}.csv") for k in keys], ignore_index=True))
     write_csv(out / "results" / f"{name}.csv", df)
     rec = run["methods"][name]
     summary = {"method": name, **rec, "data": run["data"], "suite": run.get("suite"), "noise_mm": run["noise_mm"],
@@ -434,7 +437,7 @@ def load_results(run_dir) -> tuple[dict, pd.DataFrame]:
         csv = run_dir / "results" / f"{name}.csv"
         if not csv.is_file():
             raise InputError(f"{run_dir}: method {name!r} is not finished; rerun colonbench evaluate into it")
-        df = read_rows(csv)
+        df = with_sample_ids(read_rows(csv))
         expected = run["data"]["samples"] * len(run["noise_mm"])
         if len(df) != expected:
             raise InputError(f"{csv}: {len(df)} rows, the run needs {expected}; rerun colonbench evaluate into it")

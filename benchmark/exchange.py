@@ -43,6 +43,17 @@ def sample_id(shard_name: str, index: int, sigma: float) -> str:
     return f"{stem}_{int(index):03d}_noise{float(sigma):g}"
 
 
+def with_sample_ids(rows):
+    """Per-segment results rows with their ``sample_id`` column (:func:`sample_id` of ``shard``, ``index`` and
+    ``noise_mm``) filled in where it is missing or empty: rows made before the column existed get it too."""
+    if "sample_id" in rows.columns and rows["sample_id"].notna().all():
+        return rows
+    ids = [sample_id(s, i, n) for s, i, n in zip(rows["shard"], rows["index"], rows["noise_mm"])]
+    if "sample_id" not in rows.columns:
+        return rows.assign(sample_id=ids)
+    return rows.assign(sample_id=rows["sample_id"].where(rows["sample_id"].notna(), ids))
+
+
 def segment_id(sample: str, segment: int) -> str:
     """The id of segment ``segment`` of a whole-colon map of sample ``sample`` (``<sample>_seg<k>``)."""
     return f"{sample}_seg{int(segment):03d}"
