@@ -8,6 +8,7 @@ A run folder holds::
     results/<method>.csv        every per-segment row of a method, once all its parts exist
     results/<method>.json       its summary (colonbench.benchmark.summary) with the run's settings
     examples/<method>/*.npz     a few segments' completed meshes, for the Fig. 5 triplets
+    predictions/<method>/       an exec: program's answers; logs/<method>/ its calls' output
 
 One unit of work is one shard at one noise level. Each worker process loads
 the methods once; for every segment of a unit the noise is drawn once
@@ -15,11 +16,13 @@ the methods once; for every segment of a unit the noise is drawn once
 every method and every rerun sees the same noisy cloud), and methods built on
 the network share its prediction (:func:`colonbench.completion.method.shared_predictor`).
 A method that raises on a segment gets a row with the error and NaN metrics;
-the leaderboard counts these rows, it never drops them.
+the leaderboard counts these rows and scores them as failures
+(:func:`colonbench.benchmark.summary.scored_errors`), it never drops them.
 
-A rerun with the same data, noise and methods finishes what is missing. A
-rerun with more methods adds them to the run; a method whose version changed
-is refused (start a new run folder).
+A rerun with the same data, noise and methods finishes what is missing; with
+``retry_failed`` it also evaluates again the segments whose rows hold an
+error. A rerun with more methods adds them to the run; a method whose version
+changed is refused (start a new run folder).
 """
 
 from __future__ import annotations
@@ -286,7 +289,7 @@ def suite_of(identity: dict, sigmas, noise_seed: int, task: str, data, allow_unv
 def evaluate(data, methods, out, noise=(0.0, 0.5), split: str = "test", limit: int | None = None,
              workers: int = 1, model=None, device: str = "cpu", examples: int = 3, noise_seed: int = 0,
              progress: bool = True, scheduler=None, allow_unverified: bool = False, timeout: float | None = None,
-             batch: int | None = None, tta: int = 1) -> Path:
+             batch: int | None = None, tta: int = 1, retry_failed: bool = False) -> Path:
     """Evaluate methods on a dataset split; write (or finish) a run folder.
 
     Parameters
@@ -324,6 +327,9 @@ def evaluate(data, methods, out, noise=(0.0, 0.5), split: str = "test", limit: i
     tta : int
         Passed to the methods on the network that take it: their prediction averaged over this many symmetries
         of the grid (:mod:`colonbench.completion.symmetry`; default 1, the network once).
+    retry_failed : bool
+        Evaluate again, in the same run folder, the segments whose rows hold an error (an ``exec:`` program's
+        answers and notes on them are removed first, so that it runs on them again); the other rows are kept.
 
     Returns
     -------
@@ -349,7 +355,7 @@ def evaluate(data, methods, out, noise=(0.0, 0.5), split: str = "test", limit: i
     with folder_lock(out, "evaluate", "evaluation"):
         run = begin_run(out, settings, loaded, data)
         return _run(out, run, data, picks, sigmas, loaded, options, workers, examples, noise_seed, progress, t0,
-                    scheduler)
+                    scheduler, retry_failed)
 
 
 def _run_programs(out, data, units, loaded, noise_seed, workers, progress) -> None:
@@ -376,8 +382,30 @@ def _run_programs(out, data, units, loaded, noise_seed, workers, progress) -> No
                 m.run(items, workers=workers, progress=bar.update)
 
 
+def _retry_units(out: Path, picks, sigmas, loaded) -> list:
+    """Units of the failed segments of a run's finished parts, one per part with failures: ``(shard, failed
+    indices, sigma, [method], [], key)``; an ``exec:`` method forgets its answers on them, so that it runs again."""
+    from colonbench.benchmark.external import ExecMethod
+
+    units = []
+    for shard_name, _ in picks:
+        for s in sigmas:
+            key = _unit_key(shard_name, s)
+            for name, (_, m) in loaded.items():
+                part = out / "parts" / name / f"{key}.csv"
+                if not part.exists():
+                    continue
+                rows = read_rows(part)
+                again = [int(i) for i in rows.loc[rows["error"] != "", "index"]]
+                if again:
+                    units.append((shard_name, again, s, [name], [], key))
+                    if isinstance(m, ExecMethod):
+                        m.forget(sample_id(shard_name, i, s) for i in again)
+    return units
+
+
 def _run(out, run, data, picks, sigmas, loaded, options, workers, examples, noise_seed, progress, t0,
-         scheduler=None) -> Path:
+         scheduler=None, retry_failed: bool = False) -> Path:
     flat = [(n, i) for n, idx in picks for i in idx]
     ex_keys = {flat[k] for k in np.unique(np.linspace(0, len(flat) - 1, examples).astype(int))} if examples else set()
     units, keys = [], []
@@ -389,6 +417,8 @@ def _run(out, run, data, picks, sigmas, loaded, options, workers, examples, nois
             if todo:
                 ex = [i for i in idx if (shard_name, i) in ex_keys]
                 units.append((shard_name, idx, s, todo, ex, key))
+    if retry_failed:
+        units += _retry_units(out, picks, sigmas, loaded)
     _run_programs(out, data, units, loaded, noise_seed, workers, progress)
     from tqdm.auto import tqdm
 
@@ -401,7 +431,12 @@ def _run(out, run, data, picks, sigmas, loaded, options, workers, examples, nois
             bar.update(len(u[1]))
     finally:
         bar.close()
-    for name in loaded:
+    from colonbench.benchmark.external import ExecMethod
+
+    for name, (_, m) in loaded.items():
+        if isinstance(m, ExecMethod):   # where its seconds come from (docs/formats.md)
+            run["methods"][name]["seconds_from"] = m.seconds_from(
+                sample_id(n, i, s) for n, idx in picks for i in idx for s in sigmas)
         _finalize(out, run, name, keys)
     wall = time.perf_counter() - t0
     peak = max(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss,
@@ -415,9 +450,17 @@ def _run(out, run, data, picks, sigmas, loaded, options, workers, examples, nois
 
 
 def _store(out: Path, unit, rows: dict):
+    """Write a unit's rows into its parts; into a part that exists (a retry of its failed segments), in place of
+    the rows of the same samples."""
     key = unit[5]
     for name, r in rows.items():
-        write_csv(out / "parts" / name / f"{key}.csv", r, result_columns())
+        path = out / "parts" / name / f"{key}.csv"
+        new = pd.DataFrame(r, columns=result_columns())
+        if path.exists():
+            old = read_rows(path)
+            new = pd.concat([old[~old["index"].isin(new["index"])], new], ignore_index=True)
+            new = new.sort_values("index", kind="stable").reset_index(drop=True)
+        write_csv(path, new.reindex(columns=result_columns()))
 
 
 def load_results(run_dir) -> tuple[dict, pd.DataFrame]:
