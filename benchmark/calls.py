@@ -55,6 +55,10 @@ class Call:
         Wall time from its start to its end.
     why : str
         "" when it ran to its end, else why not.
+    started : bool
+        Whether the program started at all.
+    answered : set of str
+        The inputs it had answered when last looked at.
     """
 
     name: str
@@ -64,6 +68,7 @@ class Call:
     status: int | None = None
     seconds: float = 0.0
     why: str = ""
+    started: bool = True
     answered: set = field(default_factory=set)
 
     @property
@@ -125,7 +130,7 @@ def run_call(argv: list[str], sids: list[str], folder: Path, logs: Path, limit: 
         try:
             proc = subprocess.Popen(argv, stdout=out, stderr=err, start_new_session=True)
         except OSError as exc:
-            call.why = f"the program could not start: {exc.strerror or exc}: {argv[0]}"
+            call.why, call.started = f"the program could not start: {exc.strerror or exc}: {argv[0]}", False
             err.write(call.why.encode() + b"\n")
         else:
             while True:
@@ -209,7 +214,7 @@ def unanswered_message(call: Call, sid: str, answered: int, named: list[str], fi
     tail = _tail(call)
     ends = f"; it ends: {tail}" if tail else ""
     what = f"the program's {call.name} ({len(call.sids)} inputs, {answered} answered)"
-    if call.why and call.status is None and "could not start" in call.why:
+    if not call.started:
         return call.why
     if call.why:
         return f"{call.why} ({call.name}, {answered} answered) before it answered {sid}; {where}"
