@@ -8,6 +8,7 @@ A run folder holds::
     results/<method>.csv        every per-segment row of a method, once all its parts exist
     results/<method>.json       its summary (colonbench.benchmark.summary) with the run's settings
     examples/<method>/*.npz     a few segments' completed meshes, for the Fig. 5 triplets
+    predictions/<method>/       an exec: program's answers; logs/<method>/ its calls' output
 
 One unit of work is one shard at one noise level. Each worker process loads
 the methods once; for every segment of a unit the noise is drawn once
@@ -15,11 +16,13 @@ the methods once; for every segment of a unit the noise is drawn once
 every method and every rerun sees the same noisy cloud), and methods built on
 the network share its prediction (:func:`colonbench.completion.method.shared_predictor`).
 A method that raises on a segment gets a row with the error and NaN metrics;
-the leaderboard counts these rows, it never drops them.
+the leaderboard counts these rows and scores them as failures
+(:func:`colonbench.benchmark.summary.scored_errors`), it never drops them.
 
-A rerun with the same data, noise and methods finishes what is missing. A
-rerun with more methods adds them to the run; a method whose version changed
-is refused (start a new run folder).
+A rerun with the same data, noise and methods finishes what is missing; with
+``retry_failed`` it also evaluates again the segments whose rows hold an
+error. A rerun with more methods adds them to the run; a method whose version
+changed is refused (start a new run folder).
 """
 
 from __future__ import annotations
@@ -35,7 +38,7 @@ import numpy as np
 import pandas as pd
 
 from colonbench import seeding
-from colonbench.benchmark.exchange import sample_id
+from colonbench.benchmark.exchange import sample_id, with_sample_ids
 from colonbench.benchmark.metrics import COUNT_COLUMNS, THRESHOLDS_MM, point_counts, segment_metrics
 from colonbench.benchmark.parallel import run_units
 from colonbench.benchmark.registry import load_method
@@ -56,8 +59,8 @@ ID_COLUMNS = ["method", "shard", "index", "colon_id", "length_mm", "hole_model",
 
 def result_columns() -> list[str]:
     """Columns of a per-segment results CSV (the point counts after the metrics: rows made before version 1.1
-    have none)."""
-    return ID_COLUMNS + metric_columns() + list(COUNT_COLUMNS) + ["seconds", "error"]
+    have none; ``sample_id`` last, the id of the input, filled in on reading rows made before it was kept)."""
+    return ID_COLUMNS + metric_columns() + list(COUNT_COLUMNS) + ["seconds", "error", "sample_id"]
 
 
 # ---------------------------------------------------------------------------------------------- the data
@@ -188,19 +191,22 @@ def run_unit(data: str, shard_name: str, indices: list[int], sigma: float, noise
             geo = shard.geometry(i)
             truth = _truth(shard, i, geo, needs_heatmap)
             pts = noisy(geo["partial_points"], sigma, noise_seed, shard_name, i)
+            sid = sample_id(shard_name, i, sigma)
             base = {"shard": shard_name, "index": int(i), "colon_id": geo["colon_id"],
                     "length_mm": geo["length_mm"], "hole_model": geo["hole_model"], "noise_mm": float(sigma),
-                    "true_coverage": geo["coverage"]}
+                    "true_coverage": geo["coverage"], "sample_id": sid}
             for m in chosen:
                 row = {"method": m.name, **base}
                 try:
-                    est, seconds = _one(m, pts, truth, sample_id(shard_name, i, sigma))
+                    est, seconds = _one(m, pts, truth, sid)
                 except Exception as exc:  # noqa: BLE001 - recorded in the row and counted in the tables
                     msg = str(exc) if isinstance(exc, ColonbenchError) else f"{type(exc).__name__}: {exc}"
                     row.update({"coverage": np.nan, "coverage_error": np.nan, "interval_low": np.nan,
                                 "interval_high": np.nan, "seconds": np.nan,
-                                "error": msg.replace("\n", " ")[:500]})
+                                "error": msg.replace("\n", " ")[:1000]})
                     row.update({c: np.nan for c in (*metric_columns(), *COUNT_COLUMNS)})
+                    # the truth's side is known: a failure's precision / recall is scored where it has points
+                    row.update({k: v for k, v in point_counts((), (), truth).items() if k.endswith("_true_n")})
                 else:
                     metrics = segment_metrics(est.coverage, est.holes, est.centerline, truth)
                     low, high = est.coverage_interval if est.coverage_interval is not None else (np.nan, np.nan)
@@ -222,7 +228,7 @@ def _unit_key(shard_name: str, sigma: float) -> str:
 
 
 def _finalize(out: Path, run: dict, name: str, keys: list[str]) -> Path:
-    df = pd.concat([read_rows(out / "parts" / name / f"{k}.csv") for k in keys], ignore_index=True)
+    df = with_sample_ids(pd.concat([read_rows(out / "parts" / name / f"{k}.csv") for k in keys], ignore_index=True))
     write_csv(out / "results" / f"{name}.csv", df)
     rec = run["methods"][name]
     summary = {"method": name, **rec, "data": run["data"], "suite": run.get("suite"), "noise_mm": run["noise_mm"],
@@ -283,7 +289,7 @@ def suite_of(identity: dict, sigmas, noise_seed: int, task: str, data, allow_unv
 def evaluate(data, methods, out, noise=(0.0, 0.5), split: str = "test", limit: int | None = None,
              workers: int = 1, model=None, device: str = "cpu", examples: int = 3, noise_seed: int = 0,
              progress: bool = True, scheduler=None, allow_unverified: bool = False, timeout: float | None = None,
-             batch: int | None = None, tta: int = 1) -> Path:
+             batch: int | None = None, tta: int = 1, retry_failed: bool = False) -> Path:
     """Evaluate methods on a dataset split; write (or finish) a run folder.
 
     Parameters
@@ -321,6 +327,9 @@ def evaluate(data, methods, out, noise=(0.0, 0.5), split: str = "test", limit: i
     tta : int
         Passed to the methods on the network that take it: their prediction averaged over this many symmetries
         of the grid (:mod:`colonbench.completion.symmetry`; default 1, the network once).
+    retry_failed : bool
+        Evaluate again, in the same run folder, the segments whose rows hold an error (an ``exec:`` program's
+        answers and notes on them are removed first, so that it runs on them again); the other rows are kept.
 
     Returns
     -------
@@ -346,7 +355,7 @@ def evaluate(data, methods, out, noise=(0.0, 0.5), split: str = "test", limit: i
     with folder_lock(out, "evaluate", "evaluation"):
         run = begin_run(out, settings, loaded, data)
         return _run(out, run, data, picks, sigmas, loaded, options, workers, examples, noise_seed, progress, t0,
-                    scheduler)
+                    scheduler, retry_failed)
 
 
 def _run_programs(out, data, units, loaded, noise_seed, workers, progress) -> None:
@@ -373,8 +382,30 @@ def _run_programs(out, data, units, loaded, noise_seed, workers, progress) -> No
                 m.run(items, workers=workers, progress=bar.update)
 
 
+def _retry_units(out: Path, picks, sigmas, loaded) -> list:
+    """Units of the failed segments of a run's finished parts, one per part with failures: ``(shard, failed
+    indices, sigma, [method], [], key)``; an ``exec:`` method forgets its answers on them, so that it runs again."""
+    from colonbench.benchmark.external import ExecMethod
+
+    units = []
+    for shard_name, _ in picks:
+        for s in sigmas:
+            key = _unit_key(shard_name, s)
+            for name, (_, m) in loaded.items():
+                part = out / "parts" / name / f"{key}.csv"
+                if not part.exists():
+                    continue
+                rows = read_rows(part)
+                again = [int(i) for i in rows.loc[rows["error"] != "", "index"]]
+                if again:
+                    units.append((shard_name, again, s, [name], [], key))
+                    if isinstance(m, ExecMethod):
+                        m.forget(sample_id(shard_name, i, s) for i in again)
+    return units
+
+
 def _run(out, run, data, picks, sigmas, loaded, options, workers, examples, noise_seed, progress, t0,
-         scheduler=None) -> Path:
+         scheduler=None, retry_failed: bool = False) -> Path:
     flat = [(n, i) for n, idx in picks for i in idx]
     ex_keys = {flat[k] for k in np.unique(np.linspace(0, len(flat) - 1, examples).astype(int))} if examples else set()
     units, keys = [], []
@@ -386,6 +417,8 @@ def _run(out, run, data, picks, sigmas, loaded, options, workers, examples, nois
             if todo:
                 ex = [i for i in idx if (shard_name, i) in ex_keys]
                 units.append((shard_name, idx, s, todo, ex, key))
+    if retry_failed:
+        units += _retry_units(out, picks, sigmas, loaded)
     _run_programs(out, data, units, loaded, noise_seed, workers, progress)
     from tqdm.auto import tqdm
 
@@ -398,7 +431,12 @@ def _run(out, run, data, picks, sigmas, loaded, options, workers, examples, nois
             bar.update(len(u[1]))
     finally:
         bar.close()
-    for name in loaded:
+    from colonbench.benchmark.external import ExecMethod
+
+    for name, (_, m) in loaded.items():
+        if isinstance(m, ExecMethod):   # where its seconds come from (docs/formats.md)
+            run["methods"][name]["seconds_from"] = m.seconds_from(
+                sample_id(n, i, s) for n, idx in picks for i in idx for s in sigmas)
         _finalize(out, run, name, keys)
     wall = time.perf_counter() - t0
     peak = max(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss,
@@ -412,9 +450,17 @@ def _run(out, run, data, picks, sigmas, loaded, options, workers, examples, nois
 
 
 def _store(out: Path, unit, rows: dict):
+    """Write a unit's rows into its parts; into a part that exists (a retry of its failed segments), in place of
+    the rows of the same samples."""
     key = unit[5]
     for name, r in rows.items():
-        write_csv(out / "parts" / name / f"{key}.csv", r, result_columns())
+        path = out / "parts" / name / f"{key}.csv"
+        new = pd.DataFrame(r, columns=result_columns())
+        if path.exists():
+            old = read_rows(path)
+            new = pd.concat([old[~old["index"].isin(new["index"])], new], ignore_index=True)
+            new = new.sort_values("index", kind="stable").reset_index(drop=True)
+        write_csv(path, new.reindex(columns=result_columns()))
 
 
 def load_results(run_dir) -> tuple[dict, pd.DataFrame]:
@@ -434,7 +480,7 @@ def load_results(run_dir) -> tuple[dict, pd.DataFrame]:
         csv = run_dir / "results" / f"{name}.csv"
         if not csv.is_file():
             raise InputError(f"{run_dir}: method {name!r} is not finished; rerun colonbench evaluate into it")
-        df = read_rows(csv)
+        df = with_sample_ids(read_rows(csv))
         expected = run["data"]["samples"] * len(run["noise_mm"])
         if len(df) != expected:
             raise InputError(f"{csv}: {len(df)} rows, the run needs {expected}; rerun colonbench evaluate into it")

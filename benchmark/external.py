@@ -6,8 +6,10 @@ for each evaluated cloud (``colonbench export`` writes the inputs,
 (:class:`ExecMethod`) runs the program exactly as ``colonbench estimate`` is
 called, ``PROGRAM ARGS FILE... --out-dir DIR``, on batches of input PLYs named
 by sample id, and then reads its predictions the same way. A missing or
-malformed prediction, a crash or a timeout is that segment's failure in the
-results (its message says which), never the run's.
+malformed prediction, the program's own failure (``<sample_id>.error`` or an
+``error`` key), a crash or a timeout is that segment's failure in the results
+(its message says which, :mod:`colonbench.benchmark.calls`), never the run's.
+Each call's standard output and error are kept in ``<run>/logs/<method>/``.
 
 Both are matched to the clouds they answer by sample id; in a whole-colon map,
 where the benchmark cuts the segments itself, a segment's cloud is matched by
@@ -17,25 +19,23 @@ its content (:func:`content_key`) to the id it was written under.
 from __future__ import annotations
 
 import hashlib
-import os
 import shlex
 import shutil
-import signal
-import subprocess
 import tempfile
 import threading
-import time
 from pathlib import Path
 
 import numpy as np
 
-from colonbench.benchmark.exchange import read_prediction, write_input
+from colonbench.benchmark import calls
+from colonbench.benchmark.exchange import one_line, read_prediction, write_input
 from colonbench.errors import InputError
 
 #: Inputs per program call by default, and seconds allowed per input.
 BATCH = 64
 TIMEOUT_S = 300.0
-#: The program's wall time per input, one ``sample_id,seconds`` line per input, in its predictions folder.
+#: Each input's seconds, one ``sample_id,seconds,source`` line per input and call, in its predictions folder:
+#: source ``program`` (its JSON's own ``seconds``) or ``call`` (the call's wall time over its inputs).
 SECONDS_NAME = "seconds.csv"
 #: Interpreters whose next argument names the method (``exec:python my_method.py`` is ``my_method``).
 INTERPRETERS = {"python", "python3", "bash", "sh", "Rscript", "julia", "node", "conda", "uv", "pixi", "env",
@@ -76,28 +76,49 @@ class PredictionMethod:
 
     def predicted(self, sid: str):
         """The checked estimate of sample ``sid`` (:func:`colonbench.benchmark.exchange.read_prediction`), with
-        the program's wall time per input of its call as ``seconds["program"]`` where it was timed.
+        its seconds: the prediction's own ``seconds``, else its call's wall time over its inputs where a call
+        timed it (``seconds["program"]``).
 
         Raises
         ------
         InputError
-            Why there is none: the program's failure recorded for it, or what is wrong with its file.
+            Why there is none: the program's own failure (``<sid>.error``, or an ``error`` key in its JSON), why
+            its call left it unanswered (``<sid>.unanswered``), or what is wrong with its file.
         """
         failure = self.folder / f"{sid}.error"
-        if failure.is_file() and not (self.folder / f"{sid}.json").is_file():
-            raise InputError(failure.read_text().strip())
+        if failure.is_file():
+            raise InputError(f"{failure.name} says: {one_line(failure.read_text(errors='replace'))}")
+        note = self.folder / f"{sid}{calls.UNANSWERED}"
+        if note.is_file() and not (self.folder / f"{sid}.json").is_file():
+            raise InputError(note.read_text(errors="replace").strip())
         est = read_prediction(self.folder / f"{sid}.json", self.name)
         seconds = self._seconds(sid)
-        if seconds is not None:
+        if not est.seconds and seconds is not None:
             est.seconds = {"program": seconds}
         return est
 
+    def timing(self) -> dict[str, tuple[float, str]]:
+        """``{sample id: (seconds, source)}`` of :data:`SECONDS_NAME`, the latest line of each input (lines
+        without a source are the call's)."""
+        path = self.folder / SECONDS_NAME
+        if not path.is_file():
+            return {}
+        out = {}
+        for line in path.read_text().splitlines():
+            sid, _, rest = line.partition(",")
+            value, _, source = rest.partition(",")
+            try:
+                out[sid] = (float(value), source.strip() or "call")
+            except ValueError:
+                continue
+        return out
+
     def _seconds(self, sid: str) -> float | None:
-        """The program's time per input of ``sid``'s call, read again when a later call has timed ``sid``."""
-        timing = self.folder / SECONDS_NAME
-        if sid not in self._timing and timing.is_file():
-            rows = (line.split(",") for line in timing.read_text().splitlines() if "," in line)
-            self._timing = {k: float(v) for k, v in rows}
+        """The seconds of ``sid`` its call recorded, read again when the file has grown (a later call)."""
+        path = self.folder / SECONDS_NAME
+        size = path.stat().st_size if path.is_file() else 0
+        if size != getattr(self, "_timing_size", 0):
+            self._timing, self._timing_size = {k: v for k, (v, _) in self.timing().items()}, size
         return self._timing.get(sid)
 
     def estimate(self, points):
@@ -140,11 +161,20 @@ class ExecMethod(PredictionMethod):
         name = name or default_name(self.argv)
         root = Path(predictions) if predictions is not None else Path(tempfile.mkdtemp(prefix="colonbench-exec-"))
         super().__init__(root / name, name, command_version(self.argv))
+        #: Each call's standard output and error and its record (:mod:`colonbench.benchmark.calls`).
+        self.logs = root.parent / "logs" / name
 
     def missing(self, sids) -> list[str]:
-        """The ids among ``sids`` with neither a prediction nor a recorded failure."""
-        return [s for s in sids if not (self.folder / f"{s}.json").is_file()
-                and not (self.folder / f"{s}.error").is_file()]
+        """The ids among ``sids`` with neither an answer (a prediction, the program's ``.error``) nor a note of
+        why its call left it unanswered."""
+        return [s for s in sids if not calls.done(self.folder, s)
+                and not (self.folder / f"{s}{calls.UNANSWERED}").is_file()]
+
+    def forget(self, sids) -> None:
+        """Remove what the program answered for ``sids`` and the notes on them, so that they run again."""
+        for sid in sids:
+            for end in (*calls.ANSWERS, calls.UNANSWERED):
+                (self.folder / f"{sid}{end}").unlink(missing_ok=True)
 
     def run(self, items, workers: int = 1, progress=None) -> None:
         """Run the program on ``items`` (``(sample id, points)`` pairs) that have no answer yet, in batches.
@@ -155,7 +185,8 @@ class ExecMethod(PredictionMethod):
         workers : int
             Calls at the same time.
         progress : callable, optional
-            Called with the number of inputs of each finished call.
+            Called with the number of inputs answered, as the calls answer them (and 0 now and then while they
+            run).
         """
         from concurrent.futures import ThreadPoolExecutor
 
@@ -164,25 +195,31 @@ class ExecMethod(PredictionMethod):
             return
         self.folder.mkdir(parents=True, exist_ok=True)
         batches = [todo[k:k + self.batch] for k in range(0, len(todo), self.batch)]
-        with ThreadPoolExecutor(max(1, workers)) as pool:
-            for n in pool.map(self._call, batches):
-                if progress is not None:
+
+        def report(n: int) -> None:
+            if progress is not None:
+                with self._lock:
                     progress(n)
 
-    def _call(self, batch) -> int:
-        t = time.perf_counter()
+        with ThreadPoolExecutor(max(1, workers)) as pool:
+            list(pool.map(lambda b: self._call(b, report), batches))
+
+    def _call(self, batch, report) -> None:
+        sids = [sid for sid, _ in batch]
         with tempfile.TemporaryDirectory(prefix="colonbench-inputs-") as tmp:
             files = [str(write_input(Path(tmp) / f"{sid}.ply", pts)) for sid, pts in batch]
-            limit = self.timeout * len(files)
-            why = _run_program(self.argv + files + ["--out-dir", str(self.folder)], limit, len(files))
-        per_input = (time.perf_counter() - t) / len(batch)
+            call = calls.run_call(self.argv + files + ["--out-dir", str(self.folder)], sids, self.folder,
+                                  self.logs, self.timeout * len(files), report)
+        seconds = calls.settle(call)
         with self._lock, open(self.folder / SECONDS_NAME, "a") as fh:
-            fh.writelines(f"{sid},{per_input:.4f}\n" for sid, _ in batch)
-        for sid, _ in batch:
-            if not (self.folder / f"{sid}.json").is_file():
-                (self.folder / f"{sid}.error").write_text(
-                    f"{self.name}: no prediction {sid}.json" + (f" ({why})" if why else "") + "\n")
-        return len(batch)
+            fh.writelines(f"{sid},{s:.4f},{source}\n" for sid, (s, source) in seconds.items())
+
+    def seconds_from(self, sids) -> dict[str, int]:
+        """How many of ``sids`` have the program's own seconds (``program``) and how many the call's wall time
+        over its inputs (``call``), by :data:`SECONDS_NAME`."""
+        timing = self.timing()
+        sources = [timing[s][1] for s in sids if s in timing]
+        return {"program": sources.count("program"), "call": sources.count("call")}
 
 
 def check_command(command: str) -> list[str]:
@@ -209,26 +246,6 @@ def check_command(command: str) -> list[str]:
             where = "" if path.is_absolute() else f" (relative to {Path.cwd()}, where the program runs)"
             raise InputError(f"exec:{command}: no such file {word!r}{where}; nothing was run")
     return argv
-
-
-def _run_program(argv: list[str], limit: float, files: int) -> str:
-    """Run a program in its own process group; '' on success, else why it failed (one line)."""
-    t = time.perf_counter()
-    try:
-        proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True)
-    except OSError as exc:
-        return f"the program could not start: {exc.strerror or exc}: {argv[0]}"
-    try:
-        _, err = proc.communicate(timeout=limit)
-    except subprocess.TimeoutExpired:
-        os.killpg(proc.pid, signal.SIGKILL)
-        proc.communicate()
-        return f"the program was stopped after {limit:.0f} s, the time allowed for its {files} input(s)"
-    if proc.returncode == 0:
-        return ""
-    tail = " ".join(err.decode(errors="replace").strip().splitlines()[-2:])[-300:]
-    return f"the program exited with status {proc.returncode} after {time.perf_counter() - t:.1f} s" + (
-        f": {tail}" if tail else "")
 
 
 def command_version(argv: list[str]) -> str:

@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from colonbench.benchmark.exchange import with_sample_ids
 from colonbench.benchmark.metrics import THRESHOLDS_MM
 from colonbench.benchmark.runfolder import RUN_FILE, read_rows, read_run, write_json
 from colonbench.errors import InputError
@@ -85,7 +86,7 @@ def load(suite, exclude=()) -> tuple | None:
         cols = read_rows(where / "results" / "colons.csv")
         return run, segs[segs["method"].isin(methods)], cols[cols["method"].isin(methods)], label
     frames = [read_rows(where / "results" / f"{n}.csv") for n in methods]
-    return run, pd.concat(frames, ignore_index=True), label
+    return run, with_sample_ids(pd.concat(frames, ignore_index=True)), label
 
 
 def publish(run_dir, suite, methods=None) -> Path:

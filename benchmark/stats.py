@@ -1,7 +1,8 @@
 """Uncertainty of coverage errors: bootstrap intervals, paired comparisons, breakdowns by group.
 
-Coverage errors come in as fractions (``estimated - true``; NaN where a method gave no estimate
-or failed, left out of every statistic) and go out in percentage points. Each table cell draws
+Coverage errors come in as fractions (``estimated - true``) and go out in percentage points. The
+functions on per-segment results score a failed segment as the farther of coverage 0 and 1
+(:func:`colonbench.benchmark.summary.scored_errors`); a NaN error (nothing to score) is left out. Each table cell draws
 from its own ``np.random.default_rng(SeedSequence([seed, crc32(cell key)]))``, so its interval
 does not depend on which other cells are computed, or in which order.
 """
@@ -13,7 +14,7 @@ import zlib
 import numpy as np
 import pandas as pd
 
-from colonbench.benchmark.summary import KEY_COLUMNS, error_stats, interval_stats
+from colonbench.benchmark.summary import KEY_COLUMNS, error_stats, interval_stats, scored_errors
 from colonbench.errors import InputError
 
 #: Edges of the true-coverage bins of :func:`breakdown`: [lo, hi), the last one [0.9, 1.0].
@@ -141,7 +142,8 @@ def paired_against(results: pd.DataFrame, reference: str, level=0.95, resamples=
     ----------
     results : DataFrame
         Per-segment rows with ``method``, ``shard``, ``index``, ``noise_mm`` and
-        ``coverage_error`` (fraction); at most one row per method and segment.
+        ``coverage_error`` (fraction), failed rows scored by ``error`` and ``true_coverage`` where the results
+        have them (:func:`~colonbench.benchmark.summary.scored_errors`); at most one row per method and segment.
     reference : str
         The method every other one is compared with.
     level, resamples, seed
@@ -162,7 +164,7 @@ def paired_against(results: pd.DataFrame, reference: str, level=0.95, resamples=
     is_ref = results["method"] == reference
     if not is_ref.any():
         return pd.DataFrame(columns=PAIRED_COLUMNS).astype({c: float for c in PAIRED_COLUMNS[3:6]} | {"pairs": int})
-    points = results[["method", *keys]].assign(_err=100 * results["coverage_error"].astype(float).abs())
+    points = results[["method", *keys]].assign(_err=100 * np.abs(scored_errors(results)))
     both = points[~is_ref].merge(points.loc[is_ref, keys + ["_err"]], on=keys, how="left", suffixes=("", "_ref"))
     rows = []
     for (noise, method), g in both.groupby(["noise_mm", "method"], sort=True):
@@ -220,8 +222,8 @@ def breakdown(results: pd.DataFrame, by: str, level=0.95, resamples=1000, seed=0
     Parameters
     ----------
     results : DataFrame
-        Per-segment rows with ``noise_mm``, ``method``, ``coverage_error`` (fraction) and the
-        column ``by`` needs: ``hole_model``, ``length_mm`` (mm), ``true_coverage`` (fraction, binned
+        Per-segment rows with ``noise_mm``, ``method``, ``coverage_error`` (fraction; failed rows scored by
+        ``error`` and ``true_coverage`` where the results have them) and the column ``by`` needs: ``hole_model``, ``length_mm`` (mm), ``true_coverage`` (fraction, binned
         by :data:`coverage_bins`; no bin -> row dropped), or for ``unseen_end`` a boolean
         ``end_unobserved`` if present, else ``hole_model`` ending in ``+end``.
     by : str
@@ -242,13 +244,13 @@ def breakdown(results: pd.DataFrame, by: str, level=0.95, resamples=1000, seed=0
         raise InputError(f"unknown breakdown {by!r}; expected one of {', '.join(BREAKDOWNS)}")
     _check(level, resamples)
     _need(results, ["noise_mm", "method", "coverage_error"], "results")
-    extra = [c for c in ("true_coverage", "interval_low", "interval_high") if c in results.columns]
+    extra = [c for c in ("true_coverage", "interval_low", "interval_high", "error") if c in results.columns]
     frame = results[["noise_mm", "method", "coverage_error", *extra]].assign(_group=_groups(results, by))
     rows = []  # rows in no group (None) are dropped by groupby
     for (noise, method, group), g in frame.groupby(["noise_mm", "method", "_group"], sort=True, dropna=True):
-        err = g["coverage_error"].to_numpy(float)
+        err = scored_errors(g)
         mae = mae_interval(err, level, resamples, _cell_seed(seed, by, repr(float(noise)), method, group))
-        iv = interval_stats(g) if "true_coverage" in g.columns else {}
+        iv = interval_stats(g, failures=True) if "true_coverage" in g.columns else {}
         rows.append({"noise_mm": float(noise), "method": method, "by": by, "group": group, "segments": len(g),
                      **mae, "bias": error_stats(err)["bias"], "interval_covered": iv.get("interval_covered", np.nan),
                      "interval_width": iv.get("interval_width", np.nan)})

@@ -3,14 +3,20 @@
 Per noise level and method:
 
 * coverage, in percentage points of the absolute error ``|estimated - true|``:
-  MAE (mean), median, q95, and the bias (mean signed error); segments where a
-  method returned no coverage (NaN) or failed are counted as undefined, never
-  averaged in silently;
+  MAE (mean), median, q95, and the bias (mean signed error). A failed segment
+  (a row with an ``error``) is scored as the farther of coverage 0 and 1
+  (:func:`scored_errors`): its error, ``max(true, 1 - true)``, is at least that
+  of any answer, so failing never improves a statistic. Segments with no error
+  to score (no truth) are counted as undefined;
 * for each precision / recall column (:func:`metric_columns`): mean, median,
-  q25 and q75 over the segments where it is defined, and the count of
-  undefined ones (one side empty, or the method failed);
-* ``seconds``: mean wall time per segment (shared steps counted in full for
-  every method that uses them);
+  q25 and q75 over the segments where it is defined, and the count of answered
+  segments where it is undefined (one side empty); a failed segment counts 0
+  where the method gives the metric on other segments and the truth's side is
+  not empty (:func:`scored_metric`);
+* coverage intervals (:func:`interval_stats`): a failed segment of a method
+  that gives intervals counts as one whose truth lies outside;
+* ``seconds``: mean wall time per answered segment (shared steps counted in
+  full for every method that uses them);
 * ``segments`` and ``failed``.
 """
 
@@ -33,6 +39,45 @@ def metric_columns(thresholds=THRESHOLDS_MM) -> list[str]:
             for pr in ("precision", "recall")]
 
 
+def failed(g: pd.DataFrame) -> np.ndarray:
+    """Which rows are failures: a non-empty ``error`` (all False without the column)."""
+    if "error" not in g.columns:
+        return np.zeros(len(g), bool)
+    return g["error"].fillna("").astype(str).ne("").to_numpy()
+
+
+def fallback_coverage(true_coverage) -> np.ndarray:
+    """The coverage a failed segment is scored as: the farther of 0 and 1 from the truth (0 at a truth of 0.5),
+    so that its error, ``max(true, 1 - true)``, is at least that of any estimate in [0, 1]."""
+    true = np.asarray(true_coverage, float)
+    return np.where(true >= 0.5, 0.0, 1.0)
+
+
+def scored_errors(g: pd.DataFrame) -> np.ndarray:
+    """Coverage errors (fractions) as every statistic scores them: ``coverage_error`` of answered rows, and of
+    failed rows (:func:`failed`) with a truth ``fallback_coverage - true_coverage``; NaN where there is nothing
+    to score (no truth, or rows without a ``true_coverage`` column)."""
+    err = g["coverage_error"].to_numpy(float).copy()
+    if "true_coverage" in g.columns:
+        bad = failed(g)
+        true = g["true_coverage"].to_numpy(float)[bad]
+        err[bad] = np.where(np.isfinite(true), fallback_coverage(true) - true, np.nan)
+    return err
+
+
+def scored_metric(g: pd.DataFrame, column: str) -> np.ndarray:
+    """A precision / recall column as the statistics score it: a failed row counts 0 where the method gives the
+    metric on an answered row of ``g`` and the truth's side of it is not known to be empty (``holes_true_n`` or
+    ``centerline_true_n`` of 0 leaves it undefined, as for any answer); else NaN, left out."""
+    v = g[column].to_numpy(float).copy()
+    bad = failed(g)
+    if bad.any() and not np.isnan(v[~bad]).all():
+        true_n = f"{column.split('_')[0]}_true_n"
+        empty = g[true_n].to_numpy(float) == 0 if true_n in g.columns else np.zeros(len(g), bool)
+        v[bad] = np.where(empty[bad], np.nan, 0.0)
+    return v
+
+
 def error_stats(errors) -> dict:
     """``mae``, ``median``, ``bias``, ``q95`` in percentage points of coverage errors given as fractions.
 
@@ -47,38 +92,40 @@ def error_stats(errors) -> dict:
             "q95": 100 * float(np.quantile(a, 0.95))}
 
 
-def interval_stats(g: pd.DataFrame) -> dict:
+def interval_stats(g: pd.DataFrame, failures: bool = False) -> dict:
     """How a method's coverage intervals did on rows with ``true_coverage``, ``interval_low`` and ``interval_high``
     (fractions): ``interval_covered``, the share of the truths inside (%), ``interval_width``, the mean width
-    (points), over ``interval_segments`` rows with an interval and a truth; NaN (n/a) for a method that gives
-    none."""
+    (points, of the intervals given), over ``interval_segments`` rows with an interval and a truth; NaN (n/a) for a
+    method that gives none. With ``failures``, failed rows (:func:`failed`) with a truth join those rows as truths
+    outside, where the method gives an interval on any row."""
     if "interval_low" not in g.columns:
         return {"interval_covered": np.nan, "interval_width": np.nan, "interval_segments": 0}
     low, high = g["interval_low"].to_numpy(float), g["interval_high"].to_numpy(float)
     # rows with no truth (a whole-colon segment whose region holds no true face) are scored by neither the MAE nor
     # the intervals
-    have = ~np.isnan(low) & ~np.isnan(high) & np.isfinite(g["true_coverage"].to_numpy(float))
+    truth = np.isfinite(g["true_coverage"].to_numpy(float))
+    have = ~np.isnan(low) & ~np.isnan(high) & truth
     if not have.any():
         return {"interval_covered": np.nan, "interval_width": np.nan, "interval_segments": 0}
     true = g["true_coverage"].to_numpy(float)[have]
     inside = (low[have] - 1e-9 <= true) & (true <= high[have] + 1e-9)
-    return {"interval_covered": 100 * float(inside.mean()), "interval_width": 100 * float((high - low)[have].mean()),
-            "interval_segments": int(have.sum())}
+    outside = int((failed(g) & truth).sum()) if failures else 0
+    return {"interval_covered": 100 * float(inside.sum()) / (len(inside) + outside),
+            "interval_width": 100 * float((high - low)[have].mean()), "interval_segments": int(have.sum()) + outside}
 
 
 def _stats(g: pd.DataFrame, metrics: list[str]) -> dict:
-    err = g["coverage_error"].to_numpy(float)
-    row = {"segments": len(g), "failed": int(g["error"].fillna("").astype(str).ne("").sum()),
-           "coverage_undefined": int(np.isnan(err).sum()),
+    err, bad = scored_errors(g), failed(g)
+    row = {"segments": len(g), "failed": int(bad.sum()), "coverage_undefined": int(np.isnan(err[~bad]).sum()),
            **{f"coverage_{k}": v for k, v in error_stats(err).items()},
-           **interval_stats(g), "seconds": float(g["seconds"].mean())}
+           **interval_stats(g, failures=True), "seconds": float(g["seconds"].mean())}
     for m in metrics:
-        v = g[m].to_numpy(float)
+        v = scored_metric(g, m)
         d = v[~np.isnan(v)]
         row[f"{m}_mean"] = float(d.mean()) if len(d) else np.nan
         for q, at in QUANTILES.items():
             row[f"{m}_{q}"] = float(np.quantile(d, at)) if len(d) else np.nan
-        row[f"{m}_undefined"] = int(len(v) - len(d))
+        row[f"{m}_undefined"] = int(np.isnan(v[~bad]).sum())
     return row
 
 
@@ -88,7 +135,7 @@ def summarize(results: pd.DataFrame, thresholds=THRESHOLDS_MM) -> pd.DataFrame:
     Parameters
     ----------
     results : DataFrame
-        Per-segment rows with ``method``, ``noise_mm``, ``coverage_error``
+        Per-segment rows with ``method``, ``noise_mm``, ``true_coverage``, ``coverage_error``
         (fraction), ``seconds``, ``error`` and the :func:`metric_columns`.
 
     Returns

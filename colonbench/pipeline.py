@@ -51,16 +51,16 @@ class RunFailed(ColonbenchError):
         self.failures = failures
 
 
-def _evaluate(suite, data, methods, run_dir, **kw) -> Path:
+def _evaluate(suite, data, methods, run_dir, retry_failed: bool = False, **kw) -> Path:
     from colonbench.benchmark.colon_evaluate import evaluate_colons
     from colonbench.benchmark.evaluate import evaluate
 
-    if suite.task == "colon":
+    if suite.task == "colon":   # a map is one unit: it is resumed, not retried
         return evaluate_colons(data, methods, run_dir, noise=suite.noise_mm, contexts=suite.contexts_mm,
                                segment_mm=suite.segment_mm, split=suite.split, limit=suite.limit,
                                noise_seed=suite.noise_seed, **kw)
     return evaluate(data, methods, run_dir, noise=suite.noise_mm, split=suite.split, limit=suite.limit,
-                    noise_seed=suite.noise_seed, **kw)
+                    noise_seed=suite.noise_seed, retry_failed=retry_failed, **kw)
 
 
 def _check_suite_run(run_dir: Path, suite) -> None:
@@ -75,7 +75,7 @@ def _check_suite_run(run_dir: Path, suite) -> None:
 def run_benchmark(methods=(), suites_=("demo-v1",), out="runs/benchmark", data=None, workers: int = 1,
                   scheduler=None, model=None, device: str = "cpu", allow_unverified: bool = False,
                   shipped: bool = True, timeout: float | None = None, batch: int | None = None,
-                  figures: bool = True, progress: bool = True) -> dict:
+                  figures: bool = True, progress: bool = True, retry_failed: bool = False) -> dict:
     """Evaluate methods on named suites and write the cross-suite leaderboard.
 
     Parameters
@@ -102,6 +102,9 @@ def run_benchmark(methods=(), suites_=("demo-v1",), out="runs/benchmark", data=N
     timeout, batch
         ``exec:`` methods: seconds per input, inputs per call.
     figures, progress : bool
+    retry_failed : bool
+        Evaluate again the segments a method failed on in ``out``'s runs (segment suites; the other rows are
+        kept), then rebuild the tables.
 
     Returns
     -------
@@ -140,7 +143,8 @@ def run_benchmark(methods=(), suites_=("demo-v1",), out="runs/benchmark", data=N
         t1 = time.perf_counter()
         run_dir = out / "runs" / suite.id
         _evaluate(suite, data_dir, methods, run_dir, workers=workers, scheduler=scheduler, model=model,
-                  device=device, progress=progress, allow_unverified=allow_unverified, timeout=timeout, batch=batch)
+                  device=device, progress=progress, allow_unverified=allow_unverified, timeout=timeout, batch=batch,
+                  retry_failed=retry_failed)
         _check_suite_run(run_dir, suite)
         runs[suite.id] = run_dir
         timing[suite.id] = {"data_seconds": round(t1 - t0, 1), "evaluate_seconds": round(time.perf_counter() - t1, 1)}

@@ -7,8 +7,10 @@ with the shipped results merged in), then one summary across suites:
 * ``leaderboard.md``: per noise level a table, one row per method and one
   column per suite, each cell the coverage MAE in points with its 95 %
   bootstrap interval; a whole-colon suite's cell is the segment MAE of its
-  in-context track (what ``colonbench map`` reports); a missing cell is shown
-  as missing, never averaged over;
+  in-context track (what ``colonbench map`` reports); a segment a method
+  failed on is in the MAE, scored as the farther of coverage 0 and 1, and the
+  cell says how many failed; a missing cell is shown as missing, never
+  averaged over; methods ranked by their mean MAE over the suites;
 * ``leaderboard.csv``: one row per suite, noise level and method (``mae``,
   ``mae_lo``, ``mae_hi``, ``segments``, ``failed``, ``version``,
   ``reference``, ``source``: ``shipped`` or the run folder);
@@ -106,10 +108,15 @@ def write_report(out, chosen, runs: dict, shipped: bool = True, figures: bool = 
 
 
 def _cell(r) -> str:
-    if r is None or math.isnan(r["mae"]):
+    """A table cell: the MAE with its interval, and how many samples failed where any did."""
+    if r is None:
         return "—"
+    n = 0 if pd.isna(r["failed"]) else int(r["failed"])
+    failed = f" ({n} failed)" if n else ""
+    if math.isnan(r["mae"]):
+        return "—" + failed
     ci = "" if math.isnan(r["mae_lo"]) else f" [{r['mae_lo']:.2f}, {r['mae_hi']:.2f}]"
-    return f"{r['mae']:.2f}{ci}"
+    return f"{r['mae']:.2f}{ci}{failed}"
 
 
 def markdown(summary: pd.DataFrame, chosen, records: dict, skipped: list[str]) -> str:
@@ -119,7 +126,9 @@ def markdown(summary: pd.DataFrame, chosen, records: dict, skipped: list[str]) -
     ids = [s.id for s in chosen if s.id in records]
     lines = ["# colonbench benchmark", "",
              "Coverage MAE in percentage points with its 95 % bootstrap interval over segments, per suite; a "
-             "whole-colon suite's cell is the segment MAE of its in-context track. Rows marked * are references "
+             "whole-colon suite's cell is the segment MAE of its in-context track. A segment a method failed on is "
+             "scored as the farther of coverage 0 and 1 (an error of max(true, 1 - true), never better than an "
+             "answer), and the cell says how many failed (for a whole-colon suite: maps). Rows marked * are references "
              "given ground truth (or the constant guess); rows marked † come from the shipped reference results. "
              "Each suite's own page (suites/<suite>/leaderboard.md) has medians, bias, q95, holes and centerline "
              "precision / recall, the paired difference against the best baseline and the breakdowns.", ""]

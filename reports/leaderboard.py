@@ -6,10 +6,11 @@ chosen samples), with different noise levels, noise seed or metric settings,
 or naming the same method twice. :func:`write_leaderboard` writes
 
 * ``leaderboard.md``: per noise level, a coverage table (MAE, median, bias,
-  q95 in percentage points; undefined and failed segments counted) and a
-  precision / recall table (mean, with the median in brackets; undefined
-  counts), methods ranked by MAE, reference rows (given ground truth) last
-  and marked;
+  q95 in percentage points, failed segments scored as the farther of coverage
+  0 and 1 and counted; undefined values counted) and a precision / recall
+  table (mean, with the median in brackets; failed segments count 0;
+  undefined counts), methods ranked by MAE, reference rows (given ground
+  truth) last and marked;
 * ``leaderboard.csv``: one row per noise level and method with every
   statistic of :func:`colonbench.benchmark.summary.summarize`;
 * ``leaderboard.json``: the same rows with the runs, data identity and
@@ -25,7 +26,7 @@ from pathlib import Path
 import pandas as pd
 
 from colonbench.benchmark.evaluate import load_results
-from colonbench.benchmark.summary import summarize
+from colonbench.benchmark.summary import scored_errors, summarize
 from colonbench.errors import InputError
 
 #: Settings two runs must share to be compared.
@@ -117,7 +118,7 @@ def table(meta: dict, results: pd.DataFrame) -> pd.DataFrame:
     s["reference"] = s["method"].map(lambda m: bool(meta["methods"][m]["reference"]))
     # one seed for every cell: methods scored on the same segments are resampled alike (identical errors give
     # identical intervals), and no cell depends on which others are computed
-    ci = {(n, m): stats.mae_interval(g["coverage_error"], seed=0)
+    ci = {(n, m): stats.mae_interval(scored_errors(g), seed=0)
           for (n, m), g in results.groupby(["noise_mm", "method"])}
     s["coverage_mae_lo"] = [ci[(n, m)]["mae_lo"] for n, m in zip(s["noise_mm"], s["method"])]
     s["coverage_mae_hi"] = [ci[(n, m)]["mae_hi"] for n, m in zip(s["noise_mm"], s["method"])]
@@ -175,7 +176,10 @@ def markdown(meta: dict, tab: pd.DataFrame) -> str:
              f"seed {meta['noise_seed']}. Coverage errors in percentage points (estimated - true); MAE with its 95 % "
              "bootstrap interval over segments; Δ = the paired mean difference of the absolute error against the "
              "best baseline of the noise level, with its interval (negative: better). Precision and recall at "
-             f"{' and '.join(f'{t:g}' for t in meta['thresholds_mm'])} mm.", "",
+             f"{' and '.join(f'{t:g}' for t in meta['thresholds_mm'])} mm. A failed segment (no valid answer; "
+             "counted in *failed*) is scored as the farther of coverage 0 and 1 in every coverage statistic and the "
+             "ranking, as precision and recall 0 and as a truth outside its interval: failing never improves a "
+             "score. *Undefined*: answered segments where a metric has no value.", "",
              "Rows marked * are references that bound the problem, not methods: they are given ground truth (the GT "
              "target heatmap or centerline) or guess the training data's mean coverage.", ""]
     ths = meta["thresholds_mm"]

@@ -40,22 +40,38 @@ def test_summary_statistics_by_hand():
     rows = []
     errors = [0.01, -0.03, 0.05, np.nan]  # the last: the method gave no coverage
     for k, e in enumerate(errors):
-        row = {"method": "m", "noise_mm": 0.0, "coverage_error": e, "seconds": 0.5 * (k + 1), "error": ""}
+        row = {"method": "m", "noise_mm": 0.0, "true_coverage": 0.8, "coverage_error": e, "seconds": 0.5 * (k + 1),
+               "error": ""}
         row.update({c: (1.0 if k % 2 == 0 else 0.5) for c in metric_columns()})
         rows.append(row)
     rows[3]["holes_precision_2mm"] = np.nan
-    rows.append({**rows[0], "coverage_error": np.nan, "error": "RuntimeError: boom", "seconds": np.nan,
-                 **{c: np.nan for c in metric_columns()}})
+    # a failure: scored as coverage 1, the farther end from its truth 0.3 (error +0.7), and 0 in precision / recall
+    rows.append({**rows[0], "true_coverage": 0.3, "coverage_error": np.nan, "error": "RuntimeError: boom",
+                 "seconds": np.nan, **{c: np.nan for c in metric_columns()}})
     s = summarize(pd.DataFrame(rows)).iloc[0]
-    assert s["segments"] == 5 and s["failed"] == 1 and s["coverage_undefined"] == 2
-    assert s["coverage_mae"] == pytest.approx(100 * (0.01 + 0.03 + 0.05) / 3)
-    assert s["coverage_median"] == pytest.approx(3.0)
-    assert s["coverage_bias"] == pytest.approx(100 * 0.03 / 3)
-    assert s["coverage_q95"] == pytest.approx(100 * np.quantile([0.01, 0.03, 0.05], 0.95))
-    assert s["holes_precision_2mm_mean"] == pytest.approx((1 + 0.5 + 1) / 3)
-    assert s["holes_precision_2mm_undefined"] == 2 and s["holes_recall_2mm_undefined"] == 1
-    assert s["centerline_recall_1mm_median"] == pytest.approx(0.75)
+    assert s["segments"] == 5 and s["failed"] == 1 and s["coverage_undefined"] == 1
+    scored = [0.01, -0.03, 0.05, 0.7]
+    assert s["coverage_mae"] == pytest.approx(100 * np.abs(scored).mean())
+    assert s["coverage_median"] == pytest.approx(4.0)
+    assert s["coverage_bias"] == pytest.approx(100 * np.mean(scored))
+    assert s["coverage_q95"] == pytest.approx(100 * np.quantile(np.abs(scored), 0.95))
+    assert s["holes_precision_2mm_mean"] == pytest.approx((1 + 0.5 + 1 + 0) / 4)
+    assert s["holes_precision_2mm_undefined"] == 1 and s["holes_recall_2mm_undefined"] == 0
+    assert s["centerline_recall_1mm_median"] == pytest.approx(0.5)
     assert s["seconds"] == pytest.approx(np.mean([0.5, 1.0, 1.5, 2.0]))
+    # the same method answering that segment with the worst possible estimate scores no worse: failing never helps
+    worst = pd.DataFrame(rows[:4] + [{**rows[4], "coverage_error": 0.7, "error": "",
+                                      **{c: 0.0 for c in metric_columns()}}])
+    assert summarize(worst).iloc[0]["coverage_mae"] == pytest.approx(s["coverage_mae"])
+    # a failure where the truth has no hole points: its holes metrics stay undefined, as any answer's would; a
+    # method that never gives a centerline (coverage only) keeps it undefined, and failures are not counted there
+    empty = pd.DataFrame(rows).assign(holes_true_n=[5, 5, 5, 5, 0], centerline_true_n=5)
+    for c in metric_columns():
+        if c.startswith("centerline"):
+            empty[c] = np.nan
+    e = summarize(empty).iloc[0]
+    assert e["holes_recall_2mm_mean"] == pytest.approx((1 + 0.5 + 1 + 0.5) / 4)
+    assert np.isnan(e["centerline_recall_2mm_mean"]) and e["centerline_recall_2mm_undefined"] == 4
 
 
 # ------------------------------------------------------------------------------------------------ registry
@@ -147,9 +163,13 @@ def test_leaderboard_merges_runs_counts_failures_and_refuses_other_data(smoke_da
     assert set(tab["method"]) == {"oracle", "constant", "broken"}
     assert len(tab) == 3 * 2  # per noise level
     broken = tab[tab["method"] == "broken"]
-    n = load_results(a)[0]["data"]["samples"]
-    assert (broken["failed"] == n).all() and (broken["coverage_undefined"] == n).all()
-    assert broken["coverage_mae"].isna().all()  # no number where there is none, and not dropped
+    meta, rows = load_results(a)
+    n = meta["data"]["samples"]
+    assert (broken["failed"] == n).all() and (broken["coverage_undefined"] == 0).all()
+    # every failure scored as the farther of coverage 0 and 1: never dropped, never better than an answer
+    true = rows[rows["noise_mm"] == 0]["true_coverage"]
+    assert broken["coverage_mae"].to_numpy() == pytest.approx([100 * np.maximum(true, 1 - true).mean()] * 2)
+    assert (broken["coverage_mae"] > tab[tab["method"] == "constant"]["coverage_mae"].max()).all()
     const = tab[tab["method"] == "constant"]
     assert (const["holes_recall_2mm_undefined"] == n).all() and const["reference"].all()
     text = (tmp_path / "lb" / "leaderboard.md").read_text()

@@ -155,7 +155,7 @@ def test_a_program_outside_colonbench_joins_the_shipped_leaderboard(demo_data, t
     assert main(["score", "demo-v1", str(preds), "--data", str(demo_data), "--out", str(tmp_path / "scored2"),
                  "--quiet"]) == 0
     out, err = capsys.readouterr()
-    assert "23 of 24 segments, 1 without a valid prediction" in out
+    assert "24 of 24 segments, 1 without a valid prediction (scored as the farther of coverage 0 and 1)" in out
     (warning,) = [x for x in err.splitlines() if x.startswith("colonbench: warning:")]
     assert f"failed on 1 of 24 samples of demo-v1 at noise {index['noise_mm'].iloc[-1]:g} mm" in warning
     assert f"first: {bad.name}: coverage 1.5 is not a fraction in [0, 1]" in warning
@@ -203,12 +203,12 @@ def test_bad_outputs_are_that_segments_failure(demo_data, tmp_path):
     errors = list(rows["error"])
     # inputs go in sample order, six per call: each call's k-th input gets the k-th answer
     assert errors[0] == "" and rows["coverage"].iloc[0] == 0.7
-    assert "no prediction" in errors[1]
+    assert "exited with status 0 without writing" in errors[1] and "_noise0.json or" in errors[1]
     assert "not a fraction in [0, 1]" in errors[2] and "nan" in errors[2]
     assert "1.5 is not a fraction" in errors[3]
     assert "'holes' has shape (1, 2)" in errors[4]
     assert "not valid JSON" in errors[5]
-    kinds = [re.sub(r"test_colon\S+?_noise0", "ID", e) for e in errors]   # the same fault, another sample
+    kinds = [re.sub(r"call-\d+", "CALL", re.sub(r"test_colon\S+?_noise0", "ID", e)) for e in errors]  # another sample
     assert kinds[6:] == kinds[:6]
     assert rows["coverage_error"].isna().sum() == 10   # failures are counted, not dropped
     # a crash and a timeout: the program's own words end up in the rows
@@ -234,7 +234,7 @@ def test_each_noise_levels_warning_names_a_failure_at_that_noise_level(demo_data
     assert len(warnings) == 2
     for noise, line in zip((0.0, 0.5), warnings):
         first = rows[(rows["noise_mm"] == noise) & (rows["error"] != "")]["error"].iloc[0]
-        assert f"at noise {noise:g} mm; first: {first} (" in line
+        assert f"at noise {noise:g} mm, scored as the farther of coverage 0 and 1; first: {first} (" in line
         assert f"_noise{noise:g}.json" in line and f"_noise{0.5 - noise:g}.json" not in line
 
 
@@ -395,8 +395,10 @@ def test_programs_that_cannot_run_and_predictions_that_match_nothing_say_so(demo
     # a failed run writes no tables: only the run folder, whose rows say why, is left
     assert "no leaderboard was written" in err
     assert sorted(p.name for p in (tmp_path / "b").iterdir()) == ["runs"]
-    assert (pd.read_csv(tmp_path / "b" / "runs" / "demo-v1" / "results" / "crash.csv")["error"]
-            .str.contains("cannot load my model").all())
+    errors = pd.read_csv(tmp_path / "b" / "runs" / "demo-v1" / "results" / "crash.csv")["error"]
+    assert errors.str.contains("exited with status 2").all()    # the program's words are quoted once, on the first
+    assert errors.str.contains("cannot load my model").sum() == 1
+    assert errors.str.contains("its end is quoted on").sum() == len(errors) - 1
     # nor does it leave the tables of an earlier run there, which no longer describe the folder's runs
     good = ["--methods", f"exec:{sys.executable} {EXAMPLE}", "--out", str(tmp_path / "g"), *data]
     assert main(["benchmark", *good]) == 0 and (tmp_path / "g" / "leaderboard.md").is_file()

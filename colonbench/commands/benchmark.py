@@ -49,6 +49,9 @@ def add_external_args(p) -> None:
     p.add_argument("--timeout", type=_positive_float, help="exec: methods: seconds allowed per input file (a call "
                    "gets that times its files; default 300)")
     p.add_argument("--batch", type=_positive_int, help="exec: methods: input files per program call (default 64)")
+    p.add_argument("--retry-failed", action="store_true",
+                   help="evaluate again the segments a method failed on in this --out (an exec: program runs on "
+                        "them again); the other rows are kept")
 
 
 def _add_data_args(p) -> None:
@@ -71,7 +74,7 @@ def cmd_benchmark(args):
                                scheduler=args.scheduler, model=args.model, device=args.device,
                                allow_unverified=args.allow_unverified, shipped=not args.no_shipped,
                                timeout=args.timeout, batch=args.batch, figures=not args.no_figures,
-                               progress=not args.quiet)
+                               progress=not args.quiet, retry_failed=args.retry_failed)
     except RunFailed as exc:  # no tables: the warnings say what failed, then the error
         warn_failures(exc.failures, lambda suite: Path(args.out) / "runs" / suite / "results")
         raise
@@ -93,9 +96,11 @@ def warn_failures(failures, where) -> None:
         The results folder of a suite id, for the message.
     """
     for _, r in failures[failures["failed"] > 0].iterrows():
+        logs = Path(where(r["suite"])).parent / "logs" / r["method"]
+        calls = f"; each program call's standard error and output are in {logs}" if logs.is_dir() else ""
         print(f"colonbench: warning: {r['method']} failed on {r['failed']} of {r['samples']} samples of "
-              f"{r['suite']} at noise {r['noise_mm']:g} mm; first: {r['first_error']} (every one is in "
-              f"{where(r['suite'])})", file=sys.stderr)
+              f"{r['suite']} at noise {r['noise_mm']:g} mm, scored as the farther of coverage 0 and 1; first: "
+              f"{r['first_error']} (every one is in {where(r['suite'])}{calls})", file=sys.stderr)
 
 
 def cmd_export(args):
@@ -125,7 +130,8 @@ def cmd_score(args):
     if not is_colon_run(run):
         _, results = load_results(run)
         for _, r in summarize(results).iterrows():
-            failed = f", {r['failed']} without a valid prediction" if r["failed"] else ""
+            failed = (f", {r['failed']} without a valid prediction (scored as the farther of coverage 0 and 1)"
+                      if r["failed"] else "")
             print(f"noise {r['noise_mm']:g} mm  {r['method']}: MAE {r['coverage_mae']:.2f} points over "
                   f"{r['segments'] - r['coverage_undefined']} of {r['segments']} segments{failed}")
     warn_failures(pd.DataFrame(failures(suites.get(args.suite), run), columns=FAILURE_COLUMNS),

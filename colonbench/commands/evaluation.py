@@ -32,17 +32,19 @@ def cmd_evaluate(args):
                    limit=args.limit, workers=args.workers, model=args.model, device=args.device,
                    examples=args.examples, noise_seed=args.noise_seed, progress=not args.quiet,
                    scheduler=args.scheduler, allow_unverified=args.allow_unverified, timeout=args.timeout,
-                   batch=args.batch, tta=args.tta)
+                   batch=args.batch, tta=args.tta, retry_failed=args.retry_failed)
     meta, results = load_results(run)
     s = summarize(results)
     for _, r in s.iterrows():
-        failed = f", {r['failed']} failed" if r["failed"] else ""
+        failed = f", {r['failed']} failed (scored as the farther of coverage 0 and 1)" if r["failed"] else ""
         print(f"noise {r['noise_mm']:g} mm  {r['method']:<14} MAE {r['coverage_mae']:6.2f} points over "
               f"{r['segments'] - r['coverage_undefined']} of {r['segments']} segments{failed}")
     errors = results[results["error"] != ""]
     for name, g in errors.groupby("method"):
-        print(f"colonbench: warning: {name} failed on {len(g)} segment(s); first: {g['error'].iloc[0]}",
-              file=sys.stderr)
+        logs = run / "logs" / name
+        calls = f"; each program call's standard error and output are in {logs}" if logs.is_dir() else ""
+        print(f"colonbench: warning: {name} failed on {len(g)} segment(s); first: {g['error'].iloc[0]} (every one "
+              f"is in {run / 'results' / (name + '.csv')}{calls})", file=sys.stderr)
     session = meta["sessions"][-1]
     print(f"wrote {run}/results/: {session['segments']} segment evaluations in {time.perf_counter() - t:.0f} s "
           f"with {session['workers']} worker(s), peak memory {session['peak_process_mib']} MiB per process; "
@@ -51,6 +53,9 @@ def cmd_evaluate(args):
 
 def _evaluate_colons(args):
     """colonbench evaluate --task colon: map every whole-colon sample with every method and track."""
+    if args.retry_failed:
+        raise ColonbenchError("--retry-failed retries segments; a whole-colon map is one unit (a rerun resumes "
+                              "maps; to redo failed ones, evaluate into a new run folder)")
     from colonbench.benchmark.colon_evaluate import ALL_METHODS, evaluate_colons, load_colon_results
     from colonbench.reports.colon_leaderboard import colon_table
 
