@@ -235,7 +235,7 @@ def suite_page(key, g: dict, folder: Path, lb: dict, tab: pd.DataFrame, bd, figu
                   "group's segments, and the group's size.</p>", breakdown_tables(bd, methods, root)]
     if figures:
         html_ += ["<h2>Figures</h2>"] + [
-            f'<figure><img src="{esc(f)}" alt="{esc(cap)}" loading="lazy"><figcaption>{esc(cap)}</figcaption></figure>'
+            f'<figure><img src="{esc(f)}" alt="{esc(cap)}"><figcaption>{esc(cap)}</figcaption></figure>'
             for f in figures for cap in [CAPTIONS.get(f[:-4], f[:-4].replace("-", " "))]]
     every = [(_row(r["method"], methods), [(esc(t), v) for t, v in (fmt(r[c], c) for c in tab.columns)])
              for _, r in tab.iterrows()]
