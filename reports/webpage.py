@@ -21,7 +21,7 @@ from colonbench._version import __version__
 COUNTS = {"segments", "maps", "failed", "failed_maps", "estimated", "coverage_undefined", "interval_segments",
           "end_unobserved"}
 #: Every page's style, inline.
-STYLE = """body{font:15px/1.45 system-ui,sans-serif;margin:0 auto;max-width:1200px;padding:1em 2em;color:#222}
+STYLE = """body{font:15px/1.45 system-ui,sans-serif;margin:0 auto;max-width:1600px;padding:1em 2em;color:#222}
 table{border-collapse:collapse;margin:.6em 0 1.2em;font-size:13px}th,td{border:1px solid #ccc;padding:3px 7px}
 th{background:#eef2f7;cursor:pointer;white-space:nowrap}td.n{text-align:right;white-space:nowrap}
 th[aria-sort=ascending]::after{content:" \\25B2"}th[aria-sort=descending]::after{content:" \\25BC"}
