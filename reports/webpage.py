@@ -23,7 +23,7 @@ COUNTS = {"segments", "maps", "failed", "failed_maps", "estimated", "coverage_un
 #: Every page's style, inline.
 STYLE = """body{font:15px/1.45 system-ui,sans-serif;margin:0 auto;max-width:1600px;padding:1em 2em;color:#222}
 table{border-collapse:collapse;margin:.6em 0 1.2em;font-size:13px}th,td{border:1px solid #ccc;padding:3px 7px}
-th{background:#eef2f7;cursor:pointer;white-space:nowrap}td.n{text-align:right;white-space:nowrap}
+th{background:#eef2f7;cursor:pointer;white-space:nowrap}td.n,td:first-child{white-space:nowrap}td.n{text-align:right}
 th[aria-sort=ascending]::after{content:" \\25B2"}th[aria-sort=descending]::after{content:" \\25BC"}
 tr.mine td{background:#fff7e0}code,pre{font-size:12px;background:#f4f4f4}pre{padding:.6em;white-space:pre-wrap}
 img{max-width:100%}.wrap{overflow-x:auto}.note{color:#555;font-size:13px}"""
