@@ -320,6 +320,36 @@ def index_page(pages: list[dict]) -> str:
 # ---------------------------------------------------------------------------------------------------- the site
 
 
+def _write_pages(found: dict, out: Path, figures: bool) -> tuple[list, dict, list]:
+    """Each group's page, the methods' pages and the index under ``out``: (pages, methods seen, files written)."""
+    from colonbench.reports.leaderboard import write_leaderboard
+
+    pages, written, seen = [], [], {}
+    for key in sorted(found):
+        g, (pid, track) = found[key], (slug(key[0]), slug(key[1]))
+        folder = out / pid / track
+        res = write_leaderboard(g["runs"], folder, figures=figures, extra=g["extra"])
+        lb = json.loads((folder / "leaderboard.json").read_text())
+        tab = pd.read_csv(folder / "leaderboard.csv")
+        bd = pd.read_csv(folder / "breakdowns.csv") if (folder / "breakdowns.csv").is_file() else None
+        pngs = [Path(p).name for p in res["paths"] if str(p).endswith(".png")]
+        (folder / "index.html").write_text(suite_page(key, g, folder, lb, tab, bd, pngs))
+        mae = headline(tab, g["suite"])
+        pages.append({"pid": pid, "track": track, "name": f"{pid}/{track}", "suite": g["suite"], "lb": lb,
+                      "mae": mae})
+        written += [*res["paths"], folder / "index.html"]
+        runs = {label: run for run, label in g["records"]}
+        for name, rec in lb["methods"].items():
+            seen.setdefault(name, []).append({"pid": pid, "track": track, "record": rec,
+                                              "run": runs.get(rec.get("run"), {}), "mae": mae[mae["method"] == name]})
+    (out / "methods").mkdir()
+    for name, where in sorted(seen.items()):
+        written.append(out / "methods" / f"{slug(name)}.html")
+        written[-1].write_text(method_page(name, where))
+    (out / "index.html").write_text(index_page(pages))
+    return pages, seen, written
+
+
 def write_site(paths, out, figures: bool = True, shipped: bool = True) -> dict:
     """Write the leaderboard site of run folders and ``benchmark --out`` folders into ``out``.
 
@@ -345,8 +375,6 @@ def write_site(paths, out, figures: bool = True, shipped: bool = True) -> dict:
     InputError
         A path that is neither kind of folder, runs that cannot be compared, or an unsuitable ``out``.
     """
-    from colonbench.reports.leaderboard import write_leaderboard
-
     final = Path(out)
     if final.exists() and not final.is_dir():
         raise InputError(f"{final} is a file: give a folder for the site")
@@ -359,29 +387,11 @@ def write_site(paths, out, figures: bool = True, shipped: bool = True) -> dict:
     out = final.with_name(f".{final.name}.new")    # written aside, then put in place: never a half-written site
     shutil.rmtree(out, ignore_errors=True)
     out.mkdir(parents=True)
-    pages, written, seen = [], [], {}
-    for key in sorted(found):
-        g, (pid, track) = found[key], (slug(key[0]), slug(key[1]))
-        folder = out / pid / track
-        res = write_leaderboard(g["runs"], folder, figures=figures, extra=g["extra"])
-        lb = json.loads((folder / "leaderboard.json").read_text())
-        tab = pd.read_csv(folder / "leaderboard.csv")
-        bd = pd.read_csv(folder / "breakdowns.csv") if (folder / "breakdowns.csv").is_file() else None
-        pngs = [Path(p).name for p in res["paths"] if str(p).endswith(".png")]
-        (folder / "index.html").write_text(suite_page(key, g, folder, lb, tab, bd, pngs))
-        mae = headline(tab, g["suite"])
-        pages.append({"pid": pid, "track": track, "name": f"{pid}/{track}", "suite": g["suite"], "lb": lb,
-                      "mae": mae})
-        written += [*res["paths"], folder / "index.html"]
-        runs = {label: run for run, label in g["records"]}
-        for name, rec in lb["methods"].items():
-            seen.setdefault(name, []).append({"pid": pid, "track": track, "record": rec,
-                                              "run": runs.get(rec.get("run"), {}), "mae": mae[mae["method"] == name]})
-    (out / "methods").mkdir()
-    for name, where in sorted(seen.items()):
-        written.append(out / "methods" / f"{slug(name)}.html")
-        written[-1].write_text(method_page(name, where))
-    (out / "index.html").write_text(index_page(pages))
+    try:
+        pages, seen, written = _write_pages(found, out, figures)
+    except BaseException:
+        shutil.rmtree(out, ignore_errors=True)
+        raise
     names = [p["name"] for p in pages]
     write_json(out / SITE_FILE, {"format": "colonbench-site", "colonbench": __version__,
                                  "inputs": [str(p) for p in paths], "pages": names})
