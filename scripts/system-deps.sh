@@ -3,9 +3,11 @@
 #   libusb-1.0-0  open3d loads it at import
 #   libgl1, libgomp1  open3d's renderer and OpenMP (present on most images)
 #   libegl1, libegl-mesa0, libgl1-mesa-dri  headless OpenGL for pyrender (PYOPENGL_PLATFORM=egl: the map picture)
+#   chromium, chromium-driver  headless Chromium and its WebDriver: the leaderboard site's browser test
+#                              (tests/test_site.py) and scripts/site_screenshot.py (Debian's package names)
 set -euo pipefail
 need=()
-for pkg in libusb-1.0-0 libgl1 libgomp1 libegl1 libegl-mesa0 libgl1-mesa-dri; do
+for pkg in libusb-1.0-0 libgl1 libgomp1 libegl1 libegl-mesa0 libgl1-mesa-dri chromium chromium-driver; do
     dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || need+=("$pkg")
 done
 [ ${#need[@]} -eq 0 ] && exit 0

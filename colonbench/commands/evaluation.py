@@ -76,9 +76,19 @@ def _evaluate_colons(args):
 
 
 def cmd_leaderboard(args):
-    """Rebuild the leaderboard tables (and figures) from stored runs."""
+    """Rebuild the leaderboard tables (and figures) from stored runs; with --html, the leaderboard site."""
     from colonbench.reports.leaderboard import write_leaderboard
 
+    if args.html:
+        from colonbench.reports.site import write_site
+
+        site = write_site(args.runs, args.out, figures=not args.no_figures, shipped=not args.no_shipped)
+        print(f"wrote the leaderboard site {args.out}: {len(site['pages'])} page(s) ({', '.join(site['pages'])}) "
+              f"and {len(site['methods'])} method page(s); open {site['index'].resolve().as_uri()}")
+        return
+    if args.no_shipped:
+        raise ColonbenchError("--no-shipped is for --html (without it the tables hold the runs alone unless "
+                              "--shipped)")
     extra = _shipped_for(args.runs) if args.shipped else []
     result = write_leaderboard(args.runs, args.out, figures=not args.no_figures, extra=extra)
     print(result["markdown"])
@@ -145,12 +155,21 @@ def add_parsers(sub) -> None:
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_evaluate)
 
-    p = sub.add_parser("leaderboard", help="tables (md, csv, json) and figures from stored runs on the same data")
-    p.add_argument("runs", nargs="+", help="run folders (colonbench evaluate)")
-    p.add_argument("--out", required=True, help="folder for leaderboard.md/.csv/.json and the figures")
+    p = sub.add_parser("leaderboard", help="tables (md, csv, json) and figures from stored runs on the same data; "
+                                           "--html: a static web site of runs on any suites")
+    p.add_argument("runs", nargs="+", metavar="RUN", help="run folders (colonbench evaluate, score); with --html also "
+                                                          "colonbench benchmark --out folders")
+    p.add_argument("--out", required=True, help="folder for leaderboard.md/.csv/.json and the figures; with --html "
+                                                "the site (OUT/index.html; a site made before is replaced)")
+    p.add_argument("--html", action="store_true", help="write a static site: one page per suite and track, one per "
+                                                       "method, sortable tables, the shipped results merged "
+                                                       "(docs/benchmark.md, The leaderboard page)")
     p.add_argument("--no-figures", action="store_true", help="tables only")
-    p.add_argument("--shipped", action="store_true", help="merge the shipped reference results of the runs' suite "
-                                                          "(methods the runs hold are left out of them)")
+    shipped = p.add_mutually_exclusive_group()
+    shipped.add_argument("--shipped", action="store_true", help="merge the shipped reference results of the runs' "
+                                                                "suite (methods the runs hold are left out of them; "
+                                                                "--html does by default)")
+    shipped.add_argument("--no-shipped", action="store_true", help="--html: leave the shipped results out")
     p.set_defaults(func=cmd_leaderboard)
 
     p = sub.add_parser("methods", help="list the registered coverage-estimation methods")

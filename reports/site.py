@@ -1,0 +1,401 @@
+"""The leaderboard as a static web site: ``colonbench leaderboard RUN... --out SITE --html``.
+
+:func:`write_site` takes run folders (``colonbench evaluate``, ``score``) and
+``colonbench benchmark --out`` folders, groups their runs by suite (or data)
+and *track* (``track`` in run.json, ``points`` where absent), merges the
+shipped results of the built-in methods as ``colonbench benchmark`` does, and
+writes, with no server needed (``file://`` or a project page):
+
+* ``SITE/index.html``: the pages, what each suite tests and how to cite it, and
+  the coverage MAE of every method on every page, per noise level;
+* ``SITE/<suite>/<track>/index.html``: the tables and figures that
+  :func:`colonbench.reports.leaderboard.write_leaderboard` writes into that
+  folder: per noise level every column of the leaderboard table (MAE with its
+  interval, failures, interval scores, ...), precision and recall, breakdowns;
+* ``SITE/methods/<method>.html``: a method's version, how it was run, its model
+  card where one ships, and the package versions and machine its run recorded.
+
+Every table sorts by a click on a column header (:mod:`colonbench.reports.webpage`:
+a small inline script); every string from a run (method names, versions, command
+lines) is escaped.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import shutil
+from pathlib import Path
+
+import pandas as pd
+
+from colonbench._version import __version__
+from colonbench.benchmark.runfolder import RUN_FILE, read_run, write_json
+from colonbench.errors import InputError
+from colonbench.reports.leaderboard import data_line, suite_state
+from colonbench.reports.webpage import esc, fmt, inline, kv_table, page, slug, table, with_interval
+
+#: The track of a run whose run.json names none.
+DEFAULT_TRACK = "points"
+#: Marks a site folder (which a rebuild may replace) and lists its pages.
+SITE_FILE = "site.json"
+#: Precision / recall statistics, shown in their own table rather than the main one.
+PR_COLUMN = re.compile(r"^(holes|centerline)_(precision|recall)_(.+)_(mean|median|q25|q75|undefined)$")
+#: Columns that lead the main table where present, in this order; the others follow in the frame's order.
+FIRST = ("track", "segments", "maps", "failed", "failed_maps", "coverage_undefined", "coverage_mae",
+         "segment_mae", "vs_baseline")
+#: Columns the main table leaves out: the noise level is the section, the others are in other cells.
+HIDDEN = {"noise_mm", "method", "version", "reference", "baseline", "vs_baseline_pairs"}
+LABELS = {"coverage_undefined": "undefined", "coverage_mae": "MAE [95 % CI]", "segment_mae": "segment MAE [95 % CI]",
+          "vs_baseline": "Δ vs best baseline [95 % CI]", "coverage_median": "median", "coverage_bias": "bias",
+          "coverage_q95": "q95", "interval_covered": "truth in interval, %", "interval_width": "interval width",
+          "interval_segments": "segments with an interval", "seconds": "s/segment", "seconds_per_map": "s/map"}
+#: Model cards that ship, by the model named at the head of a method's version (``small@avg9,...``).
+CARDS = {"small": "models/MODEL_CARD.md"}
+#: What each figure of a page shows (a triplet figure is named by its file).
+CAPTIONS = {"boxplots": "Box plots per noise level (the paper's Fig. 4): hole and centerline precision and recall "
+                        "at 2 mm and the absolute coverage error, by method.",
+            "scatter": "Estimated against true coverage, one panel per method.",
+            "colon-maps": "One colon's map, truth and error side by side."}
+
+# ---------------------------------------------------------------------------------------------------- the runs
+
+
+def expand(paths) -> tuple[list[Path], list[str]]:
+    """Run folders and suite ids in ``paths``: a run folder is itself; a ``benchmark --out`` folder gives its
+    ``runs/<suite>/`` and the suites of its ``leaderboard.json`` (shipped results only where it ran none).
+
+    Raises
+    ------
+    InputError
+        A path that is neither.
+    """
+    runs, ids = [], []
+    for p in map(Path, paths):
+        if (p / RUN_FILE).is_file():
+            runs.append(p)
+            continue
+        lb = p / "leaderboard.json"
+        found = sorted(d for d in (p / "runs").glob("*") if (d / RUN_FILE).is_file()) if p.is_dir() else []
+        try:
+            named = list(json.loads(lb.read_text()).get("suites", {})) if lb.is_file() else []
+        except (json.JSONDecodeError, AttributeError) as exc:
+            raise InputError(f"{lb}: unreadable ({exc})") from None
+        if not found and not named:
+            what = "no such folder" if not p.exists() else "neither a run folder (no run.json) nor a colonbench " \
+                "benchmark --out folder (no runs/<suite>/run.json, no leaderboard.json naming suites)"
+            raise InputError(f"{p}: {what}")
+        runs, ids = runs + found, ids + named
+    return list({r.resolve(): r for r in reversed(runs)}.values())[::-1], list(dict.fromkeys(ids))
+
+
+def _suite(sid):
+    from colonbench.benchmark import suites
+
+    try:
+        return suites.get(sid)
+    except InputError:   # a suite this version of colonbench does not know: no shipped results, no description
+        return None
+
+
+def groups(paths, shipped: bool = True) -> dict:
+    """``{(page id, track): {"runs", "records", "extra", "suite"}}``: the runs of each suite (or data) and track,
+    and the shipped results merged into them as ``colonbench benchmark`` merges them (its runs' data verified,
+    the methods they hold left out of the shipped ones; the shipped results are of the ``points`` track)."""
+    from colonbench.benchmark.shipped import shipped_items
+
+    run_dirs, ids = expand(paths)
+    out = {}
+    for d in run_dirs:
+        run = read_run(d)
+        rec, data = run.get("suite") or {}, run.get("data") or {}
+        pid = rec.get("id") or "-".join(str(x) for x in (data.get("manifest_name", "data"), data.get("split", ""),
+                                                          str(data.get("samples_sha256", ""))[:8]))
+        g = out.setdefault((pid, str(run.get("track") or DEFAULT_TRACK)),
+                           {"runs": [], "records": [], "extra": [], "suite": _suite(pid) if rec else None})
+        g["runs"].append(d)
+        g["records"].append((run, str(d)))
+    for s in filter(None, map(_suite, ids) if shipped else ()):
+        out.setdefault((s.id, DEFAULT_TRACK), {"runs": [], "records": [], "extra": [], "suite": s})
+    for (pid, track), g in out.items():
+        verified = all((run.get("suite") or {}).get("verified") for run, _ in g["records"])
+        if shipped and g["suite"] is not None and track == DEFAULT_TRACK and verified:
+            g["extra"] = shipped_items(g["suite"], exclude={m for run, _ in g["records"] for m in run["methods"]})
+            g["records"] += [(item[0], item[-1]) for item in g["extra"]]
+    return {k: g for k, g in out.items() if g["runs"] or g["extra"]}
+
+
+# ---------------------------------------------------------------------------------------------------- the pages
+
+
+def headline(tab: pd.DataFrame, suite) -> pd.DataFrame:
+    """Rows ``noise_mm``, ``method``, ``mae``, ``mae_lo``, ``mae_hi`` of a leaderboard table (a whole-colon
+    table: the segment MAE of its headline track, as the cross-suite table of ``colonbench benchmark``)."""
+    col = "coverage_mae" if "coverage_mae" in tab.columns else "segment_mae"
+    if col == "segment_mae":
+        tab = tab[tab["track"] == (getattr(suite, "headline_track", None) or tab["track"].iloc[0])]
+    return tab.rename(columns={col: "mae", f"{col}_lo": "mae_lo", f"{col}_hi": "mae_hi"})[
+        ["noise_mm", "method", "mae", "mae_lo", "mae_hi"]]
+
+
+def _is_shipped(rec: dict) -> bool:
+    return str(rec.get("run", "")).startswith("shipped")
+
+
+def _method_cell(m: str, methods: dict, root: str) -> tuple[str, str]:
+    rec = methods.get(m, {})
+    mark = (" *" if rec.get("reference") else "") + (" †" if _is_shipped(rec) else "")
+    return f'<a href="{root}methods/{esc(slug(m))}.html">{esc(m)}</a>{mark}', m
+
+
+def _row(m: str, methods: dict) -> dict:
+    return {"data-method": m, "class": "shipped" if _is_shipped(methods.get(m, {})) else "mine"}
+
+
+def main_table(tid: str, g: pd.DataFrame, methods: dict, root: str) -> str:
+    """Every column of the leaderboard frame ``g`` (one noise level) but precision / recall, intervals merged."""
+    cols = [c for c in g.columns if c not in HIDDEN and not PR_COLUMN.match(c)
+            and not (c.endswith(("_lo", "_hi")) and c[:-3] in g.columns)]
+    cols = [c for c in FIRST if c in cols] + [c for c in cols if c not in FIRST]
+    heads = [("method", False), ("source", False), ("version", False)] + [
+        (LABELS.get(c, c.replace("_", " ")), g[c].dtype.kind in "ifb" or f"{c}_lo" in g.columns) for c in cols]
+    rows = []
+    for _, r in g.iterrows():
+        rec = methods.get(r["method"], {})
+        run = str(rec.get("run", ""))
+        src = "shipped" if _is_shipped(rec) else "/".join(Path(run).parts[-2:])
+        cells = [_method_cell(r["method"], methods, root), (f'<span title="{esc(run)}">{esc(src)}</span>', src),
+                 (esc(rec.get("version", r.get("version", ""))), None)]
+        for c in cols:
+            text, v = with_interval(r, c) if f"{c}_lo" in g.columns else fmt(r[c], c)
+            cells.append((esc(text), v))
+        rows.append((_row(r["method"], methods), cells))
+    return table(tid, heads, rows)
+
+
+def pr_table(tid: str, g: pd.DataFrame, methods: dict, root: str) -> str:
+    """Precision and recall, mean (median), per threshold; empty where the frame has none."""
+    cols = [c for c in g.columns if PR_COLUMN.match(c) and c.endswith("_mean")]
+    if not cols:
+        return ""
+    heads = [("method", False)] + [(re.sub(r"^(\w+?)_(precision|recall)_(.+)_mean$",
+                                           lambda m: f"{m[1]} {m[2][0].upper()} @{m[3]}", c), True) for c in cols]
+    rows = [(_row(r["method"], methods), [_method_cell(r["method"], methods, root)] + [
+        (esc(f"{fmt(r[c])[0]} ({fmt(r[c[:-5] + '_median'])[0]})"), fmt(r[c])[1]) for c in cols])
+        for _, r in g.iterrows()]
+    return "<h3>Holes and centerline: precision (P) and recall (R), mean (median)</h3>" + table(tid, heads, rows)
+
+
+def breakdown_tables(bd: pd.DataFrame, methods: dict, root: str) -> str:
+    """Per grouping and noise level, methods x groups: MAE [95 % CI] (segments), as breakdowns.md."""
+    parts = []
+    for by, g in bd.groupby("by", sort=False):
+        for noise in [None] if by == "noise_mm" else sorted(g["noise_mm"].unique()):
+            h = g if noise is None else g[g["noise_mm"] == noise]
+            names = sorted(h["group"].astype(str).unique(), key=lambda x: (len(x), x))
+            rows = []
+            for m, r in h.groupby("method", sort=True):
+                cells = {str(x["group"]): (esc(f"{with_interval(x, 'mae')[0]} ({x['segments']})"), repr(x["mae"]))
+                         for _, x in r.iterrows()}
+                rows.append((_row(m, methods), [_method_cell(m, methods, root)] + [cells.get(c, ("", ""))
+                                                                                   for c in names]))
+            title = f"By {by.replace('_', ' ')}" + ("" if noise is None else f", noise {noise:g} mm")
+            tid = f"breakdown-{by}-{'all' if noise is None else f'{noise:g}'}"
+            parts.append(f"<h3>{esc(title)}</h3>" + table(tid, [("method", False)] + [(c, True) for c in names], rows))
+    return "\n".join(parts)
+
+
+def suite_page(key, g: dict, folder: Path, lb: dict, tab: pd.DataFrame, bd, figures: list[str]) -> str:
+    """The page of one suite (or data) and track."""
+    (pid, track), s, root, methods = key, g["suite"], "../../", lb["methods"]
+    html_ = [f"<h1>{esc(pid)} · track {esc(track)}</h1>"]
+    if s is not None:
+        html_.append(f"<p>{esc(s.tests)}. Cite as <code>{esc(s.id)} ({esc(s.signature)})</code>.</p>")
+    unit = "reconstructions" if lb.get("task") == "colon" else "segments"
+    html_ += [f"<p>{inline(data_line({'data': lb['data'], 'suite': lb.get('suite')}, unit))} Noise levels: "
+              f"{esc(', '.join(f'{n:g}' for n in lb['noise_mm']))} mm (Gaussian, seed {esc(lb['noise_seed'])}).</p>",
+              '<p class="note">Coverage errors in percentage points (estimated - true), MAE with its 95 % bootstrap '
+              "interval over segments; Δ: the paired difference of the absolute error against the best baseline "
+              "(negative: better). Rows marked * are references (given ground truth, or the constant guess); † marks "
+              "the shipped reference results. Click a column header to sort.</p>", "<p>Files: " + " ".join(
+                  f'<a href="{f}">{f}</a>' for f in ("leaderboard.md", "leaderboard.csv", "leaderboard.json",
+                                                     "breakdowns.md", "breakdowns.csv") if (folder / f).is_file())
+              + "</p>"]
+    for noise, h in tab.groupby("noise_mm", sort=True):
+        n = f"noise{noise:g}"
+        html_ += [f'<h2 id="{n}">Noise sigma = {noise:g} mm</h2>', main_table(f"coverage-{n}", h, methods, root),
+                  pr_table(f"pr-{n}", h, methods, root)]
+    extra = pd.DataFrame(lb.get("in_context") or [])
+    if len(extra):
+        html_ += ["<h2>In context vs segment-only, the same segments</h2>", table(
+            "in-context", [(c, extra[c].dtype.kind in "if") for c in extra.columns],
+            [({}, [(esc(t), v) for t, v in (fmt(x, c) for c, x in r.items())]) for _, r in extra.iterrows()])]
+    if bd is not None and len(bd):
+        html_ += ['<h2>Breakdowns</h2><p class="note">Coverage MAE in points with its 95 % interval over the '
+                  "group's segments, and the group's size.</p>", breakdown_tables(bd, methods, root)]
+    if figures:
+        html_ += ["<h2>Figures</h2>"] + [
+            f'<figure><img src="{esc(f)}" alt="{esc(cap)}"><figcaption>{esc(cap)}</figcaption></figure>'
+            for f in figures for cap in [CAPTIONS.get(f[:-4], f[:-4].replace("-", " "))]]
+    every = [(_row(r["method"], methods), [(esc(t), v) for t, v in (fmt(r[c], c) for c in tab.columns)])
+             for _, r in tab.iterrows()]
+    html_ += ["<h2>Every statistic</h2><details><summary>the leaderboard table as computed (leaderboard.csv)"
+              "</summary>", table("all-columns", [(c, tab[c].dtype.kind in "ifb") for c in tab.columns], every),
+              "</details>",
+              "<p>Runs: " + ", ".join(f"<code>{esc(r['path'])}</code>" for r in lb["runs"]) + ".</p>"]
+    return page(f"{pid} · {track}: colonbench leaderboard", "\n".join(html_), root)
+
+
+def model_card(version: str) -> str | None:
+    """The text of the model card that ships for the model a method's version names, if any."""
+    from importlib import resources
+
+    name = CARDS.get(str(version).split("@", 1)[0]) if "@" in str(version) else None
+    card = resources.files("colonbench.completion").joinpath(name) if name else None
+    return card.read_text() if card is not None and card.is_file() else None
+
+
+def method_page(name: str, seen: list[dict]) -> str:
+    """A method's page: per page it appears on, its version, how it was run, its MAE, model card, environment."""
+    body = [f"<h1>{esc(name)}</h1>"]
+    for a in seen:
+        rec, run = a["record"], a["run"]
+        how = {"version": rec.get("version", ""), "spec": rec.get("spec", ""), "class": rec.get("class", ""),
+               "reference": "yes" if rec.get("reference") else "no",
+               "given ground truth": "yes" if rec.get("uses_truth") else "no",
+               "source": "shipped reference results" if _is_shipped(rec) else rec.get("run", "")}
+        mae = [({}, [(esc(f"{r['noise_mm']:g}"), repr(r["noise_mm"])),
+                     (esc(with_interval(r, "mae")[0]), fmt(r["mae"])[1])]) for _, r in a["mae"].iterrows()]
+        body += [f'<h2><a href="../{esc(a["pid"])}/{esc(a["track"])}/index.html">{esc(a["pid"])} · track '
+                 f'{esc(a["track"])}</a></h2>', kv_table(how),
+                 table(f"mae-{a['pid']}-{a['track']}", [("noise, mm", True), ("MAE [95 % CI]", True)], mae)]
+        card = model_card(rec.get("version", ""))
+        body.append("<h3>Model card</h3>" + (
+            f"<details><summary>the shipped model card</summary><pre>{esc(card)}</pre></details>" if card else
+            "<p>None ships: the run records the method's spec, class and version.</p>"))
+        env, versions = rec.get("environment") or run.get("environment"), rec.get("versions") or run.get("versions")
+        env = {k: ", ".join(map(str, v)) if isinstance(v, list) else v for k, v in (env or {}).items()}
+        body.append("<h3>Environment (run.json)</h3>" + (kv_table(env) if env else "<p>Not recorded by this run.</p>"))
+        if versions:
+            body.append("<h3>Package versions</h3>" + kv_table(versions))
+        if run.get("sessions"):
+            cols = list(run["sessions"][0])
+            body.append("<h3>Sessions</h3>" + table(None, [(c, False) for c in cols], [
+                ({}, [(esc(s.get(c, "")), None) for c in cols]) for s in run["sessions"]]))
+    return page(f"{name}: colonbench leaderboard", "\n".join(body), "../")
+
+
+def index_page(pages: list[dict]) -> str:
+    """The site's front page: the pages and every method's MAE on each, per noise level."""
+    rows = []
+    for p in pages:
+        s, lb = p["suite"], p["lb"]
+        mine = sorted(m for m, r in lb["methods"].items() if not _is_shipped(r))
+        rows.append(({"data-page": p["name"]}, [
+            (f'<a href="{esc(p["name"])}/index.html">{esc(p["pid"])}</a>', p["pid"]), (esc(p["track"]), p["track"]),
+            (esc(s.tests if s else "not a named suite"), None), (esc(f"{s.id} ({s.signature})") if s else "", None),
+            (inline(suite_state(lb["suite"])) if lb.get("suite") else "", None),
+            (esc(", ".join(mine) or "none (shipped results only)"), None)]))
+    body = ["<h1>colonbench leaderboard</h1>", "<p>Coverage estimation for colonoscopy: each page is one suite (or "
+            "dataset) and track, the built-in methods' shipped results (†) beside the runs given; * marks reference "
+            "rows. Click a column header to sort.</p>",
+            table("pages", [("suite", False), ("track", False), ("what it tests", False), ("cite as", False),
+                            ("data", False), ("runs given", False)], rows)]
+    recs = {m: r for p in pages for m, r in p["lb"]["methods"].items()}
+    summary = pd.concat([p["mae"].assign(page=p["name"]) for p in pages], ignore_index=True)
+    for noise, g in summary.groupby("noise_mm", sort=True):
+        keyed = {(r["method"], r["page"]): r for _, r in g.iterrows()}
+        order = g.groupby("method")["mae"].mean().reset_index()
+        order["reference"] = order["method"].map(lambda m: bool(recs.get(m, {}).get("reference")))
+        trs = [(_row(m, recs), [_method_cell(m, recs, "")] + [
+            ("—", "") if (m, p["name"]) not in keyed else
+            (esc(with_interval(keyed[m, p["name"]], "mae")[0]), fmt(keyed[m, p["name"]]["mae"])[1]) for p in pages])
+            for m in order.sort_values(["reference", "mae", "method"], na_position="last")["method"]]
+        body += [f"<h2>Coverage MAE, points, noise sigma = {noise:g} mm</h2>", table(
+            f"summary-noise{noise:g}", [("method", False)] + [(f"{p['pid']} · {p['track']}", True) for p in pages],
+            trs)]
+    return page("colonbench leaderboard", "\n".join(body), "")
+
+
+# ---------------------------------------------------------------------------------------------------- the site
+
+
+def _write_pages(found: dict, out: Path, figures: bool) -> tuple[list, dict, list]:
+    """Each group's page, the methods' pages and the index under ``out``: (pages, methods seen, files written)."""
+    from colonbench.reports.leaderboard import write_leaderboard
+
+    pages, written, seen = [], [], {}
+    for key in sorted(found):
+        g, (pid, track) = found[key], (slug(key[0]), slug(key[1]))
+        folder = out / pid / track
+        res = write_leaderboard(g["runs"], folder, figures=figures, extra=g["extra"])
+        lb = json.loads((folder / "leaderboard.json").read_text())
+        tab = pd.read_csv(folder / "leaderboard.csv")
+        bd = pd.read_csv(folder / "breakdowns.csv") if (folder / "breakdowns.csv").is_file() else None
+        pngs = [Path(p).name for p in res["paths"] if str(p).endswith(".png")]
+        (folder / "index.html").write_text(suite_page(key, g, folder, lb, tab, bd, pngs))
+        mae = headline(tab, g["suite"])
+        pages.append({"pid": pid, "track": track, "name": f"{pid}/{track}", "suite": g["suite"], "lb": lb,
+                      "mae": mae})
+        written += [*res["paths"], folder / "index.html"]
+        runs = {label: run for run, label in g["records"]}
+        for name, rec in lb["methods"].items():
+            seen.setdefault(name, []).append({"pid": pid, "track": track, "record": rec,
+                                              "run": runs.get(rec.get("run"), {}), "mae": mae[mae["method"] == name]})
+    (out / "methods").mkdir()
+    for name, where in sorted(seen.items()):
+        written.append(out / "methods" / f"{slug(name)}.html")
+        written[-1].write_text(method_page(name, where))
+    (out / "index.html").write_text(index_page(pages))
+    return pages, seen, written
+
+
+def write_site(paths, out, figures: bool = True, shipped: bool = True) -> dict:
+    """Write the leaderboard site of run folders and ``benchmark --out`` folders into ``out``.
+
+    Parameters
+    ----------
+    paths : list of path
+        Run folders and ``colonbench benchmark --out`` folders.
+    out : path
+        The site folder: new, empty, or a site written before (replaced once the new one is complete).
+    figures : bool
+        Draw each page's figures.
+    shipped : bool
+        Merge the shipped results of the built-in methods where the runs' data verified.
+
+    Returns
+    -------
+    dict
+        ``index`` (the front page's path), ``pages`` (``suite/track`` of each page), ``methods`` (method names),
+        ``paths`` (every file written).
+
+    Raises
+    ------
+    InputError
+        A path that is neither kind of folder, runs that cannot be compared, or an unsuitable ``out``.
+    """
+    final = Path(out)
+    if final.exists() and not final.is_dir():
+        raise InputError(f"{final} is a file: give a folder for the site")
+    if final.is_dir() and not (final / SITE_FILE).is_file() and any(not p.name.startswith(".")
+                                                                    for p in final.iterdir()):
+        raise InputError(f"{final} is not empty and holds no {SITE_FILE}: give a new or empty folder for the site")
+    found = groups(paths, shipped=shipped)
+    if not found:
+        raise InputError(f"nothing to show for {', '.join(map(str, paths))}: no runs, and no shipped results merged")
+    out = final.with_name(f".{final.name}.new")    # written aside, then put in place: never a half-written site
+    shutil.rmtree(out, ignore_errors=True)
+    out.mkdir(parents=True)
+    try:
+        pages, seen, written = _write_pages(found, out, figures)
+    except BaseException:
+        shutil.rmtree(out, ignore_errors=True)
+        raise
+    names = [p["name"] for p in pages]
+    write_json(out / SITE_FILE, {"format": "colonbench-site", "colonbench": __version__,
+                                 "inputs": [str(p) for p in paths], "pages": names})
+    shutil.rmtree(final, ignore_errors=True)
+    out.rename(final)
+    return {"index": final / "index.html", "pages": names, "methods": sorted(seen),
+            "paths": [final / Path(p).relative_to(out) for p in [*written, out / "index.html", out / SITE_FILE]]}

@@ -1,0 +1,141 @@
+"""The leaderboard site (colonbench leaderboard RUN... --out SITE --html), built from a real benchmark folder and
+read in headless Chromium."""
+
+import importlib.util
+import json
+import shutil
+import sys
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from colonbench.benchmark import shipped, suites
+from colonbench.cli import main
+
+ROOT = Path(__file__).resolve().parents[1]
+EXAMPLE = ROOT / "examples" / "constant_method.py"
+#: An argument the example program ignores, so that its command line (shown on its method page) holds markup.
+MARKUP = "--note=<b>bold</b>&amp;"
+
+
+def _script():
+    spec = importlib.util.spec_from_file_location("site_screenshot", ROOT / "scripts" / "site_screenshot.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+#: scripts/site_screenshot.py, which drives the system's headless Chromium.
+browser = _script()
+
+
+@pytest.fixture(scope="module")
+def bench(demo_data, tmp_path_factory):
+    """A colonbench benchmark --out folder: the example program on demo-v1, the shipped results merged."""
+    out = tmp_path_factory.mktemp("site") / "bench"
+    assert main(["benchmark", "--methods", f"exec:{sys.executable} {EXAMPLE} '{MARKUP}'", "--suites", "demo-v1",
+                 "--data", str(demo_data), "--out", str(out), "--quiet", "--no-figures"]) == 0
+    return out
+
+
+@pytest.fixture(scope="module")
+def site(bench):
+    out = bench.parent / "site"
+    assert main(["leaderboard", str(bench), "--out", str(out), "--html"]) == 0
+    return out
+
+
+@pytest.mark.skipif(browser.binaries() is None, reason="Chromium is not installed (apt-get install chromium "
+                    "chromium-driver; scripts/system-deps.sh)")
+def test_the_page_of_a_benchmark_folder_in_chromium(site):
+    """Done when: the page opens in headless Chromium and shows the suite, the shipped rows and the user's method;
+    a click on a header sorts the table."""
+    from selenium.webdriver.common.by import By
+
+    tab = pd.read_csv(site / "demo-v1" / "points" / "leaderboard.csv")
+    noiseless = tab[tab["noise_mm"] == 0]
+    published = set(shipped.load(suites.get("demo-v1"))[0]["methods"])
+
+    def rows(driver, table):
+        return [(tr.get_attribute("data-method"), tr.get_attribute("class"))
+                for tr in driver.find_elements(By.CSS_SELECTOR, f"#{table} tbody tr")]
+
+    with browser.chromium() as driver:
+        driver.get((site / "index.html").as_uri())
+        assert driver.title == "colonbench leaderboard"
+        summary = [m for m, _ in rows(driver, "summary-noise0")]
+        assert set(summary) == published | {"constant_method"}
+        driver.find_element(By.CSS_SELECTOR, "#pages a").click()               # follow to the suite's page
+        assert driver.title.startswith("demo-v1 · points")
+        assert "Cite as demo-v1 (cbs1-" in driver.find_element(By.TAG_NAME, "body").text
+        images = driver.execute_script("return Array.from(document.images).map(i => i.complete && i.naturalWidth)")
+        assert len(images) >= 2 and all(images)                                # the figures, loaded from file://
+        shown = rows(driver, "coverage-noise0")
+        assert [m for m, _ in shown] == list(noiseless["method"])              # ranked as the leaderboard ranks
+        assert {m for m, c in shown if c == "shipped"} == published
+        assert [m for m, c in shown if c == "mine"] == ["constant_method"]
+        mine = driver.find_element(By.CSS_SELECTOR, '#coverage-noise0 tr[data-method="constant_method"]').text
+        assert "shipped" not in mine and f"{noiseless.set_index('method').loc['constant_method', 'coverage_mae']:.2f}" \
+            in mine
+        browser.sort_by(driver, "coverage-noise0", "MAE [95 % CI]")
+        ascending = list(noiseless.sort_values("coverage_mae", kind="stable")["method"])
+        assert [m for m, _ in rows(driver, "coverage-noise0")] == ascending
+        head = [h for h in driver.find_elements(By.CSS_SELECTOR, "#coverage-noise0 th") if h.text.startswith("MAE")]
+        assert head[0].get_attribute("aria-sort") == "ascending"
+        browser.sort_by(driver, "coverage-noise0", "MAE [95 % CI]")                 # again: descending
+        assert [m for m, _ in rows(driver, "coverage-noise0")] == ascending[::-1]
+        browser.sort_by(driver, "coverage-noise0", "method")
+        assert [m for m, _ in rows(driver, "coverage-noise0")] == sorted(noiseless["method"], key=str.lower)
+        driver.find_element(By.LINK_TEXT, "constant_method").click()            # the method's page
+        assert MARKUP in driver.find_element(By.TAG_NAME, "body").text         # its command line, as text
+        assert not driver.find_elements(By.CSS_SELECTOR, "td b")
+
+
+def test_a_folder_that_is_not_a_run_is_named(tmp_path, capsys):
+    (tmp_path / "notes").mkdir()
+    assert main(["leaderboard", str(tmp_path / "notes"), "--out", str(tmp_path / "site"), "--html"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("colonbench: error: ") and str(tmp_path / "notes") in err and "Traceback" not in err
+    assert main(["leaderboard", str(tmp_path / "gone"), "--out", str(tmp_path / "site"), "--html"]) == 2
+    assert f"{tmp_path / 'gone'}: no such folder" in capsys.readouterr().err
+    assert not (tmp_path / "site").exists()
+
+
+def test_strings_from_runs_are_escaped_and_nothing_comes_from_the_network(site):
+    page = (site / "methods" / "constant_method.html").read_text()
+    assert "&lt;b&gt;bold&lt;/b&gt;&amp;amp;" in page and "<b>bold" not in page
+    assert "None ships" in page and "cpu_count" in page                        # its environment, from run.json
+    assert "the shipped model card" in (site / "methods" / "completion.html").read_text()
+    for html in site.rglob("*.html"):
+        text = html.read_text()
+        assert '="http' not in text and "url(" not in text and "@import" not in text, html
+
+
+def test_a_site_is_rebuilt_in_place_and_never_over_other_files(bench, tmp_path, capsys):
+    assert main(["leaderboard", str(bench), "--out", str(bench), "--html"]) == 2   # a folder that is not a site
+    assert "holds no site.json" in capsys.readouterr().err
+    site = tmp_path / "site"
+    assert main(["leaderboard", str(bench), "--out", str(site), "--html", "--no-figures"]) == 0
+    (site / "stale.html").write_text("left over")
+    assert main(["leaderboard", str(bench / "runs" / "demo-v1"), "--out", str(site), "--html", "--no-figures",
+                 "--no-shipped"]) == 0
+    assert not (site / "stale.html").exists()
+    assert json.loads((site / "site.json").read_text())["pages"] == ["demo-v1/points"]
+    assert [p.name for p in (site / "methods").iterdir()] == ["constant_method.html"]
+
+
+def test_pages_are_per_suite_and_track(bench, tmp_path):
+    """A run whose run.json names another track gets its own page, without the shipped rows (of the points track)."""
+    other = tmp_path / "length-run"
+    shutil.copytree(bench / "runs" / "demo-v1", other, ignore=shutil.ignore_patterns("parts", "predictions"))
+    run = json.loads((other / "run.json").read_text())
+    (other / "run.json").write_text(json.dumps({**run, "track": "length"}))
+    out = tmp_path / "site"
+    assert main(["leaderboard", str(bench), str(other), "--out", str(out), "--html", "--no-figures"]) == 0
+    assert json.loads((out / "site.json").read_text())["pages"] == ["demo-v1/length", "demo-v1/points"]
+    length = pd.read_csv(out / "demo-v1" / "length" / "leaderboard.csv")
+    assert list(length["method"].unique()) == ["constant_method"]
+    assert "constant_method" in set(pd.read_csv(out / "demo-v1" / "points" / "leaderboard.csv")["method"])
+    method = (out / "methods" / "constant_method.html").read_text()
+    assert "demo-v1 · track length" in method and "demo-v1 · track points" in method
