@@ -9,7 +9,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: install test demo bench clean
+.PHONY: install test demo bench cards clean
 
 $(STAMP): pyproject.toml scripts/system-deps.sh $(CONSTRAINTS)
 	./scripts/system-deps.sh
@@ -31,6 +31,10 @@ demo: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python scripts/bench_datagen.py
 	$(BIN)/python scripts/bench_shards.py --manifest data_manifests/paper.yaml --shards 2
+
+# every suite's dataset card and Croissant metadata in docs/suites/ (tests/test_cards.py checks they are current)
+cards: $(STAMP)
+	$(BIN)/python scripts/suite_cards.py
 
 clean:
 	rm -rf $(VENV) out .pytest_cache *.egg-info

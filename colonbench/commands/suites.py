@@ -1,4 +1,4 @@
-"""``colonbench suites``: list the suites, check the cached ones, archive a suite, fetch an archive."""
+"""``colonbench suites``: list the suites, check the cached ones, archive a suite, fetch an archive, write a card."""
 
 from __future__ import annotations
 
@@ -18,6 +18,8 @@ def cmd_suites(args):
         return _archive(args)
     if getattr(args, "action", None) == "fetch":
         return _fetch(args)
+    if getattr(args, "action", None) == "card":
+        return _card(args)
     rows = suites.SUITES if args.all_versions else tuple(suites.latest().values())
     for s in rows:
         here = suites.data_dir(s, args.data)
@@ -68,6 +70,15 @@ def _fetch(args):
     return 0
 
 
+def _card(args):
+    from colonbench.benchmark import cards, suites
+
+    for suite in suites.parse(args.suite):
+        md, js = cards.write(suite, args.out)
+        print(f"{suite.id}: wrote {md} and {js}")
+    return 0
+
+
 def add_parsers(sub) -> None:
     """Add ``suites`` (with its ``archive`` and ``fetch`` actions) to the ``colonbench`` subparsers."""
     p = sub.add_parser("suites", help="list the named, versioned suites; check, archive or fetch their data",
@@ -101,3 +112,11 @@ def add_parsers(sub) -> None:
     f.add_argument("--sha256", required=True, help="the archive's sha256 (64 hex digits)")
     f.add_argument("--data", default=argparse.SUPPRESS, help=DATA_HELP)
     f.add_argument("--quiet", action="store_true", help="no progress bar")
+    c = actions.add_parser("card", help="write a suite's dataset card (Markdown) and Croissant metadata (JSON-LD)",
+                           description="Write a suite's dataset card, DIR/<suite id>.md (what it tests, how it is "
+                                       "made, what a sample holds, licence and attribution, how to cite it, its "
+                                       "signature), and its Croissant 1.0 metadata, DIR/<suite id>.croissant.json, "
+                                       "from the suite registry, its manifest and its published signature; no data "
+                                       "are needed. The project keeps every suite's pair in docs/suites/.")
+    c.add_argument("suite", help="suite id or name (colonbench suites), comma-separated ones, or all")
+    c.add_argument("--out", default=".", metavar="DIR", help="folder to write them into (default: the current folder)")
