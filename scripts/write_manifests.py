@@ -203,6 +203,13 @@ dump("colon-val", "Whole-colon validation, where the map's settings are chosen (
      20261123, {"validation": whole_colons(340, 4, 2, ["gca00090", "gca00080"])},
      mesh_names=["gca00090", "gca00080"], task="colon")
 
+#: The real validation colon mapped whole (issue 63): where the map's figures on a real colon are judged and its
+#: segments' intervals calibrated, never colon-test.yaml's gca00060.
+dump("colon-val-real", "Whole-colon validation on the real validation colon gca00020 (colonbench evaluate --task colon "
+     "--split validation): two whole partial reconstructions (withdrawal-camera or sphere holes, 2 points/mm^2, each "
+     "with its withdrawal trajectory), with their exact per-face truth. No manifest trains on gca00020.",
+     20261130, {"validation": whole_colons(0, 0, 2, ["gca00020"])}, mesh_names=["gca00020"], task="colon")
+
 #: Whole-colon training data of the context model (issue 12): its context samples are cut from these
 #: reconstructions (colonbench pack --context): paper.yaml's train colons and the real colon gca00090, and
 #: colons of the widened generator; gca00080 stays out for colon-val.yaml to judge on.
