@@ -40,6 +40,8 @@ SUFFIX = ".intervals.json"
 #: The features of an estimate its interval is scaled by, per scaled scheme (:func:`features`; decision record 0156).
 SCALE_FEATURES = {
     "scaled": ("one", "estimate", "length", "span_ratio", "no_rim", "one_rim", "doubtful"),
+    "scaled2": ("one", "estimate", "length", "span_ratio", "no_rim", "one_rim", "doubtful"),
+    "scaled2-gaps": ("one", "estimate", "length", "span_ratio", "no_rim", "one_rim", "doubtful", "gap_share"),
     "scaled+": ("one", "estimate", "length", "span_ratio", "no_rim", "one_rim", "doubtful", "unwrap_gap",
                 "unwrap_gap_abs", "threshold_gap", "largest_hole", "aspect", "log_density", "roughness"),
 }
@@ -56,7 +58,7 @@ def features(coverage: float, signals: dict, names) -> np.ndarray:
     the planes / that line; ``no_rim``, ``one_rim``: how many cut rims were found; ``doubtful``: a doubtful rim;
     ``unwrap_gap`` (``_abs``): the coverage minus the unwrapping coverage of the cloud around the method's line;
     ``threshold_gap``: minus the thresholding coverage of the same prediction; ``largest_hole``: the area share of
-    the largest patch of hole faces; ``aspect``: the tube's diameter / the line's length; ``log_density``: the log of
+    the largest patch of hole faces; ``gap_share``: the area share of the wall-gap patches; ``aspect``: the tube's diameter / the line's length; ``log_density``: the log of
     the cloud's points/mm^2; ``roughness``: its points' rms distance from their neighbours' plane, mm."""
     g = lambda k: float(signals.get(k, 0.0) or 0.0)          # noqa: E731
     length = g("length_mm")
@@ -66,7 +68,7 @@ def features(coverage: float, signals: dict, names) -> np.ndarray:
              "doubtful": float(g("rims_doubtful") > 0),
              "unwrap_gap": float(coverage) - g("unwrap_coverage") if "unwrap_coverage" in signals else 0.0,
              "threshold_gap": float(coverage) - g("threshold_coverage") if "threshold_coverage" in signals else 0.0,
-             "largest_hole": g("largest_hole"), "aspect": 2.0 * g("radius_mm") / max(length, 1.0),
+             "largest_hole": g("largest_hole"), "gap_share": g("gap_share"), "aspect": 2.0 * g("radius_mm") / max(length, 1.0),
              "log_density": float(np.log(max(g("density"), 1e-3))), "roughness": g("roughness_mm")}
     value["unwrap_gap_abs"] = abs(value["unwrap_gap"])
     out = np.array([value[n] for n in names], float)
@@ -77,6 +79,11 @@ def _scaled(scheme: str) -> str | None:
     """The scaled factor of a scheme (``scaled`` or ``scaled+``), or None."""
     last = scheme.split("+", 1)[-1] if scheme.startswith("length+") else scheme
     return last if last in SCALE_FEATURES else None
+
+
+def _two_sided(scaled: str | None) -> bool:
+    """Whether a scaled factor fits a scale for each end of the interval (``scaled2``, ``scaled2-gaps``)."""
+    return bool(scaled) and scaled.startswith("scaled2")
 
 
 def _groups_of(scheme: str) -> str:
@@ -163,12 +170,6 @@ class Intervals:
         low, high = self.quantiles(coverage, signals)
         return float(np.clip(coverage + low, 0, 1)), float(np.clip(coverage + high, 0, 1))
 
-    def scale(self, coverage: float, signals: dict) -> float:
-        """The scale of an estimate's interval (1 in a scheme that is not scaled)."""
-        g = self.known if signals.get("extent") == "known" and self.known else next(
-            (self.groups[k] for k in (group_key(coverage, signals, sch) for sch in (self.scheme, "marginal"))
-             if k in self.groups), {})
-        return _scale_of(g, coverage, signals)
 
     def apply(self, est) -> None:
         """Set an :class:`~colonbench.estimate.Estimate`'s ``coverage_interval``, ``interval_level`` and ``review``
@@ -190,28 +191,43 @@ class Intervals:
         return asdict(self)
 
 
-def _scale_of(group: dict, coverage: float, signals: dict) -> float:
-    """``exp(w . f)`` of a scaled group (its ``weights`` over its ``features``), else 1."""
-    if "weights" not in group:
+def _scale_of(group: dict, coverage: float, signals: dict, side: str = "") -> float:
+    """``exp(w . f)`` of a scaled group (its ``weights``, or ``weights_low`` / ``weights_high`` by ``side`` in a
+    two-sided one, over its ``features``), else 1."""
+    w = group.get(f"weights_{side}", group.get("weights"))
+    if w is None:
         return 1.0
-    return float(np.exp(np.clip(features(coverage, signals, group["features"]) @ np.asarray(group["weights"]), -20, 5)))
+    return float(np.exp(np.clip(features(coverage, signals, group["features"]) @ np.asarray(w), -20, 5)))
 
 
 def _scale(group: dict, coverage: float, signals: dict) -> tuple[float, float]:
-    s = _scale_of(group, coverage, signals)
-    return group["low"] * s, group["high"] * s
+    return (group["low"] * _scale_of(group, coverage, signals, "low"),
+            group["high"] * _scale_of(group, coverage, signals, "high"))
 
 
-def _fit_group(residual: np.ndarray, x: np.ndarray | None, names, level: float) -> dict:
-    """A group's quantiles, of the residuals or (``x``: its features) of the residuals over their fitted scale."""
+def _log_fit(x: np.ndarray, magnitude: np.ndarray) -> tuple[list, np.ndarray]:
+    """Least-squares weights of ``log(magnitude + SCALE_FLOOR)`` on ``x``, and the scales they give."""
+    w, *_ = np.linalg.lstsq(x, np.log(magnitude + SCALE_FLOOR), rcond=None)
+    return [float(v) for v in w], np.exp(np.clip(x @ w, -20, 5))
+
+
+def _fit_group(residual: np.ndarray, x: np.ndarray | None, names, level: float, two_sided: bool = False) -> dict:
+    """A group's quantiles: of the residuals, or (``x``: its features) of the residuals over their fitted scale;
+    ``two_sided``: a scale of the residuals below 0 for the low end and one of those above for the high end, each
+    end's quantile taken of the residuals over its own scale."""
     if x is None:
         low, high = conformal_quantiles(residual, level)
         return {"low": low, "high": high, "n": int(len(residual))}
-    w, *_ = np.linalg.lstsq(x, np.log(np.abs(residual) + SCALE_FLOOR), rcond=None)
-    s = np.exp(np.clip(x @ w, -20, 5))
-    low, high = conformal_quantiles(residual / s, level)
-    return {"low": low, "high": high, "n": int(len(residual)), "features": list(names),
-            "weights": [float(v) for v in w]}
+    out = {"n": int(len(residual)), "features": list(names)}
+    if not two_sided:
+        out["weights"], s = _log_fit(x, np.abs(residual))
+        out["low"], out["high"] = conformal_quantiles(residual / s, level)
+        return out
+    out["weights_low"], s_low = _log_fit(x, np.maximum(-residual, 0.0))
+    out["weights_high"], s_high = _log_fit(x, np.maximum(residual, 0.0))
+    out["low"] = conformal_quantiles(residual / s_low, level)[0]
+    out["high"] = conformal_quantiles(residual / s_high, level)[1]
+    return out
 
 
 def known_length(est, length_mm: float) -> None:
@@ -245,7 +261,8 @@ def fit(true, estimated, signals: list, scheme: str, review_width: float, level:
         for key in np.unique(keys):
             sel = keys == key
             if sel.sum() >= MIN_GROUP and str(key) not in groups:
-                groups[str(key)] = _fit_group(residual[sel], x[sel] if scaled else None, names, level)
+                groups[str(key)] = _fit_group(residual[sel], x[sel] if scaled else None, names, level,
+                                              _two_sided(scaled))
     return Intervals(scheme, level, groups, review_width, dict(source or {}))
 
 
@@ -256,7 +273,7 @@ def fit_known(cal: Intervals, true, estimated, signals: list | None = None) -> N
     scaled = _scaled(cal.scheme)
     names = SCALE_FEATURES[scaled] if scaled else ()
     x = np.array([features(c, sig, names) for c, sig in zip(estimated, signals)]) if scaled else None
-    cal.known = _fit_group(residual, x, names, cal.level)
+    cal.known = _fit_group(residual, x, names, cal.level, _two_sided(scaled))
 
 
 def path_for(model: Path) -> Path:

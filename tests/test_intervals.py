@@ -147,29 +147,38 @@ def test_the_benchmark_scores_intervals_and_says_n_a_for_methods_without(demo_da
     assert "| sure: interval |" in bd and "| plain: interval |" not in bd and "% inside, 20.0 wide" in bd
 
 
-def test_the_calibration_halves_put_each_real_colon_in_its_own_half(monkeypatch):
-    # scripts/calibrate_intervals.py measures each scheme fitted on one half of the colons on the other: the widened
-    # colons 0-3 alternate as their ids do, and the real colons (ids 900080 and 900090, both even) are split
+def test_the_calibration_is_measured_leaving_each_colon_out(monkeypatch):
+    """scripts/calibrate_intervals.py measures every scheme leave-one-colon-out: each colon's intervals come from a
+    calibration fitted on all the other colons, and the truth-inside shares are those of the held-out intervals."""
     import importlib.util
 
     spec = importlib.util.spec_from_file_location(
         "calibrate_intervals", Path(__file__).resolve().parents[1] / "scripts" / "calibrate_intervals.py")
     script = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(script)
-    ids = [900090, 0, 0, 1, 2, 3, 900080, 900090]
-    assert script.even_half(pd.Series(ids)).tolist() == [False, True, True, False, True, False, True, False]
+    ids = np.repeat([3, 900020, 7], 40)
+    df = pd.DataFrame({"colon_id": ids, "true": np.tile(np.linspace(0.5, 0.9, 40), 3), "estimate": 0.7,
+                       "rims": 2, "length_mm": 50.0, "span_mm": 50.0, "segment_mm": 50.0,
+                       "set": np.where(ids == 900020, "V_real", "V_wide"), "noise_mm": 0.0})
+    df.loc[df["colon_id"] == 7, "true"] = 0.7              # one colon whose truths all equal its estimates
     fitted_on = []
     real_fit = script.intervals.fit
 
     def recording_fit(true, estimated, signals, *args, **kwargs):
-        fitted_on.append(sorted(set(df.loc[true.index, "colon_id"])))
+        fitted_on.append(len(true))
         return real_fit(true, estimated, signals, *args, **kwargs)
 
     monkeypatch.setattr(script.intervals, "fit", recording_fit)
-    df = pd.DataFrame({"colon_id": ids, "true": np.linspace(0.5, 0.9, 8), "estimate": np.full(8, 0.7),
-                       "rims": 2, "length_mm": 50.0})
-    script.held_out(df, "marginal", 0.9)
-    assert fitted_on == [[0, 2, 900080], [1, 3, 900090]]
+    held = script.by_colon(df, "length+band", 0.9)
+    assert fitted_on == [80, 80, 80]                       # each fit leaves one colon of 40 out
+    # colon 7 (truths at the estimate) gets the interval of colons 3 and 900020: their 80 residuals, each of
+    # linspace(-0.2, 0.2, 40) twice, have the 4th smallest (rank floor(81 * 0.05)) at the second step
+    seven = held[held["colon_id"] == 7]
+    assert seven["inside"].all() and seven["low"].iloc[0] == pytest.approx(0.7 - 0.2 + 0.4 / 39, abs=1e-9)
+    # colons 3 and 900020 get it from one spread colon and one at zero: narrower than their own spread
+    assert 0 < held.loc[held["colon_id"] == 3, "inside"].mean() < 1
+    table = script.cells(held)
+    assert set(table.index.get_level_values("set")) == {"V_real", "V_wide"} and table["n"].sum() == 120
 
 
 def test_a_map_segment_gets_the_interval_around_its_own_coverage():
@@ -221,3 +230,25 @@ def test_a_calibrated_method_gives_each_segment_its_interval_around_the_maps_cov
     for method, expected in ((Sure(), [0.7, 0.9]), (Calibrated(), [0.75, 1.0])):
         result = map_colon(pts, method, segment_mm=60.0, positions=line.points[::-20], progress=False)
         assert [s.coverage_interval for s in result["segments"]] == [pytest.approx(expected)] * 3
+
+
+def test_a_scaled_interval_follows_the_scale_its_signals_give():
+    """Residuals of +-0.2 on short lines and +-0.02 on long ones: the scale, fitted to log(|r| + 0.005), is
+    0.205 / 0.025 times larger on the short, and so is the interval, which holds every truth. Two-sided, with
+    under-estimates (+0.2) only on short lines, the high end reaches far there and the low end does not."""
+    n = 400
+    short = np.arange(n) % 4 < 2
+    sign = np.where(np.arange(n) % 2 == 0, 1.0, -1.0)
+    sig = [{"length_mm": 30.0 if s else 90.0, "span_mm": 30.0 if s else 90.0, "rims": 2} for s in short]
+    residual = sign * np.where(short, 0.2, 0.02)
+    cal = intervals.fit(0.5 + residual, np.full(n, 0.5), sig, "scaled", 0.4)
+    ends = np.array([cal.interval(0.5, s) for s in sig])
+    widths = ends[:, 1] - ends[:, 0]
+    assert widths[short].mean() / widths[~short].mean() == pytest.approx(0.205 / 0.025, rel=1e-6)
+    assert ((ends[:, 0] - 1e-12 <= 0.5 + residual) & (0.5 + residual <= ends[:, 1] + 1e-12)).all()
+    skew = np.where(short & (sign < 0), -0.02, residual)
+    two = intervals.fit(0.5 + skew, np.full(n, 0.5), sig, "scaled2", 0.4)
+    (lo_s, hi_s), (lo_l, hi_l) = two.interval(0.5, sig[0]), two.interval(0.5, sig[2])
+    assert hi_s - 0.5 > 2.5 * (hi_l - 0.5) and 0.5 - lo_s < 1.5 * (0.5 - lo_l)
+    ends = np.array([two.interval(0.5, s) for s in sig])
+    assert ((ends[:, 0] - 1e-12 <= 0.5 + skew) & (0.5 + skew <= ends[:, 1] + 1e-12)).all()
