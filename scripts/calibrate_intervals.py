@@ -1,18 +1,20 @@
-"""Calibrate the completion method's coverage intervals: split-conformal on data_manifests/calibration.yaml and
-calibration-real.yaml.
+"""Calibrate the completion method's coverage intervals on colons neither the network nor the calibration saw.
 
-    python scripts/calibrate_intervals.py [--data data] [--model small] [--level 0.9]
+    python scripts/calibrate_intervals.py [--data data] [--model small] [--level 0.9] [--workers 2]
 
-Generates the calibration set where missing, ``<data>/calibration`` and ``<data>/calibration-real`` (the two
-manifests' validation splits: widened colons no manifest trains on with a tenth video partials, and the real
-training colons, which make up about 43 % of the segments: decision record 0147), estimates every segment with the
-completion method (its intervals off) at 0 and 0.5 mm noise (the suites' levels, the noise drawn as colonbench
-evaluate draws it), and chooses the grouping by a rule fixed before the measurement (decision record 0144): each
-candidate scheme is fitted on the colons of one half (the parity of a colon's rank among the colons sorted by id)
-and measured on the other, both ways; of the schemes whose held-out coverage lies within 4 points of the level in
-every group of at least 30 segments, the one with the smallest mean width wins (else the marginal one). It is then
-fitted on all segments and written beside the model (``<model>.intervals.json``). Prints the held-out coverage and
-width of every scheme.
+Generates the calibration's datasets where missing (``<data>/<manifest>``, the manifests' validation splits):
+data_manifests/calibration.yaml's widened colons (``V_wide``: no manifest trains on them; its segments of the real
+training colons are left out) and validation-real.yaml, the real validation colon gca00020 (``V_real``), with
+calibration-real.yaml's real training colons, which are reported, never calibrated on (the network saw them).
+Estimates every segment with the completion method (its intervals off) at 0 and 0.5 mm noise, as the suites do,
+with the signals its intervals are scaled by (cached per model and steps in ``<data>/<manifest>``), then chooses
+the scheme by decision record 0156's rule: every scheme is measured leave-one-colon-out (a colon's estimates get the
+intervals of a calibration fitted on all the other colons); of those whose truth-inside share lies within 85-95 % in
+each of ``V_real`` and ``V_wide`` at each noise level, the one with the smallest mean width on ``V_real`` (else the
+one whose worst cell lies closest to the level). The review width comes from the same held-out intervals. The
+chosen scheme is fitted on all of ``V_wide`` and ``V_real`` and written beside the model
+(``<model>.intervals.json``), with the known-length interval fitted on the same segments with their true lengths.
+Prints every scheme's held-out table.
 """
 
 from __future__ import annotations
@@ -33,32 +35,38 @@ from colonbench.shards.dataset import generate
 from colonbench.shards.reader import Shard
 from colonbench.shards.schema import sha256_file
 
-MANIFESTS = tuple(Path(__file__).resolve().parents[1] / "data_manifests" / f"{name}.yaml"
-                  for name in ("calibration", "calibration-real"))
-SCHEMES = ("marginal", "rims", "length", "length+band", "length+rims")
+ROOT = Path(__file__).resolve().parents[1] / "data_manifests"
+#: The calibration's datasets: manifest name -> the set its segments belong to (``train_real``: reported only).
+MANIFESTS = {"calibration": "V_wide", "validation-real": "V_real", "calibration-real": "train_real"}
+CALIBRATED = ("V_wide", "V_real")
+SCHEMES = ("length+band", "scaled", "scaled+", "length+scaled+")
 NOISE_MM = (0.0, 0.5)
-#: An interval wider than this flags its estimate for review: the truth may lie 20 points or more away (the
-#: calibration groups of the shortest clouds, whose 90 % intervals span 47-51 points; the others span 12-35).
-REVIEW_WIDTH = 0.4
+#: The signals an estimate's interval may be scaled by, as columns of the estimates' table.
+SIGNALS = ("rims", "rims_doubtful", "gap_share", "length_mm", "span_mm", "unwrap_coverage", "threshold_coverage", "largest_hole",
+           "radius_mm", "density", "roughness_mm")
+#: The review rule (decision record 0156): flag at least this share of the estimates off by more than BIG.
+REVIEW_RECALL, BIG = 0.8, 0.15
+#: Colon ids of real meshes start here (data_manifests: 900000 + the atlas number).
+REAL_IDS = 900000
 
 
-def calibration_data(root: Path, workers: int = 2) -> list[tuple[Path, Path]]:
-    """(manifest, folder) of each calibration manifest, generated under ``root`` where missing (``<root>/<name>``)."""
+def calibration_data(root: Path, workers: int = 2) -> list[tuple[str, Path]]:
+    """(manifest name, folder) of each calibration dataset, generated under ``root`` where missing."""
     root = Path(root)
     if (root / "manifest.yaml").is_file():
         raise SystemExit(f"--data {root} is a single dataset: give the folder that holds (or is to hold) "
-                         f"{' and '.join(m.stem + '/' for m in MANIFESTS)}, the calibration's datasets (default: data)")
+                         f"{' and '.join(m + '/' for m in MANIFESTS)}, the calibration's datasets (default: data)")
     out = []
-    for manifest in MANIFESTS:
-        data = root / manifest.stem
-        generate(manifest, data, workers=workers, splits=["validation"], progress=False)
-        out.append((manifest, data))
+    for name in MANIFESTS:
+        data = root / name
+        generate(ROOT / f"{name}.yaml", data, workers=workers, splits=["validation"], progress=False)
+        out.append((name, data))
     return out
 
 
 def estimates(data: Path, method: CompletionMethod, cache: Path) -> pd.DataFrame:
-    """Completion's estimate of every validation segment at every noise level (cached in ``cache``)."""
-    if cache.is_file() and "span_mm" in pd.read_csv(cache, nrows=0).columns:   # a cache without spans: made again
+    """Completion's estimate of every validation segment at every noise level, with its signals (cached)."""
+    if cache.is_file():
         return pd.read_csv(cache)
     _, picks = select(data, "validation")
     rows = []
@@ -75,8 +83,7 @@ def estimates(data: Path, method: CompletionMethod, cache: Path) -> pd.DataFrame
                     rows.append({"shard": name, "index": i, "colon_id": geo["colon_id"], "noise_mm": sigma,
                                  "hole_model": geo["hole_model"], "segment_mm": geo["length_mm"],
                                  "true": geo["coverage"], "estimate": est.coverage,
-                                 "rims": est.signals.get("rims", 0), "length_mm": est.signals.get("length_mm"),
-                                 "span_mm": est.signals.get("span_mm")})
+                                 **{k: est.signals.get(k, np.nan) for k in SIGNALS}})
         print(f"{name}: {len(rows)} estimates", flush=True)
     out = pd.DataFrame(rows)
     out = out[np.isfinite(out["estimate"])]             # an empty completed surface gives no estimate
@@ -85,52 +92,144 @@ def estimates(data: Path, method: CompletionMethod, cache: Path) -> pd.DataFrame
 
 
 def signals_of(row) -> dict:
-    return {"rims": int(row["rims"]), "length_mm": float(row["length_mm"])}
+    return {k: float(row[k]) for k in SIGNALS if k in row and np.isfinite(row[k])}
 
 
 def signals(df: pd.DataFrame) -> list[dict]:
     return [signals_of(r) for _, r in df.iterrows()]
 
 
-def even_half(colon_ids: pd.Series) -> pd.Series:
-    """Whether each row's colon is in the first of the two halves the schemes are measured on: the parity of the
-    colon's rank among the distinct ids sorted (not of the id itself, which puts both real colons, 900080 and
-    900090, in one half; decision record 0147)."""
-    rank = {c: k for k, c in enumerate(sorted(colon_ids.unique()))}
-    return colon_ids.map(rank) % 2 == 0
+def known_estimates(df: pd.DataFrame) -> np.ndarray:
+    """The estimates with each segment's true length given, as :func:`intervals.known_length` scales them."""
+    share = df["span_mm"] / df["segment_mm"]
+    return np.where(share < intervals.SHORT_SHARE, df["estimate"] * share, df["estimate"]).astype(float)
 
 
-def held_out(df: pd.DataFrame, scheme: str, level: float) -> pd.DataFrame:
-    """Coverage and width per group of a scheme fitted on one half of the colons and measured on the other."""
-    half = even_half(df["colon_id"])
-    rows = []
-    for fit_on, test_on in ((half, ~half), (~half, half)):
-        a, b = df[fit_on], df[test_on]
-        cal = intervals.fit(a["true"], a["estimate"], signals(a), scheme, REVIEW_WIDTH, level)
-        for _, r in b.iterrows():
-            lo, hi = cal.interval(r["estimate"], signals_of(r))
-            rows.append({"group": intervals.group_key(r["estimate"], signals_of(r), scheme),
-                         "inside": lo - 1e-12 <= r["true"] <= hi + 1e-12, "width": hi - lo})
-    return pd.DataFrame(rows)
+def by_colon(df: pd.DataFrame, scheme: str, level: float, known: bool = False) -> pd.DataFrame:
+    """``df`` with each row's interval (``low``, ``high``) from a calibration fitted on the other colons
+    (leave-one-colon-out); ``known``: the known-length interval around the length-scaled estimate."""
+    out = df.copy()
+    est = known_estimates(df) if known else df["estimate"].to_numpy(float)
+    out["estimate_used"] = est
+    sig = signals(df)
+    low, high = np.empty(len(df)), np.empty(len(df))
+    colons = df["colon_id"].to_numpy()
+    for colon in np.unique(colons):
+        fit_on, test_on = np.flatnonzero(colons != colon), np.flatnonzero(colons == colon)
+        sig_fit = [sig[k] for k in fit_on]
+        if known:
+            cal = intervals.Intervals(scheme, level, {}, 1.0)
+            intervals.fit_known(cal, df["true"].to_numpy(float)[fit_on], est[fit_on], sig_fit)
+        else:
+            cal = intervals.fit(df["true"].to_numpy(float)[fit_on], est[fit_on], sig_fit, scheme, 1.0, level)
+        for k in test_on:
+            s = {**sig[k], "extent": "known"} if known else sig[k]
+            low[k], high[k] = cal.interval(est[k], s)
+    out["low"], out["high"] = low, high
+    out["inside"] = (out["low"] - 1e-12 <= out["true"]) & (out["true"] <= out["high"] + 1e-12)
+    out["width"] = out["high"] - out["low"]
+    return out
 
 
-def choose(name: str, held: dict, level: float) -> tuple[str | None, dict]:
-    """0144's rule on held-out tables (:func:`held_out`'s) of several schemes: of those whose coverage lies within 4
-    points of ``level`` in every group of at least :data:`intervals.MIN_GROUP` rows, the narrowest (None if none
-    does); prints each scheme's table. Also the summary per scheme: ``covered``, ``width`` (fractions), ``ok``."""
-    best, best_width, summary = None, np.inf, {}
+def cells(held: pd.DataFrame) -> pd.DataFrame:
+    """Truth inside (%), mean width (points) and count per set and noise level of held-out intervals."""
+    return held.groupby(["set", "noise_mm"]).agg(n=("inside", "size"), inside=("inside", "mean"),
+                                                 width=("width", "mean")).assign(
+        inside=lambda d: (100 * d["inside"]).round(1), width=lambda d: (100 * d["width"]).round(1))
+
+
+def choose(held: dict, level: float) -> tuple[str, dict]:
+    """0156's rule on held-out intervals per scheme: of the schemes within 85-95 % in every cell of the calibrated
+    sets, the narrowest on ``V_real``; else the one whose worst cell lies closest to ``level``. Also the summary."""
+    summary, ok = {}, {}
     for scheme, h in held.items():
-        per = h.groupby("group").agg(n=("inside", "size"), covered=("inside", "mean"), width=("width", "mean"))
-        big = per[per["n"] >= intervals.MIN_GROUP]
-        ok = bool((abs(big["covered"] - level) <= 0.04).all())
-        summary[scheme] = {"covered": float(h["inside"].mean()), "width": float(h["width"].mean()), "ok": ok}
-        print(f"\n{name} {scheme}: held-out coverage {100 * h['inside'].mean():.1f} %, mean width "
-              f"{100 * h['width'].mean():.1f} points, every group within 4 points of {level:.0%}: {ok}")
-        print(per.assign(covered=lambda d: (100 * d["covered"]).round(1), width=lambda d: (100 * d["width"]).round(1))
-              .to_string())
-        if ok and h["width"].mean() < best_width:
-            best, best_width = scheme, h["width"].mean()
-    return best, summary
+        c = cells(h[h["set"].isin(CALIBRATED)])
+        worst = float((c["inside"] / 100 - level).abs().max())
+        real = h[h["set"] == "V_real"]
+        ok[scheme] = bool(((c["inside"] >= 85) & (c["inside"] <= 95)).all())
+        summary[scheme] = {"cells": {f"{s} {n:g} mm": {"n": int(r["n"]), "inside": float(r["inside"]),
+                                                       "width": float(r["width"])} for (s, n), r in c.iterrows()},
+                           "ok": ok[scheme], "worst_off": round(100 * worst, 1),
+                           "real_width": round(100 * float(real["width"].mean()), 2)}
+        print(f"\n{scheme}: every cell within 85-95 %: {ok[scheme]}; V_real mean width "
+              f"{summary[scheme]['real_width']} points\n{c.to_string()}")
+    passing = [s for s in held if ok[s]]
+    if passing:
+        return min(passing, key=lambda s: summary[s]["real_width"]), summary
+    return min(held, key=lambda s: summary[s]["worst_off"]), summary
+
+
+def review_width(held: pd.DataFrame) -> tuple[float, dict]:
+    """0156's review width: the largest at which the held-out intervals flag at least :data:`REVIEW_RECALL` of the
+    estimates off by more than :data:`BIG` in each calibrated set (else the one closest in the worse set); with
+    each set's recall and precision there."""
+    big = (held["true"] - held["estimate_used"]).abs() > BIG
+    sets = [held["set"] == s for s in CALIBRATED]
+    best, best_recall = 0.0, -1.0
+    for w in np.unique(np.round(held["width"], 4))[::-1]:
+        flag = held["width"] > w - 1e-12
+        recall = min(float((flag & big & s).sum() / max((big & s).sum(), 1)) for s in sets)
+        if recall >= REVIEW_RECALL:
+            best = float(w)
+            break
+        if recall > best_recall:
+            best, best_recall = float(w), recall
+    flag = held["width"] > best - 1e-12
+    report = {}
+    for name, s in zip(CALIBRATED, sets):
+        report[name] = {"recall": round(float((flag & big & s).sum() / max((big & s).sum(), 1)), 3),
+                        "precision": round(float((flag & big & s).sum() / max((flag & s).sum(), 1)), 3),
+                        "flagged": round(float((flag & s).mean()), 3)}
+    return best - 1e-6, report
+
+
+def calibrate(df: pd.DataFrame, level: float, source: dict) -> intervals.Intervals:
+    """Choose, fit and describe the calibration from the estimates' table (columns of :func:`estimates` and ``set``,
+    :data:`MANIFESTS`' values); prints every figure it chooses by."""
+    cal_df = df[df["set"].isin(CALIBRATED)].reset_index(drop=True)
+    print("estimates per set:", df["set"].value_counts().to_dict())
+    for name, g in df.groupby("set"):
+        print(f"{name}: {g['colon_id'].nunique()} colons, MAE {100 * (g['estimate'] - g['true']).abs().mean():.2f} "
+              "points")
+    held = {scheme: by_colon(cal_df, scheme, level) for scheme in SCHEMES}
+    best, summary = choose(held, level)
+    width, review = review_width(held[best])
+    print(f"\nchosen: {best}; review width {100 * width:.1f} points: " + "; ".join(
+        f"{k} recall {100 * v['recall']:.0f} %, precision {100 * v['precision']:.0f} %, flagged "
+        f"{100 * v['flagged']:.0f} %" for k, v in review.items()))
+    known_held = by_colon(cal_df, best, level, known=True)
+    print(f"\nknown length, held out:\n{cells(known_held).to_string()}")
+    cal = intervals.fit(cal_df["true"], cal_df["estimate"], signals(cal_df), best, width, level)
+    intervals.fit_known(cal, cal_df["true"], known_estimates(cal_df), signals(cal_df))
+    reported = df[df["set"] == "train_real"]
+    if len(reported):                    # never calibrated on: the calibration's intervals, held out by construction
+        lo_hi = np.array([cal.interval(c, s) for c, s in zip(reported["estimate"], signals(reported))])
+        inside = (lo_hi[:, 0] - 1e-12 <= reported["true"]) & (reported["true"] <= lo_hi[:, 1] + 1e-12)
+        print(f"\nthe real training colons (not calibrated on): truth inside {100 * inside.mean():.1f} %, mean width "
+              f"{100 * (lo_hi[:, 1] - lo_hi[:, 0]).mean():.1f} points")
+    cal.source = {**source, "held_out": "leave-one-colon-out over the colons of V_wide and V_real",
+                  "colons": {s: sorted(int(c) for c in cal_df.loc[cal_df["set"] == s, "colon_id"].unique())
+                             for s in CALIBRATED},
+                  "not_calibrated_on": "the real training colons (calibration-real.yaml and calibration.yaml's real "
+                                       "segments): the network saw them",
+                  "schemes": summary, "review": review,
+                  "known_held_out": {f"{s} {n:g} mm": {"inside": float(r["inside"]), "width": float(r["width"])}
+                                     for (s, n), r in cells(known_held).iterrows()}}
+    digest = hashlib.sha256(json.dumps(cal.to_json(), sort_keys=True).encode()).hexdigest()[:8]
+    cal.source["id"] = f"{best}-{digest}"
+    return cal
+
+
+def table(data: list[tuple[str, Path]], method: CompletionMethod, path: Path) -> pd.DataFrame:
+    """Every calibration dataset's estimates, each row with its ``set``."""
+    parts = []
+    for name, folder in data:
+        cache = folder / f"completion-estimates-{sha256_file(path)[:12]}-{steps_version()}-signals.csv"
+        part = estimates(folder, method, cache).assign(manifest=name, set=MANIFESTS[name])
+        if name == "calibration":         # its segments of the real training colons: seen by the network
+            part.loc[part["colon_id"] >= REAL_IDS, "set"] = "train_real"
+        parts.append(part)
+    return pd.concat(parts, ignore_index=True)
 
 
 def main() -> None:
@@ -143,42 +242,14 @@ def main() -> None:
     method = CompletionMethod(args.model)
     method.intervals = None
     path = model_path(args.model)
-    parts = []
-    for manifest, data in calibration_data(Path(args.data), args.workers):
-        cache = data / f"completion-estimates-{sha256_file(path)[:12]}-{steps_version()}.csv"   # per model and steps
-        parts.append(estimates(data, method, cache).assign(manifest=manifest.stem))
-    df = pd.concat(parts, ignore_index=True)
-    print("segments per manifest:", df.drop_duplicates(["manifest", "shard", "index"])["manifest"].value_counts()
-          .to_dict())
-    print(f"{len(df)} estimates of {df[['manifest', 'shard', 'index']].drop_duplicates().shape[0]} segments; MAE "
-          f"{100 * (df['estimate'] - df['true']).abs().mean():.2f} points")
-    best, summary = choose("segments", {scheme: held_out(df, scheme, args.level) for scheme in SCHEMES}, args.level)
-    best = best or "marginal"
+    df = table(calibration_data(Path(args.data), args.workers), method, path)
     source = {"model": path.name, "model_sha256": sha256_file(path), "steps": steps_version(),
-              "manifests": {m.name: sha256_file(m) for m in MANIFESTS}, "noise_mm": list(NOISE_MM),
-              "segments": int(df[["manifest", "shard", "index"]].drop_duplicates().shape[0]), "estimates": len(df),
-              "held_out": summary}
-    cal = intervals.fit(df["true"], df["estimate"], signals(df), best, REVIEW_WIDTH, args.level, source)
-    # segments whose length is known (colonbench estimate --length-mm, the map's segments): the estimate scaled where
-    # the segment's span stops short, as intervals.known_length does, and their own interval, on calibration.yaml's
-    # segments only, as since decision record 0147 (which found the scaling misfiring on the real segments, then
-    # measured against the network's line; 0155 measures it against the span)
-    share = df["span_mm"] / df["segment_mm"]
-    known = np.where(share < intervals.SHORT_SHARE, df["estimate"] * share, df["estimate"])
-    first = (df["manifest"] == MANIFESTS[0].stem).to_numpy()
-    for name, sel in ((MANIFESTS[0].name, first), (MANIFESTS[1].name, ~first), ("all", np.ones(len(df), bool))):
-        print(f"\nknown length, {name}: MAE {100 * np.abs(known[sel] - df['true'][sel]).mean():.2f} points (unknown "
-              f"{100 * (df['estimate'][sel] - df['true'][sel]).abs().mean():.2f})")
-    if not first.any():
-        raise SystemExit(f"no estimates of {MANIFESTS[0].name} to fit the known-length interval on")
-    intervals.fit_known(cal, df["true"][first], known[first])
-    cal.source["known_manifests"] = [MANIFESTS[0].name]
-    print(f"known-length interval width {100 * (cal.known['high'] - cal.known['low']):.1f} points")
-    digest = hashlib.sha256(json.dumps(cal.to_json(), sort_keys=True).encode()).hexdigest()[:8]
-    cal.source["id"] = f"{best}-{digest}"
+              "manifests": {f"{m}.yaml": sha256_file(ROOT / f"{m}.yaml") for m in MANIFESTS},
+              "noise_mm": list(NOISE_MM), "estimates": int(df["set"].isin(CALIBRATED).sum())}
+    cal = calibrate(df, args.level, source)
     out = intervals.path_for(path)
     out.write_text(json.dumps(cal.to_json(), indent=1) + "\n")
-    print(f"\nchosen: {best}; wrote {out} (id {cal.source['id']})")
+    print(f"\nwrote {out} (id {cal.source['id']})")
 
 
 if __name__ == "__main__":
