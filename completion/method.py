@@ -491,6 +491,7 @@ def from_heatmap(heatmap: np.ndarray, grid: Grid, points, method: str = "complet
     inside = line_between(cl_vox, comp.planes)
     cl = resample(grid.to_mm(inside), CENTERLINE_SPACING_MM) if len(inside) else np.zeros((0, 3))
     signals = {"rims": int(comp.rims), "rims_doubtful": int(getattr(comp.planes, "doubtful", 0)),
+               "gap_share": round(comp.gap_share, 4),
                "length_mm": round(float(arc_length(cl)[-1]), 2) if len(cl) else 0.0,
                "span_mm": round(float(arc_length(reach_planes(inside, comp.planes))[-1]) * grid.voxel_size, 2),
                **({} if cut_rims else {"extent": "known"})}     # a caller clipping at planes it knows its ends

@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from colonbench.completion.gaps import GAP_VALLEY, wall_gaps
+from colonbench.meshes import triangle_areas
 from colonbench.completion.planes import clip_to_segment, segment_planes
 from colonbench.completion.surface import (HOLE_DISTANCE, SHELL_LEVEL, clip_to_shell, extract_mesh, hole_vertices,
                                            mesh_coverage, resigned_field)
@@ -43,6 +44,8 @@ class Completion:
     rims : int
         How many of them were found at a cut rim of the cloud (:class:`colonbench.completion.planes.Planes`); with
         ``cut_rims`` off, where the caller knows the segment's ends, all of them.
+    gap_share : float
+        The share of the mesh's area in wall-gap patches (hole surface put where the tube has no wall).
     """
 
     vertices: np.ndarray
@@ -51,6 +54,7 @@ class Completion:
     coverage: float
     planes: list = field(default_factory=list)
     rims: int = 0
+    gap_share: float = 0.0
 
 
 def complete(heatmap: np.ndarray, centerline_vox: np.ndarray, partial_vox: np.ndarray,
@@ -74,10 +78,14 @@ def complete(heatmap: np.ndarray, centerline_vox: np.ndarray, partial_vox: np.nd
     planes = segment_planes(centerline_vox, partial_vox, cut_rims, voxel_mm) if planes is None else planes
     verts, faces = clip_to_segment(verts, faces, centerline_vox, planes=planes)
     hole = hole_vertices(verts, partial_vox, HOLE_DISTANCE if distance is None else distance)
+    gap_share = 0.0
     if gaps and len(faces):
         gap_v, gap_f = wall_gaps(heatmap, centerline_vox, planes, valley=valley)
         faces = np.concatenate([faces, gap_f + len(verts)])
         verts = np.concatenate([verts, gap_v])
         hole = np.concatenate([hole, np.ones(len(gap_v), bool)])
+        if len(gap_f):
+            area = triangle_areas(verts, faces)
+            gap_share = float(area[-len(gap_f):].sum() / area.sum()) if area.sum() > 0 else 0.0
     rims = getattr(planes, "rims", 0) if cut_rims else len(planes)   # planes the caller knows are the segment's ends
-    return Completion(verts, faces, hole, mesh_coverage(verts, faces, hole), planes, rims)
+    return Completion(verts, faces, hole, mesh_coverage(verts, faces, hole), planes, rims, gap_share)
