@@ -61,16 +61,19 @@ def test_a_known_length_counts_what_the_cloud_does_not_reach_as_unobserved():
         intervals.known_length(near, -1.0)
 
 
-def test_a_doubtful_rim_is_a_reason_to_review_unless_the_extent_is_known():
+def test_review_fires_on_a_wide_interval_and_then_names_a_doubtful_rim_unless_the_extent_is_known():
     cal = intervals.fit([0.8] * 40, [0.8] * 40, [{"length_mm": 70.0, "rims": 2}] * 40, "length", 0.4)
+    cal.known = {"low": -0.1, "high": 0.1, "n": 40}
     reasons = {}
-    for doubtful, extent in ((0, None), (1, None), (1, "known")):
+    for doubtful, extent, width in ((0, None, 0.5), (1, None, 0.5), (1, "known", 0.5), (1, None, 0.3)):
+        cal.groups["length>=60"].update(low=-width / 2, high=width / 2)
         signals = {"length_mm": 70.0, "rims": 2, "rims_doubtful": doubtful, **({"extent": extent} if extent else {})}
-        est = Estimate(0.9, np.zeros((0, 3)), np.zeros((0, 3)), "m", signals=signals)
+        est = Estimate(0.5, np.zeros((0, 3)), np.zeros((0, 3)), "m", signals=signals)
         cal.apply(est)
-        reasons[(doubtful, extent)] = est.review
-    assert reasons[(0, None)] == [] and reasons[(1, "known")] == []
-    assert len(reasons[(1, None)]) == 1 and "seen from one side" in reasons[(1, None)][0]
+        reasons[(doubtful, extent, width)] = est.review
+    assert reasons[(0, None, 0.5)] == ["interval 50 points wide (more than 40)"]
+    assert len(reasons[(1, None, 0.5)]) == 2 and "seen from one side" in reasons[(1, None, 0.5)][1]
+    assert reasons[(1, "known", 0.5)] == [] and reasons[(1, None, 0.3)] == []   # 20 and 30 points: sure enough
 
 
 def test_intervals_in_the_contract_are_checked():
