@@ -2,7 +2,7 @@
 
 A run folder holds::
 
-    run.json                    what was evaluated: data identity, noise levels and seed,
+    run.json                    what was evaluated: data identity, track, noise levels and seed,
                                 metric settings, methods with versions, package versions
     parts/<method>/<unit>.csv   per-segment rows of one shard at one noise level (resume points)
     results/<method>.csv        every per-segment row of a method, once all its parts exist
@@ -40,6 +40,7 @@ import pandas as pd
 from colonbench import seeding
 from colonbench.benchmark.exchange import sample_id, with_sample_ids
 from colonbench.benchmark.metrics import COUNT_COLUMNS, THRESHOLDS_MM, point_counts, segment_metrics
+from colonbench.benchmark import tracks
 from colonbench.benchmark.parallel import run_units
 from colonbench.benchmark.registry import load_method
 from colonbench.estimate import as_estimate
@@ -143,14 +144,15 @@ def _truth(shard, i: int, geo: dict, needs_heatmap: bool) -> dict:
     return truth
 
 
-def _one(method, pts: np.ndarray, truth: dict, sid: str):
+def _one(method, pts: np.ndarray, truth: dict, sid: str, length: float | None = None):
     t = time.perf_counter()
+    known = {} if length is None else {"length_mm": length}
     if getattr(method, "by_sample", False):  # predictions made outside (colonbench.benchmark.external)
         result = method.predicted(sid)
     elif getattr(method, "uses_truth", False):
-        result = method.estimate(pts, truth=truth)
+        result = method.estimate(pts, truth=truth, **known)
     else:
-        result = method.estimate(pts)
+        result = method.estimate(pts, **known)
     wall = time.perf_counter() - t
     est = as_estimate(result, method.name)
     stages = getattr(est, "seconds", None) or {}
@@ -173,8 +175,10 @@ def _save_example(path: Path, pts, est, truth):
 
 
 def run_unit(data: str, shard_name: str, indices: list[int], sigma: float, noise_seed: int, names: list[str],
-             examples: list[int], run_dir: str, methods: dict) -> dict[str, list[dict]]:
-    """Every method in ``names`` on the chosen samples of one shard at one noise level.
+             examples: list[int], run_dir: str, track: str = tracks.DEFAULT, *,
+             methods: dict) -> dict[str, list[dict]]:
+    """Every method in ``names`` on the chosen samples of one shard at one noise level; on the known-length track
+    (``track="length"``) the methods that take it are given each sample's ``length_mm``.
 
     Returns
     -------
@@ -184,6 +188,7 @@ def run_unit(data: str, shard_name: str, indices: list[int], sigma: float, noise
     from colonbench.shards.reader import Shard
 
     chosen = [methods[n] for n in names]
+    given = {m.name: track == "length" and tracks.takes_length(m) for m in chosen}
     needs_heatmap = any(getattr(m, "uses_truth", False) for m in chosen)
     out = {n: [] for n in names}
     with Shard(Path(data) / shard_name) as shard:
@@ -198,7 +203,7 @@ def run_unit(data: str, shard_name: str, indices: list[int], sigma: float, noise
             for m in chosen:
                 row = {"method": m.name, **base}
                 try:
-                    est, seconds = _one(m, pts, truth, sid)
+                    est, seconds = _one(m, pts, truth, sid, float(geo["length_mm"]) if given[m.name] else None)
                 except Exception as exc:  # noqa: BLE001 - recorded in the row and counted in the tables
                     msg = str(exc) if isinstance(exc, ColonbenchError) else f"{type(exc).__name__}: {exc}"
                     row.update({"coverage": np.nan, "coverage_error": np.nan, "interval_low": np.nan,
@@ -231,9 +236,9 @@ def _finalize(out: Path, run: dict, name: str, keys: list[str]) -> Path:
     df = with_sample_ids(pd.concat([read_rows(out / "parts" / name / f"{k}.csv") for k in keys], ignore_index=True))
     write_csv(out / "results" / f"{name}.csv", df)
     rec = run["methods"][name]
-    summary = {"method": name, **rec, "data": run["data"], "suite": run.get("suite"), "noise_mm": run["noise_mm"],
-               "noise_seed": run["noise_seed"], "thresholds_mm": run["thresholds_mm"], "versions": run["versions"],
-               "summary": summarize(df).to_dict("records")}
+    summary = {"method": name, **rec, "data": run["data"], "suite": run.get("suite"), "track": tracks.of_run(run),
+               "noise_mm": run["noise_mm"], "noise_seed": run["noise_seed"], "thresholds_mm": run["thresholds_mm"],
+               "versions": run["versions"], "summary": summarize(df).to_dict("records")}
     write_json(out / "results" / f"{name}.json", summary)
     return out / "results" / f"{name}.csv"
 
@@ -289,7 +294,7 @@ def suite_of(identity: dict, sigmas, noise_seed: int, task: str, data, allow_unv
 def evaluate(data, methods, out, noise=(0.0, 0.5), split: str = "test", limit: int | None = None,
              workers: int = 1, model=None, device: str = "cpu", examples: int = 3, noise_seed: int = 0,
              progress: bool = True, scheduler=None, allow_unverified: bool = False, timeout: float | None = None,
-             batch: int | None = None, tta: int = 1, retry_failed: bool = False) -> Path:
+             batch: int | None = None, tta: int = 1, retry_failed: bool = False, track: str = tracks.DEFAULT) -> Path:
     """Evaluate methods on a dataset split; write (or finish) a run folder.
 
     Parameters
@@ -330,6 +335,8 @@ def evaluate(data, methods, out, noise=(0.0, 0.5), split: str = "test", limit: i
     retry_failed : bool
         Evaluate again, in the same run folder, the segments whose rows hold an error (an ``exec:`` program's
         answers and notes on them are removed first, so that it runs on them again); the other rows are kept.
+    track : str
+        ``points`` or ``length``: the methods that take it are given each segment's length (:mod:`.tracks`).
 
     Returns
     -------
@@ -342,6 +349,7 @@ def evaluate(data, methods, out, noise=(0.0, 0.5), split: str = "test", limit: i
         Bad arguments, or data that claims to be a suite and is not (see ``allow_unverified``).
     """
     data, out = Path(data), Path(out)
+    track = tracks.check(track)
     sigmas, specs = checked_arguments(workers, noise, methods)
     identity, picks = select(data, split, limit)
     suite = suite_of(identity, sigmas, noise_seed, "segments", data, allow_unverified)
@@ -349,17 +357,18 @@ def evaluate(data, methods, out, noise=(0.0, 0.5), split: str = "test", limit: i
                "predictions": str(out / "predictions"), "timeout": timeout, "batch": batch}
     t0 = time.perf_counter()
     loaded = load_methods(specs, options)
-    settings = {"data": identity, "suite": suite, "noise_mm": sigmas, "noise_seed": int(noise_seed),
+    settings = {"data": identity, "suite": suite, "track": track, "noise_mm": sigmas, "noise_seed": int(noise_seed),
                 "thresholds_mm": list(THRESHOLDS_MM)}
     check_run_folder(out)
     with folder_lock(out, "evaluate", "evaluation"):
         run = begin_run(out, settings, loaded, data)
         return _run(out, run, data, picks, sigmas, loaded, options, workers, examples, noise_seed, progress, t0,
-                    scheduler, retry_failed)
+                    scheduler, retry_failed, track)
 
 
-def _run_programs(out, data, units, loaded, noise_seed, workers, progress) -> None:
-    """Run every ``exec:`` method's program on the inputs its unfinished units need, in batches across units."""
+def _run_programs(out, data, units, loaded, noise_seed, workers, progress, track=tracks.DEFAULT) -> None:
+    """Run every ``exec:`` method's program on the inputs its unfinished units need, in batches across units (on
+    the known-length track with each input's length: one call per length and batch)."""
     from tqdm.auto import tqdm
 
     from colonbench.benchmark.external import ExecMethod
@@ -374,8 +383,10 @@ def _run_programs(out, data, units, loaded, noise_seed, workers, progress) -> No
             pending = m.missing(ids)
             if pending:
                 with Shard(Path(data) / shard_name) as shard:  # opened once for its samples
-                    items += [(sid, noisy(shard.geometry(ids[sid])["partial_points"], sigma, noise_seed, shard_name,
-                                          ids[sid])) for sid in pending]
+                    for sid in pending:
+                        geo = shard.geometry(ids[sid])
+                        items.append((sid, noisy(geo["partial_points"], sigma, noise_seed, shard_name, ids[sid]),
+                                      float(geo["length_mm"]) if track == "length" else None))
         if items:
             with tqdm(total=len(items), unit="input", desc=f"run {name}", disable=None if progress else True,
                       dynamic_ncols=True) as bar:
@@ -405,7 +416,7 @@ def _retry_units(out: Path, picks, sigmas, loaded) -> list:
 
 
 def _run(out, run, data, picks, sigmas, loaded, options, workers, examples, noise_seed, progress, t0,
-         scheduler=None, retry_failed: bool = False) -> Path:
+         scheduler=None, retry_failed: bool = False, track: str = tracks.DEFAULT) -> Path:
     flat = [(n, i) for n, idx in picks for i in idx]
     ex_keys = {flat[k] for k in np.unique(np.linspace(0, len(flat) - 1, examples).astype(int))} if examples else set()
     units, keys = [], []
@@ -419,12 +430,12 @@ def _run(out, run, data, picks, sigmas, loaded, options, workers, examples, nois
                 units.append((shard_name, idx, s, todo, ex, key))
     if retry_failed:
         units += _retry_units(out, picks, sigmas, loaded)
-    _run_programs(out, data, units, loaded, noise_seed, workers, progress)
+    _run_programs(out, data, units, loaded, noise_seed, workers, progress, track)
     from tqdm.auto import tqdm
 
     total = sum(len(u[1]) for u in units)
     bar = tqdm(total=total, unit="segment", desc="evaluate", disable=None if progress else True, dynamic_ncols=True)
-    args = lambda u: (str(data), u[0], u[1], u[2], noise_seed, u[3], u[4], str(out))  # noqa: E731
+    args = lambda u: (str(data), u[0], u[1], u[2], noise_seed, u[3], u[4], str(out), track)  # noqa: E731
     try:
         for u, rows in run_units(run_unit, units, args, loaded, options, workers, scheduler):
             _store(out, u, rows)

@@ -6,7 +6,8 @@ files and answers with files (docs/formats.md):
 
 * **inputs**: one PLY per evaluated cloud (binary little-endian, float64
   ``x, y, z`` in mm, noise already added), named by its :func:`sample_id`,
-  and ``index.csv`` listing them (``sample_id, file, noise_mm, points``); no truth;
+  and ``index.csv`` listing them (``sample_id, file, noise_mm, points``, and
+  on the known-length track ``length_mm``); no truth;
 * **predictions**: ``<sample_id>.json`` per input, the JSON of ``colonbench
   estimate``: ``{"coverage": float in [0, 1], "holes": [[x, y, z], ...],
   "centerline": [[x, y, z], ...]}`` in mm, the input's frame (more keys are allowed);
@@ -26,8 +27,9 @@ from pathlib import Path
 from colonbench.errors import InputError
 from colonbench.estimate import Estimate, interval, level, points_array
 
-#: Columns of an export's ``index.csv``.
+#: Columns of an export's ``index.csv``; the known-length track adds :data:`LENGTH_COLUMN`.
 INDEX_COLUMNS = ["sample_id", "file", "noise_mm", "points"]
+LENGTH_COLUMN = "length_mm"
 INDEX_NAME = "index.csv"
 #: The export's own record: suite, hash, counts.
 EXPORT_NAME = "suite.json"
@@ -72,12 +74,14 @@ def write_input(path, points) -> Path:
     return path
 
 
-def write_index(folder, rows: list[dict]) -> Path:
-    """``index.csv`` of an input folder (columns :data:`INDEX_COLUMNS`)."""
+def write_index(folder, rows: list[dict], track: str = "points") -> Path:
+    """``index.csv`` of an input folder (columns :data:`INDEX_COLUMNS`, and the segment's nominal length on the
+    known-length track)."""
     import pandas as pd
 
     path = Path(folder) / INDEX_NAME
-    pd.DataFrame(rows, columns=INDEX_COLUMNS).to_csv(path, index=False)
+    columns = INDEX_COLUMNS + ([LENGTH_COLUMN] if track == "length" else [])
+    pd.DataFrame(rows, columns=columns).to_csv(path, index=False)
     return path
 
 

@@ -5,7 +5,8 @@ for each evaluated cloud (``colonbench export`` writes the inputs,
 ``colonbench score`` scores such a folder). ``exec:PROGRAM ARGS``
 (:class:`ExecMethod`) runs the program exactly as ``colonbench estimate`` is
 called, ``PROGRAM ARGS FILE... --out-dir DIR``, on batches of input PLYs named
-by sample id, and then reads its predictions the same way. A missing or
+by sample id (on the known-length track with ``--length-mm L`` appended, one
+length per call), and then reads its predictions the same way. A missing or
 malformed prediction, the program's own failure (``<sample_id>.error`` or an
 ``error`` key), a crash or a timeout is that segment's failure in the results
 (its message says which, :mod:`colonbench.benchmark.calls`), never the run's.
@@ -181,7 +182,9 @@ class ExecMethod(PredictionMethod):
 
         Parameters
         ----------
-        items : iterable of (str, (n, 3) float)
+        items : iterable of (str, (n, 3) float) or (str, (n, 3) float, float or None)
+            Inputs, each with the segment's length in mm where it is given (the known-length track): the inputs
+            of one length are called together, with ``--length-mm L`` appended to the command line.
         workers : int
             Calls at the same time.
         progress : callable, optional
@@ -190,11 +193,15 @@ class ExecMethod(PredictionMethod):
         """
         from concurrent.futures import ThreadPoolExecutor
 
-        todo = [(s, p) for s, p in items if self.missing([s])]
-        if not todo:
+        by_length: dict = {}
+        for s, p, *length in items:
+            if self.missing([s]):
+                by_length.setdefault(length[0] if length else None, []).append((s, p))
+        if not by_length:
             return
         self.folder.mkdir(parents=True, exist_ok=True)
-        batches = [todo[k:k + self.batch] for k in range(0, len(todo), self.batch)]
+        batches = [(todo[k:k + self.batch], length) for length, todo in by_length.items()
+                   for k in range(0, len(todo), self.batch)]
 
         def report(n: int) -> None:
             if progress is not None:
@@ -202,13 +209,14 @@ class ExecMethod(PredictionMethod):
                     progress(n)
 
         with ThreadPoolExecutor(max(1, workers)) as pool:
-            list(pool.map(lambda b: self._call(b, report), batches))
+            list(pool.map(lambda b: self._call(*b, report), batches))
 
-    def _call(self, batch, report) -> None:
+    def _call(self, batch, length, report) -> None:
         sids = [sid for sid, _ in batch]
+        known = [] if length is None else ["--length-mm", f"{float(length):.10g}"]
         with tempfile.TemporaryDirectory(prefix="colonbench-inputs-") as tmp:
             files = [str(write_input(Path(tmp) / f"{sid}.ply", pts)) for sid, pts in batch]
-            call = calls.run_call(self.argv + files + ["--out-dir", str(self.folder)], sids, self.folder,
+            call = calls.run_call(self.argv + files + ["--out-dir", str(self.folder)] + known, sids, self.folder,
                                   self.logs, self.timeout * len(files), report)
         seconds = calls.settle(call)
         with self._lock, open(self.folder / SECONDS_NAME, "a") as fh:

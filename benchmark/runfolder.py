@@ -2,7 +2,7 @@
 
 A run folder is made by ``colonbench evaluate`` (segments or whole colons),
 ``colonbench benchmark`` (one per suite) or ``colonbench score``. Its
-``run.json`` says what was evaluated (data identity, suite and hash, noise,
+``run.json`` says what was evaluated (data identity, suite and hash, track, noise,
 metric settings, methods with their versions, package versions, sessions); a
 rerun with the same settings finishes it or adds methods, and anything else is
 refused (:class:`RunMismatch`).
@@ -19,6 +19,7 @@ import numpy as np
 import pandas as pd
 
 from colonbench._version import __version__
+from colonbench.benchmark import tracks
 from colonbench.errors import InputError
 
 RUN_FILE = "run.json"
@@ -138,7 +139,13 @@ def open_run(out: Path, settings: dict, methods: dict[str, dict]) -> dict:
             raise InputError(f"{path}: unreadable ({exc})") from None
         if run.get("format") != RUN_FORMAT:
             raise InputError(f"{path}: not a colonbench run")
+        if "track" in settings and tracks.of_run(run) != settings["track"]:
+            raise RunMismatch(f"{out} is a run of the {tracks.label(tracks.of_run(run))}, not the "
+                              f"{tracks.label(settings['track'])}; a run folder holds one "
+                              "track: evaluate into a new run folder (colonbench benchmark: another --out)")
         for key, value in settings.items():
+            if key == "track":
+                continue
             if json.dumps(run.get(key), sort_keys=True) != json.dumps(value, sort_keys=True, default=json_default):
                 raise RunMismatch(f"{out} is a run with other {key} ({run.get(key)!r}, now {value!r}); "
                                   "evaluate into a new run folder")
@@ -165,6 +172,8 @@ def check_run_folder(out: Path) -> None:
 def begin_run(out: Path, settings: dict, loaded: dict, data: Path) -> dict:
     """Open (or extend) the run record of a locked run folder, write it, and clear leftovers of killed runs."""
     records = {name: method_record(spec, m) for name, (spec, m) in loaded.items()}
+    if settings.get("track", tracks.DEFAULT) != tracks.DEFAULT:   # whether each method is given the length
+        records = {name: {**rec, "takes_length": tracks.takes_length(loaded[name][1])} for name, rec in records.items()}
     run = open_run(out, settings, records)
     run["versions"] = run.get("versions") or versions()
     run["environment"] = run.get("environment") or environment()

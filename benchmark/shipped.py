@@ -9,8 +9,11 @@ them into its leaderboards when their suite hash is the published one, so a
 user runs only their own method; a method the user evaluates themselves
 replaces its shipped rows.
 
-They are made by ``python scripts/reference_results.py`` (every built-in
-method on every suite, then :func:`publish`), never edited by hand.
+The known-length track's (:mod:`colonbench.benchmark.tracks`) are beside
+them in ``benchmark/shipped_results/<suite id>@length/``, merged only into
+tables of that track. They are made by ``python scripts/reference_results.py``
+(every built-in method on every suite and track, then :func:`publish`), never
+edited by hand.
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from colonbench.benchmark import tracks
 from colonbench.benchmark.exchange import with_sample_ids
 from colonbench.benchmark.metrics import THRESHOLDS_MM
 from colonbench.benchmark.runfolder import RUN_FILE, read_rows, read_run, write_json
@@ -51,14 +55,15 @@ SHARE_OF = {f"{what}_{pr}_{th:g}mm": f"{what}_n" if pr == "precision" else f"{wh
             for th in THRESHOLDS_MM for what in ("holes", "centerline") for pr in ("precision", "recall")}
 
 
-def folder(suite) -> Path:
-    """The shipped results folder of a suite."""
-    return SHIPPED_DIR / suite.id
+def folder(suite, track: str = tracks.DEFAULT) -> Path:
+    """The shipped results folder of a suite on a track: ``<suite id>`` (points), ``<suite id>@length``."""
+    track = tracks.check(track)
+    return SHIPPED_DIR / (suite.id if track == tracks.DEFAULT else f"{suite.id}@{track}")
 
 
-def load(suite, exclude=()) -> tuple | None:
-    """The shipped results of a suite as a loaded run, less the methods in ``exclude``; None when there are
-    none, or when they were made on other data than the published suite (another hash).
+def load(suite, exclude=(), track: str = tracks.DEFAULT) -> tuple | None:
+    """The shipped results of a suite on a track as a loaded run, less the methods in ``exclude``; None when there
+    are none, or when they were made on other data than the published suite (another hash) or on another track.
 
     Returns
     -------
@@ -66,12 +71,12 @@ def load(suite, exclude=()) -> tuple | None:
         Segment suites ``(run record, results, label)``; whole colons ``(run record, segments, colons, label)``
         (:func:`colonbench.reports.leaderboard.merge_runs` and ``merge_colon_runs`` take them).
     """
-    where = folder(suite)
+    where = folder(suite, track)
     if not (where / RUN_FILE).is_file():
         return None
     run = read_run(where)
     rec = run.get("suite") or {}
-    if rec.get("sha256") != suite.sha256:
+    if rec.get("sha256") != suite.sha256 or tracks.of_run(run) != track:
         return None
     if "signature" not in rec:   # made on the published data itself (its hash), before suites had signatures
         run["suite"] = {**rec, "signature": suite.signature, "check": "bit-identical", "bit_identical": True,
@@ -80,7 +85,7 @@ def load(suite, exclude=()) -> tuple | None:
     if not methods:
         return None
     run = {**run, "methods": methods}
-    label = f"shipped {suite.id}"
+    label = f"shipped {suite.id}" + ("" if track == tracks.DEFAULT else f"@{track}")
     if run.get("task") == "colon":
         segs = read_rows(where / "results" / "segments.csv")
         cols = read_rows(where / "results" / "colons.csv")
@@ -89,18 +94,22 @@ def load(suite, exclude=()) -> tuple | None:
     return run, with_sample_ids(pd.concat(frames, ignore_index=True)), label
 
 
-def publish(run_dir, suite, methods=None) -> Path:
-    """Copy a finished run of a suite into the shipped results: all of it (replacing what was there), or only
-    ``methods``, whose rows replace their shipped ones while the other methods' stay.
+def publish(run_dir, suite, methods=None, track: str | None = None) -> Path:
+    """Copy a finished run of a suite into the shipped results of its track (:func:`folder`): all of it (replacing
+    what was there), or only ``methods``, whose rows replace their shipped ones while the other methods' stay.
 
     Raises
     ------
     InputError
-        The run is not of this suite, not made on its published data (bit-identical), not finished, or lacks a
-        method asked for.
+        The run is not of this suite, not made on its published data (bit-identical), not of ``track`` (where
+        given), not finished, or lacks a method asked for.
     """
     run_dir = Path(run_dir)
     run = read_run(run_dir)
+    if track is not None and tracks.check(track) != tracks.of_run(run):
+        raise InputError(f"{run_dir}: a run of the {tracks.label(tracks.of_run(run))}, not the "
+                         f"{tracks.label(track)}")
+    track = tracks.of_run(run)
     rec = run.get("suite") or {}
     if rec.get("id") != suite.id or not rec.get("verified") or rec.get("sha256") != suite.sha256:
         raise InputError(f"{run_dir}: not a run of {suite.id} on its published data (its suite record: "
@@ -112,11 +121,12 @@ def publish(run_dir, suite, methods=None) -> Path:
         missing = sorted(set(methods) - set(run["methods"]))
         if missing:
             raise InputError(f"{run_dir}: holds no run of {', '.join(missing)}")
-        old = read_run(folder(suite))       # each re-published method keeps the versions and machine it ran with
+        old = read_run(folder(suite, track)) if (folder(suite, track) / RUN_FILE).is_file() else {**run, "methods": {}}
+        # each re-published method keeps the versions and machine it ran with
         fresh = {m: {**run["methods"][m], "versions": run.get("versions"), "environment": run.get("environment")}
                  for m in methods}
         run = {**old, "methods": {**old["methods"], **fresh}, "suite": run["suite"]}
-    out = folder(suite)
+    out = folder(suite, track)
     staging = out.with_name(f".{out.name}.new")
     shutil.rmtree(staging, ignore_errors=True)
     (staging / "results").mkdir(parents=True)
@@ -194,7 +204,8 @@ def differences(ours: pd.DataFrame, reference: pd.DataFrame, flips: int = FLIPS,
     return pd.DataFrame(out, columns=[*key, "column", "ours", "reference", "allowed"])
 
 
-def shipped_items(suite, exclude=()) -> list:
-    """The shipped results of ``suite`` as extra runs for a leaderboard (an empty list when there are none)."""
-    item = load(suite, exclude)
+def shipped_items(suite, exclude=(), track: str = tracks.DEFAULT) -> list:
+    """The shipped results of ``suite`` on ``track`` as extra runs for a leaderboard (an empty list when there are
+    none)."""
+    item = load(suite, exclude, track)
     return [item] if item is not None else []

@@ -30,7 +30,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from colonbench.benchmark import suites
+from colonbench.benchmark import suites, tracks
 from colonbench.errors import ColonbenchError, InputError
 
 #: Columns of :func:`failures`.
@@ -51,7 +51,7 @@ class RunFailed(ColonbenchError):
         self.failures = failures
 
 
-def _evaluate(suite, data, methods, run_dir, retry_failed: bool = False, **kw) -> Path:
+def _evaluate(suite, data, methods, run_dir, retry_failed: bool = False, track: str = tracks.DEFAULT, **kw) -> Path:
     from colonbench.benchmark.colon_evaluate import evaluate_colons
     from colonbench.benchmark.evaluate import evaluate
 
@@ -60,7 +60,7 @@ def _evaluate(suite, data, methods, run_dir, retry_failed: bool = False, **kw) -
                                segment_mm=suite.segment_mm, split=suite.split, limit=suite.limit,
                                noise_seed=suite.noise_seed, **kw)
     return evaluate(data, methods, run_dir, noise=suite.noise_mm, split=suite.split, limit=suite.limit,
-                    noise_seed=suite.noise_seed, retry_failed=retry_failed, **kw)
+                    noise_seed=suite.noise_seed, retry_failed=retry_failed, track=track, **kw)
 
 
 def _check_suite_run(run_dir: Path, suite) -> None:
@@ -75,8 +75,9 @@ def _check_suite_run(run_dir: Path, suite) -> None:
 def run_benchmark(methods=(), suites_=("demo-v1",), out="runs/benchmark", data=None, workers: int = 1,
                   scheduler=None, model=None, device: str = "cpu", allow_unverified: bool = False,
                   shipped: bool = True, timeout: float | None = None, batch: int | None = None,
-                  figures: bool = True, progress: bool = True, retry_failed: bool = False) -> dict:
-    """Evaluate methods on named suites and write the cross-suite leaderboard.
+                  figures: bool = True, progress: bool = True, retry_failed: bool = False,
+                  track: str = tracks.DEFAULT) -> dict:
+    """Evaluate methods on named suites and write the cross-suite leaderboard, of one track.
 
     Parameters
     ----------
@@ -105,6 +106,10 @@ def run_benchmark(methods=(), suites_=("demo-v1",), out="runs/benchmark", data=N
     retry_failed : bool
         Evaluate again the segments a method failed on in ``out``'s runs (segment suites; the other rows are
         kept), then rebuild the tables.
+    track : str
+        ``points`` (the cloud only) or ``length``: each segment's nominal arc length is given to the methods that
+        take it (:mod:`colonbench.benchmark.tracks`), and that track's shipped results are merged. ``suites_="all"``
+        then leaves out the whole-colon suite, which has no such track; named, it is refused.
 
     Returns
     -------
@@ -125,7 +130,13 @@ def run_benchmark(methods=(), suites_=("demo-v1",), out="runs/benchmark", data=N
 
     from colonbench.benchmark.registry import check_spec
 
+    track = tracks.check(track)
     chosen = suites.parse(suites_)
+    if track != tracks.DEFAULT:
+        if suites_ == "all" or isinstance(suites_, (list, tuple)) and list(suites_) == ["all"]:  # those with it
+            chosen = [s for s in chosen if s.task != "colon"]
+        for s in chosen:
+            tracks.check(track, s)
     methods = method_list(methods)
     if not methods and not shipped:
         raise InputError("no methods to evaluate and --no-shipped: nothing to show")
@@ -144,7 +155,7 @@ def run_benchmark(methods=(), suites_=("demo-v1",), out="runs/benchmark", data=N
         run_dir = out / "runs" / suite.id
         _evaluate(suite, data_dir, methods, run_dir, workers=workers, scheduler=scheduler, model=model,
                   device=device, progress=progress, allow_unverified=allow_unverified, timeout=timeout, batch=batch,
-                  retry_failed=retry_failed)
+                  retry_failed=retry_failed, track=track)
         _check_suite_run(run_dir, suite)
         runs[suite.id] = run_dir
         timing[suite.id] = {"data_seconds": round(t1 - t0, 1), "evaluate_seconds": round(time.perf_counter() - t1, 1)}
@@ -160,7 +171,7 @@ def run_benchmark(methods=(), suites_=("demo-v1",), out="runs/benchmark", data=N
         raise RunFailed(f"{', '.join(dead)} failed on every sample (first, {first['suite']} at noise "
                         f"{first['noise_mm']:g} mm: {first['first_error']}); no leaderboard was written: every "
                         f"sample's row and its error are in {out / 'runs'}/<suite>/results", failed)
-    result = write_report(out, chosen, runs, shipped=shipped, figures=figures)
+    result = write_report(out, chosen, runs, shipped=shipped, figures=figures, track=track)
     result["runs"], result["seconds"], result["failures"] = runs, timing, failed
     return result
 
@@ -220,16 +231,18 @@ def _remove_tables(out: Path, chosen) -> None:
 
 
 def export_suite(suite, out, data=None, workers: int = 1, scheduler=None, allow_unverified: bool = False,
-                 progress: bool = True) -> dict:
+                 progress: bool = True, track: str = tracks.DEFAULT) -> dict:
     """Write a suite's inputs only: one PLY per evaluated cloud (noise added), ``index.csv``, ``suite.json``.
 
     A whole-colon suite's inputs are the clouds of the segments its maps estimate, cut by colonbench's own
-    map of each noisy reconstruction (what a segment method is given in its tracks).
+    map of each noisy reconstruction (what a segment method is given in its tracks). On the known-length track
+    (``track="length"``, segment suites) ``index.csv`` adds each input's ``length_mm``, the segment's nominal
+    arc length, which the points track withholds.
 
     Returns
     -------
     dict
-        ``suite.json``'s content: ``suite``, ``sha256``, ``inputs``, ``contract``.
+        ``suite.json``'s content: ``suite``, ``track``, ``inputs``, ``contract``.
     """
     from tqdm.auto import tqdm
 
@@ -238,6 +251,7 @@ def export_suite(suite, out, data=None, workers: int = 1, scheduler=None, allow_
     from colonbench.benchmark.runfolder import write_json
 
     suite = suites.get(suite)
+    track = tracks.check(track, suite)
     out = Path(out)
     if out.exists() and any(p for p in out.iterdir() if p.name != exchange.EXPORT_NAME and p.suffix != ".ply"
                             and p.name != exchange.INDEX_NAME):
@@ -253,14 +267,16 @@ def export_suite(suite, out, data=None, workers: int = 1, scheduler=None, allow_
         for i in indices:
             for sigma in suite.noise_mm:
                 sid = exchange.sample_id(shard_name, i, sigma)
-                for name, pts in _inputs(suite, data_dir, shard_name, i, sigma, sid):
+                for name, pts, length in _inputs(suite, data_dir, shard_name, i, sigma, sid):
                     exchange.write_input(out / f"{name}.ply", pts)
-                    rows.append({"sample_id": name, "file": f"{name}.ply", "noise_mm": sigma, "points": len(pts)})
+                    rows.append({"sample_id": name, "file": f"{name}.ply", "noise_mm": sigma, "points": len(pts),
+                                 **({"length_mm": length} if track == "length" else {})})
                 bar.update(1)
     bar.close()
-    exchange.write_index(out, rows)
-    info = {"suite": record, "inputs": len(rows), "contract": "docs/formats.md: colonbench score SUITE PRED_DIR "
-            "reads PRED_DIR/<sample_id>.json with coverage, holes, centerline (mm, the input's frame)"}
+    exchange.write_index(out, rows, track)
+    info = {"suite": record, "track": track, "inputs": len(rows), "contract": "docs/formats.md: colonbench score "
+            f"SUITE PRED_DIR{'' if track == tracks.DEFAULT else ' --track ' + track} reads PRED_DIR/<sample_id>.json "
+            "with coverage, holes, centerline (mm, the input's frame)"}
     write_json(out / exchange.EXPORT_NAME, info)
     return info
 
@@ -280,16 +296,18 @@ def _inputs(suite, data_dir, shard_name, i, sigma, sid):
             pieces = colon_centerline(points, positions=sample["positions"])
         except ColonbenchError:
             pieces = None
-        return segment_inputs(points, sample["positions"], pieces, suite.segment_mm, sid)
+        return [(*x, None) for x in segment_inputs(points, sample["positions"], pieces, suite.segment_mm, sid)]
     from colonbench.shards.reader import Shard
 
     with Shard(Path(data_dir) / shard_name) as shard:
-        return [(sid, noisy(shard.geometry(i)["partial_points"], sigma, suite.noise_seed, shard_name, i))]
+        geo = shard.geometry(i)
+        return [(sid, noisy(geo["partial_points"], sigma, suite.noise_seed, shard_name, i), float(geo["length_mm"]))]
 
 
 def score_suite(suite, predictions, out, name: str | None = None, data=None, workers: int = 1, scheduler=None,
-                allow_unverified: bool = False, progress: bool = True) -> Path:
-    """Score a folder of predictions (``<sample_id>.json``) on a suite into a run folder.
+                allow_unverified: bool = False, progress: bool = True, track: str = tracks.DEFAULT) -> Path:
+    """Score a folder of predictions (``<sample_id>.json``) on a suite into a run folder of ``track`` (the track
+    the predictions were made on: ``length`` for those of an export with ``--track length``).
 
     Returns
     -------
@@ -298,6 +316,7 @@ def score_suite(suite, predictions, out, name: str | None = None, data=None, wor
         ``colonbench benchmark --methods predictions:DIR`` does all at once).
     """
     suite = suites.get(suite)
+    track = tracks.check(track, suite)
     folder = Path(predictions)
     if not folder.is_dir():
         raise InputError(f"{folder}: no such folder of predictions")
@@ -307,7 +326,7 @@ def score_suite(suite, predictions, out, name: str | None = None, data=None, wor
     check_prediction_names(suite, data_dir, folder)
     spec = f"{name or folder.resolve().name}=predictions:{folder}"
     _evaluate(suite, data_dir, [spec], Path(out), workers=workers, scheduler=scheduler, progress=progress,
-              allow_unverified=allow_unverified)
+              allow_unverified=allow_unverified, track=track)
     _check_suite_run(Path(out), suite)
     return Path(out)
 

@@ -15,7 +15,11 @@ with the shipped results merged in), then one summary across suites:
   ``mae_lo``, ``mae_hi``, ``segments``, ``failed``, ``version``,
   ``reference``, ``source``: ``shipped`` or the run folder);
 * ``leaderboard.json``: the same rows with each suite's id, content hash and
-  whether the data was verified.
+  whether the data was verified, and the track.
+
+One report is of one track (:mod:`colonbench.benchmark.tracks`): on the
+known-length track the shipped results merged are that track's, and the
+whole-colon suite, which has no such track, is left out.
 """
 
 from __future__ import annotations
@@ -26,6 +30,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from colonbench.benchmark import tracks
 from colonbench.errors import InputError
 
 SUMMARY_COLUMNS = ["suite", "noise_mm", "method", "version", "reference", "mae", "mae_lo", "mae_hi", "segments",
@@ -56,8 +61,9 @@ def _rows(suite, folder: Path) -> tuple[list[dict], dict]:
     return rows, lb.get("suite") or {}
 
 
-def write_report(out, chosen, runs: dict, shipped: bool = True, figures: bool = True) -> dict:
-    """Per-suite leaderboards and the cross-suite summary under ``out``.
+def write_report(out, chosen, runs: dict, shipped: bool = True, figures: bool = True,
+                 track: str = tracks.DEFAULT) -> dict:
+    """Per-suite leaderboards and the cross-suite summary under ``out``, of one track.
 
     Parameters
     ----------
@@ -66,6 +72,8 @@ def write_report(out, chosen, runs: dict, shipped: bool = True, figures: bool = 
     runs : dict
         ``{suite id: run folder}`` of the methods evaluated (a suite may have none: shipped results only).
     shipped, figures : bool
+    track : str
+        The runs' track; the shipped results of that track are merged.
 
     Returns
     -------
@@ -77,13 +85,13 @@ def write_report(out, chosen, runs: dict, shipped: bool = True, figures: bool = 
     from colonbench.reports.leaderboard import write_leaderboard
 
     out = Path(out)
-    rows, records, paths, skipped = [], {}, [], []
+    rows, records, paths, skipped, no_length = [], {}, [], [], set()
     for suite in chosen:
         run_dir = runs.get(suite.id)
         mine = read_run(run_dir) if run_dir is not None else None
         extra = []
         if shipped and (mine is None or (mine.get("suite") or {}).get("verified")):
-            extra = shipped_items(suite, exclude=mine["methods"] if mine else ())
+            extra = shipped_items(suite, exclude=mine["methods"] if mine else (), track=track)
         if mine is None and not extra:
             skipped.append(suite.id)
             continue
@@ -91,18 +99,21 @@ def write_report(out, chosen, runs: dict, shipped: bool = True, figures: bool = 
         res = write_leaderboard([run_dir] if run_dir is not None else [], folder, figures=figures, extra=extra)
         paths += res["paths"]
         suite_rows, records[suite.id] = _rows(suite, folder)
+        lb = json.loads((folder / "leaderboard.json").read_text())
+        no_length |= {m for m, rec in lb["methods"].items() if rec.get("takes_length") is False}
         rows += suite_rows
     if not rows:
         raise InputError(f"nothing to show for {', '.join(s.id for s in chosen)}: no methods were evaluated and no "
                          "shipped results match these suites")
     summary = pd.DataFrame(rows, columns=SUMMARY_COLUMNS)
-    text = markdown(summary, chosen, records, skipped)
+    text = markdown(summary, chosen, records, skipped, track, sorted(no_length))
     out.mkdir(parents=True, exist_ok=True)
     (out / "leaderboard.md").write_text(text)
     summary.to_csv(out / "leaderboard.csv", index=False)
+    suites_ = {s.id: {**records.get(s.id, {}), "tests": s.tests, "samples": s.samples} for s in chosen
+               if s.id in records}
     (out / "leaderboard.json").write_text(json.dumps(
-        {"suites": {s.id: {**records.get(s.id, {}), "tests": s.tests, "samples": s.samples} for s in chosen
-                    if s.id in records}, "rows": json.loads(summary.to_json(orient="records"))}, indent=1))
+        {"track": track, "suites": suites_, "rows": json.loads(summary.to_json(orient="records"))}, indent=1))
     paths += [out / "leaderboard.md", out / "leaderboard.csv", out / "leaderboard.json"]
     return {"summary": summary, "markdown": text, "paths": paths}
 
@@ -119,12 +130,20 @@ def _cell(r) -> str:
     return f"{r['mae']:.2f}{ci}{failed}"
 
 
-def markdown(summary: pd.DataFrame, chosen, records: dict, skipped: list[str]) -> str:
-    """The cross-suite leaderboard as Markdown."""
+def markdown(summary: pd.DataFrame, chosen, records: dict, skipped: list[str], track: str = tracks.DEFAULT,
+             no_length=()) -> str:
+    """The cross-suite leaderboard as Markdown (``no_length``: the methods that took no length, on that track)."""
     from colonbench.reports.leaderboard import suite_state
 
     ids = [s.id for s in chosen if s.id in records]
-    lines = ["# colonbench benchmark", "",
+    lines = ["# colonbench benchmark" + ("" if track == tracks.DEFAULT else f", {tracks.label(track)}"), ""]
+    if track != tracks.DEFAULT:
+        lines += ["Each method that takes it (an `estimate` with `length_mm`, or an `exec:` program, called with "
+                  "`--length-mm`) is given each segment's nominal arc length; one that takes none answers as on the "
+                  "points-only track. These results compare only with the same track's. The whole-colon suite has "
+                  "no such track: its map cuts the segments and knows their planes itself.", "",
+                  "Took no length: " + (", ".join(f"`{m}`" for m in no_length) or "none") + ".", ""]
+    lines += [
              "Coverage MAE in percentage points with its 95 % bootstrap interval over segments, per suite; a "
              "whole-colon suite's cell is the segment MAE of its in-context track. A segment a method failed on is "
              "scored as the farther of coverage 0 and 1 (an error of max(true, 1 - true), never better than an "
@@ -145,12 +164,14 @@ def markdown(summary: pd.DataFrame, chosen, records: dict, skipped: list[str]) -
             lines.append(f"| {m}{mark} | {first['version']} | "
                          + " | ".join(_cell(keyed.get((m, s))) for s in ids) + " |")
         lines.append("")
-    lines += ["Suites (cite a suite by its id and signature; verified = the data evaluated is the published suite, "
+    lines += ["Suites (cite a suite by its id and signature" + ("" if track == tracks.DEFAULT else ", and the track")
+              + "; verified = the data evaluated is the published suite, "
               "bit-identical or within the tolerances of docs/benchmark.md):", ""]
     for s in chosen:
         if s.id in records:
             state = suite_state(records[s.id])
-            lines.append(f"- `{s.id}`: {s.tests}. {state[0].upper()}{state[1:]}.")
+            cite = s.id if track == tracks.DEFAULT else tracks.cite(s, track)
+            lines.append(f"- `{cite}`: {s.tests}. {state[0].upper()}{state[1:]}.")
     if skipped:
         lines += ["", f"No results for {', '.join(skipped)}: no method was evaluated there and no shipped results "
                   "match."]

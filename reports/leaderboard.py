@@ -2,8 +2,9 @@
 
 :func:`merge_runs` reads finished run folders (:func:`colonbench.benchmark.evaluate.load_results`)
 and refuses to combine runs on different data (dataset manifest, split or
-chosen samples), with different noise levels, noise seed or metric settings,
-or naming the same method twice. :func:`write_leaderboard` writes
+chosen samples), of different tracks (:mod:`colonbench.benchmark.tracks`),
+with different noise levels, noise seed or metric settings, or naming the same
+method twice. :func:`write_leaderboard` writes
 
 * ``leaderboard.md``: per noise level, a coverage table (MAE, median, bias,
   q95 in percentage points, failed segments scored as the farther of coverage
@@ -25,12 +26,13 @@ from pathlib import Path
 
 import pandas as pd
 
+from colonbench.benchmark import tracks
 from colonbench.benchmark.evaluate import load_results
 from colonbench.benchmark.summary import scored_errors, summarize
 from colonbench.errors import InputError
 
 #: Settings two runs must share to be compared.
-SAME = ("data", "noise_mm", "noise_seed", "thresholds_mm")
+SAME = ("data", "track", "noise_mm", "noise_seed", "thresholds_mm")
 
 
 def merge_runs(run_dirs, extra=()) -> tuple[dict, pd.DataFrame]:
@@ -66,6 +68,8 @@ def _setting(run: dict, key: str):
     where the data verified against it (bit-identical or within tolerance), else the content hash it had."""
     if key == "data" and run.get("suite"):
         return suite_identity(run["suite"])
+    if key == "track":
+        return tracks.of_run(run)
     return run.get(key)
 
 
@@ -89,9 +93,13 @@ def add_run(meta: dict | None, run: dict, path, first, same) -> dict:
         ``run`` differs from the first run in one of the settings ``same``, or names a method already there.
     """
     if meta is None:
-        meta = {k: run[k] for k in same}
+        meta = {k: tracks.of_run(run) if k == "track" else run[k] for k in same}
         meta.update(suite=run.get("suite"), methods={}, runs=[], _first=run)
     for k in same:
+        if k == "track" and tracks.of_run(run) != meta["track"]:
+            raise InputError(f"{path} is a run of the {tracks.label(tracks.of_run(run))} and {first} of the "
+                             f"{tracks.label(meta['track'])}; a leaderboard never mixes tracks (colonbench "
+                             "leaderboard --html puts each track on its own page)")
         if json.dumps(_setting(run, k), sort_keys=True) != json.dumps(_setting(meta["_first"], k), sort_keys=True):
             raise InputError(f"{path} was evaluated with other {k} than {first} "
                              f"({_setting(run, k)!r} vs {_setting(meta['_first'], k)!r}); a leaderboard compares "
@@ -116,6 +124,8 @@ def table(meta: dict, results: pd.DataFrame) -> pd.DataFrame:
     s = summarize(results, meta["thresholds_mm"])
     s["version"] = s["method"].map(lambda m: meta["methods"][m]["version"])
     s["reference"] = s["method"].map(lambda m: bool(meta["methods"][m]["reference"]))
+    if meta.get("track", tracks.DEFAULT) != tracks.DEFAULT:   # a method that takes no length answers as on points
+        s["takes_length"] = s["method"].map(lambda m: bool(meta["methods"][m].get("takes_length", True)))
     # one seed for every cell: methods scored on the same segments are resampled alike (identical errors give
     # identical intervals), and no cell depends on which others are computed
     ci = {(n, m): stats.mae_interval(scored_errors(g), seed=0)
@@ -134,7 +144,7 @@ def table(meta: dict, results: pd.DataFrame) -> pd.DataFrame:
             s.loc[at, ["vs_baseline", "vs_baseline_lo", "vs_baseline_hi", "vs_baseline_pairs"]] = \
                 d.loc[m, ["diff", "diff_lo", "diff_hi", "pairs"]].to_numpy(float)
     s = s.sort_values(["noise_mm", "reference", "coverage_mae", "method"], na_position="last")
-    cols = ["noise_mm", "method", "version", "reference"]
+    cols = ["noise_mm", "method", "version", "reference"] + (["takes_length"] if "takes_length" in s.columns else [])
     return s[cols + [c for c in s.columns if c not in cols]].reset_index(drop=True)
 
 
@@ -150,13 +160,17 @@ def interval(lo, hi, sign: str = "") -> str:
 
 
 def data_line(meta: dict, unit: str) -> str:
-    """The sentence saying what was evaluated: the suite and its content hash (verified or not), or the data."""
-    d, suite = meta["data"], meta.get("suite")
+    """The sentence saying what was evaluated: the suite and its content hash (verified or not), or the data; and
+    the track where it is not the points-only one, with how to cite it."""
+    d, suite, track = meta["data"], meta.get("suite"), meta.get("track") or tracks.DEFAULT
+    on = "" if track == tracks.DEFAULT else (
+        f" {tracks.label(track).capitalize()}: each method that takes it is given the segment's nominal arc length" +
+        (f"; cite as `{tracks.cite_record(suite, track)}`." if suite else "."))
     if suite:
         return (f"Suite `{suite['id']}` ({d['samples']} {unit}; {suite_state(suite)}; manifest "
-                f"`{d['manifest_name']}`, split `{d['split']}`).")
+                f"`{d['manifest_name']}`, split `{d['split']}`).{on}")
     return (f"Data: manifest `{d['manifest_name']}` (sha256 {str(d['manifest_sha256'])[:12]}), split `{d['split']}`, "
-            f"{d['samples']} {unit} (samples sha256 {d['samples_sha256'][:12]}; not a named suite).")
+            f"{d['samples']} {unit} (samples sha256 {d['samples_sha256'][:12]}; not a named suite).{on}")
 
 
 def suite_state(suite: dict) -> str:
@@ -183,17 +197,22 @@ def markdown(meta: dict, tab: pd.DataFrame) -> str:
              "Rows marked * are references that bound the problem, not methods: they are given ground truth (the GT "
              "target heatmap or centerline) or guess the training data's mean coverage.", ""]
     ths = meta["thresholds_mm"]
+    on_length = "takes_length" in tab.columns
+    if on_length:
+        lines += ["*length*: whether the method took the segment's length; one that takes none (its `estimate` has no "
+                  "`length_mm`) answers as on the points-only track.", ""]
     for noise, g in tab.groupby("noise_mm", sort=True):
         lines += [f"## Noise sigma = {noise:g} mm", "",
-                  "| method | version | segments | MAE [95 % CI] | Δ vs best baseline [95 % CI] | median | bias | q95 "
-                  "| undefined | failed | s/segment |",
-                  "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+                  "| method | version | " + ("length | " if on_length else "") + "segments | MAE [95 % CI] "
+                  "| Δ vs best baseline [95 % CI] | median | bias | q95 | undefined | failed | s/segment |",
+                  "|---|---|" + ("---|" if on_length else "") + "---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
         for _, r in g.iterrows():
             name = r["method"] + (" *" if r["reference"] else "")
             vs = ("(best baseline)" if r["method"] == r["baseline"] else
                   f"{_f(r['vs_baseline'], 2, '+')} {interval(r['vs_baseline_lo'], r['vs_baseline_hi'], '+')}"
                   if r["baseline"] and not math.isnan(r["vs_baseline"]) else "n/a")
-            lines.append(f"| {name} | {r['version']} | {r['segments']} | {_f(r['coverage_mae'])} "
+            given = ("given | " if r["takes_length"] else "takes none | ") if on_length else ""
+            lines.append(f"| {name} | {r['version']} | {given}{r['segments']} | {_f(r['coverage_mae'])} "
                          f"{interval(r['coverage_mae_lo'], r['coverage_mae_hi'])} | {vs} | "
                          f"{_f(r['coverage_median'])} | {_f(r['coverage_bias'])} | {_f(r['coverage_q95'])} | "
                          f"{r['coverage_undefined']} | {r['failed']} | {_f(r['seconds'], 3)} |")
@@ -309,7 +328,8 @@ def write_leaderboard(run_dirs, out, figures: bool = True, extra=()) -> dict:
     tab.to_csv(paths[1], index=False)
     paths[3].write_text(breakdown_markdown(meta, bd))
     bd.to_csv(paths[4], index=False)
-    paths[2].write_text(json.dumps({"data": meta["data"], "suite": meta["suite"], "noise_mm": meta["noise_mm"],
+    paths[2].write_text(json.dumps({"data": meta["data"], "suite": meta["suite"], "track": meta["track"],
+                                    "noise_mm": meta["noise_mm"],
                                     "noise_seed": meta["noise_seed"], "thresholds_mm": meta["thresholds_mm"],
                                     "methods": meta["methods"], "runs": meta["runs"],
                                     "rows": json.loads(tab.to_json(orient="records"))}, indent=1))

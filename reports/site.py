@@ -30,13 +30,14 @@ from pathlib import Path
 import pandas as pd
 
 from colonbench._version import __version__
+from colonbench.benchmark import tracks
 from colonbench.benchmark.runfolder import RUN_FILE, read_run, write_json
 from colonbench.errors import InputError
 from colonbench.reports.leaderboard import data_line, suite_state
 from colonbench.reports.webpage import esc, fmt, inline, kv_table, page, slug, table, with_interval
 
 #: The track of a run whose run.json names none.
-DEFAULT_TRACK = "points"
+DEFAULT_TRACK = tracks.DEFAULT
 #: Marks a site folder (which a rebuild may replace) and lists its pages.
 SITE_FILE = "site.json"
 #: Precision / recall statistics, shown in their own table rather than the main one.
@@ -49,7 +50,8 @@ HIDDEN = {"noise_mm", "method", "version", "reference", "baseline", "vs_baseline
 LABELS = {"coverage_undefined": "undefined", "coverage_mae": "MAE [95 % CI]", "segment_mae": "segment MAE [95 % CI]",
           "vs_baseline": "Δ vs best baseline [95 % CI]", "coverage_median": "median", "coverage_bias": "bias",
           "coverage_q95": "q95", "interval_covered": "truth in interval, %", "interval_width": "interval width",
-          "interval_segments": "segments with an interval", "seconds": "s/segment", "seconds_per_map": "s/map"}
+          "interval_segments": "segments with an interval", "seconds": "s/segment", "seconds_per_map": "s/map",
+          "takes_length": "takes the length"}
 #: Model cards that ship, by the model named at the head of a method's version (``small@avg9,...``).
 CARDS = {"small": "models/MODEL_CARD.md"}
 #: What each figure of a page shows (a triplet figure is named by its file).
@@ -61,9 +63,10 @@ CAPTIONS = {"boxplots": "Box plots per noise level (the paper's Fig. 4): hole an
 # ---------------------------------------------------------------------------------------------------- the runs
 
 
-def expand(paths) -> tuple[list[Path], list[str]]:
-    """Run folders and suite ids in ``paths``: a run folder is itself; a ``benchmark --out`` folder gives its
-    ``runs/<suite>/`` and the suites of its ``leaderboard.json`` (shipped results only where it ran none).
+def expand(paths) -> tuple[list[Path], list[tuple[str, str]]]:
+    """Run folders and ``(suite id, track)`` pairs in ``paths``: a run folder is itself; a ``benchmark --out``
+    folder gives its ``runs/<suite>/`` and the suites of its ``leaderboard.json`` on its track (shipped results only
+    where it ran none).
 
     Raises
     ------
@@ -78,7 +81,8 @@ def expand(paths) -> tuple[list[Path], list[str]]:
         lb = p / "leaderboard.json"
         found = sorted(d for d in (p / "runs").glob("*") if (d / RUN_FILE).is_file()) if p.is_dir() else []
         try:
-            named = list(json.loads(lb.read_text()).get("suites", {})) if lb.is_file() else []
+            record = json.loads(lb.read_text()) if lb.is_file() else {}
+            named = [(sid, str(record.get("track") or DEFAULT_TRACK)) for sid in record.get("suites", {})]
         except (json.JSONDecodeError, AttributeError) as exc:
             raise InputError(f"{lb}: unreadable ({exc})") from None
         if not found and not named:
@@ -100,8 +104,8 @@ def _suite(sid):
 
 def groups(paths, shipped: bool = True) -> dict:
     """``{(page id, track): {"runs", "records", "extra", "suite"}}``: the runs of each suite (or data) and track,
-    and the shipped results merged into them as ``colonbench benchmark`` merges them (its runs' data verified,
-    the methods they hold left out of the shipped ones; the shipped results are of the ``points`` track)."""
+    and the shipped results of that suite and track merged into them as ``colonbench benchmark`` merges them (its
+    runs' data verified, the methods they hold left out of the shipped ones)."""
     from colonbench.benchmark.shipped import shipped_items
 
     run_dirs, ids = expand(paths)
@@ -115,12 +119,15 @@ def groups(paths, shipped: bool = True) -> dict:
                            {"runs": [], "records": [], "extra": [], "suite": _suite(pid) if rec else None})
         g["runs"].append(d)
         g["records"].append((run, str(d)))
-    for s in filter(None, map(_suite, ids) if shipped else ()):
-        out.setdefault((s.id, DEFAULT_TRACK), {"runs": [], "records": [], "extra": [], "suite": s})
+    for sid, track in ids if shipped else ():
+        s = _suite(sid)
+        if s is not None:
+            out.setdefault((s.id, track), {"runs": [], "records": [], "extra": [], "suite": s})
     for (pid, track), g in out.items():
         verified = all((run.get("suite") or {}).get("verified") for run, _ in g["records"])
-        if shipped and g["suite"] is not None and track == DEFAULT_TRACK and verified:
-            g["extra"] = shipped_items(g["suite"], exclude={m for run, _ in g["records"] for m in run["methods"]})
+        if shipped and g["suite"] is not None and track in tracks.TRACKS and verified:
+            g["extra"] = shipped_items(g["suite"], exclude={m for run, _ in g["records"] for m in run["methods"]},
+                                       track=track)
             g["records"] += [(item[0], item[-1]) for item in g["extra"]]
     return {k: g for k, g in out.items() if g["runs"] or g["extra"]}
 
@@ -210,9 +217,10 @@ def suite_page(key, g: dict, folder: Path, lb: dict, tab: pd.DataFrame, bd, figu
     (pid, track), s, root, methods = key, g["suite"], "../../", lb["methods"]
     html_ = [f"<h1>{esc(pid)} · track {esc(track)}</h1>"]
     if s is not None:
-        html_.append(f"<p>{esc(s.tests)}. Cite as <code>{esc(s.id)} ({esc(s.signature)})</code>.</p>")
+        html_.append(f"<p>{esc(s.tests)}. Cite as <code>{esc(tracks.cite(s, track))}</code>.</p>")
     unit = "reconstructions" if lb.get("task") == "colon" else "segments"
-    html_ += [f"<p>{inline(data_line({'data': lb['data'], 'suite': lb.get('suite')}, unit))} Noise levels: "
+    html_ += [f"<p>{inline(data_line({'data': lb['data'], 'suite': lb.get('suite'), 'track': track}, unit))} "
+              f"Noise levels: "
               f"{esc(', '.join(f'{n:g}' for n in lb['noise_mm']))} mm (Gaussian, seed {esc(lb['noise_seed'])}).</p>",
               '<p class="note">Coverage errors in percentage points (estimated - true), MAE with its 95 % bootstrap '
               "interval over segments; Δ: the paired difference of the absolute error against the best baseline "
@@ -263,6 +271,8 @@ def method_page(name: str, seen: list[dict]) -> str:
         how = {"version": rec.get("version", ""), "spec": rec.get("spec", ""), "class": rec.get("class", ""),
                "reference": "yes" if rec.get("reference") else "no",
                "given ground truth": "yes" if rec.get("uses_truth") else "no",
+               **({"takes the length": "yes" if rec["takes_length"] else "no (answers as on the points track)"}
+                  if "takes_length" in rec else {}),
                "source": "shipped reference results" if _is_shipped(rec) else rec.get("run", "")}
         mae = [({}, [(esc(f"{r['noise_mm']:g}"), repr(r["noise_mm"])),
                      (esc(with_interval(r, "mae")[0]), fmt(r["mae"])[1])]) for _, r in a["mae"].iterrows()]
@@ -293,7 +303,8 @@ def index_page(pages: list[dict]) -> str:
         mine = sorted(m for m, r in lb["methods"].items() if not _is_shipped(r))
         rows.append(({"data-page": p["name"]}, [
             (f'<a href="{esc(p["name"])}/index.html">{esc(p["pid"])}</a>', p["pid"]), (esc(p["track"]), p["track"]),
-            (esc(s.tests if s else "not a named suite"), None), (esc(f"{s.id} ({s.signature})") if s else "", None),
+            (esc(s.tests if s else "not a named suite"), None),
+            (esc(tracks.cite(s, p["track"])) if s else "", None),
             (inline(suite_state(lb["suite"])) if lb.get("suite") else "", None),
             (esc(", ".join(mine) or "none (shipped results only)"), None)]))
     body = ["<h1>colonbench leaderboard</h1>", "<p>Coverage estimation for colonoscopy: each page is one suite (or "

@@ -1,13 +1,16 @@
-"""Make the shipped reference results: every built-in method on every suite, evaluated and published.
+"""Make the shipped reference results: every built-in method on every suite and track, evaluated and published.
 
-    python scripts/reference_results.py [--suites all] [--data DIR] [--workers 2] [--out runs/reference]
-                                        [--methods completion]
+    python scripts/reference_results.py [--suites all] [--tracks points,length] [--data DIR] [--workers 2]
+                                        [--out runs/reference] [--methods completion]
 
 Each suite's data is generated where missing (and checked against its
-published hash), the built-in methods are evaluated into OUT/runs/<suite>/ by
-colonbench benchmark (resumable: rerun to finish), and the finished run is
-copied into benchmark/shipped_results/<suite>/ (colonbench.benchmark.shipped),
-from where colonbench benchmark merges it. Prints the time per suite.
+published hash), the built-in methods are evaluated by colonbench benchmark
+into OUT/runs/<suite>/ (the points track) and OUT@length/runs/<suite>/ (the
+known-length track; resumable: rerun to finish), and each finished run is
+copied into benchmark/shipped_results/<suite>/ or <suite>@length/
+(colonbench.benchmark.shipped), from where colonbench benchmark merges it into
+the tables of its track. The whole-colon suite has no known-length track and is
+skipped there. Prints the time per suite and track.
 """
 
 from __future__ import annotations
@@ -15,7 +18,7 @@ from __future__ import annotations
 import argparse
 import time
 
-from colonbench.benchmark import shipped, suites
+from colonbench.benchmark import shipped, suites, tracks
 from colonbench.benchmark.colon_evaluate import ALL_METHODS
 from colonbench.benchmark.registry import DEFAULT_METHODS
 from colonbench.pipeline import run_benchmark
@@ -24,6 +27,7 @@ from colonbench.pipeline import run_benchmark
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--suites", default="all")
+    ap.add_argument("--tracks", default=",".join(tracks.TRACKS), help="comma-separated (default: points,length)")
     ap.add_argument("--data", help="suite data folder (default: colonbench's cache)")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--out", default="runs/reference")
@@ -31,16 +35,22 @@ def main() -> None:
                                       "the other methods' kept")
     args = ap.parse_args()
     only = [m.strip() for m in args.methods.split(",")] if args.methods else None
-    for suite in suites.parse(args.suites):
-        t = time.perf_counter()
-        methods = only or list(ALL_METHODS if suite.task == "colon" else DEFAULT_METHODS)
-        result = run_benchmark(methods, [suite], args.out, data=args.data, workers=args.workers, shipped=False,
-                               figures=False, progress=False)
-        where = shipped.publish(result["runs"][suite.id], suite, methods=only)
-        sec = result["seconds"][suite.id]
-        print(f"{suite.id}: {len(methods)} methods, data {sec['data_seconds']:.0f} s, evaluation "
-              f"{sec['evaluate_seconds']:.0f} s with {args.workers} workers -> {where} "
-              f"({time.perf_counter() - t:.0f} s in all)", flush=True)
+    chosen = [tracks.check(t) for t in args.tracks.split(",") if t.strip()]
+    for track in chosen:
+        out = args.out if track == tracks.DEFAULT else f"{args.out}@{track}"
+        for suite in suites.parse(args.suites):
+            if suite.task == "colon" and track != tracks.DEFAULT:
+                print(f"{suite.id}: skipped on the {tracks.label(track)}, which it does not have", flush=True)
+                continue
+            t = time.perf_counter()
+            methods = only or list(ALL_METHODS if suite.task == "colon" else DEFAULT_METHODS)
+            result = run_benchmark(methods, [suite], out, data=args.data, workers=args.workers, shipped=False,
+                                   figures=False, progress=False, track=track)
+            where = shipped.publish(result["runs"][suite.id], suite, methods=only, track=track)
+            sec = result["seconds"][suite.id]
+            print(f"{suite.id} ({tracks.label(track)}): {len(methods)} methods, data {sec['data_seconds']:.0f} s, "
+                  f"evaluation {sec['evaluate_seconds']:.0f} s with {args.workers} workers -> {where} "
+                  f"({time.perf_counter() - t:.0f} s in all)", flush=True)
 
 
 if __name__ == "__main__":

@@ -54,6 +54,15 @@ def add_external_args(p) -> None:
                         "them again); the other rows are kept")
 
 
+def add_track_arg(p, what: str) -> None:
+    """``--track points|length``: what the methods are given besides the points (colonbench.benchmark.tracks)."""
+    from colonbench.benchmark.tracks import DEFAULT, TRACKS
+
+    p.add_argument("--track", choices=TRACKS, default=DEFAULT,
+                   help=f"points (the default: the cloud only) or length, the known-length track: {what} "
+                        "(docs/benchmark.md, Tracks)")
+
+
 def _add_data_args(p) -> None:
     p.add_argument("--data", help="where suite data is cached (default $COLONBENCH_DATA, else "
                    "$XDG_CACHE_HOME/colonbench/suites, else ~/.cache/colonbench/suites): one folder per suite, "
@@ -74,7 +83,7 @@ def cmd_benchmark(args):
                                scheduler=args.scheduler, model=args.model, device=args.device,
                                allow_unverified=args.allow_unverified, shipped=not args.no_shipped,
                                timeout=args.timeout, batch=args.batch, figures=not args.no_figures,
-                               progress=not args.quiet, retry_failed=args.retry_failed)
+                               progress=not args.quiet, retry_failed=args.retry_failed, track=args.track)
     except RunFailed as exc:  # no tables: the warnings say what failed, then the error
         warn_failures(exc.failures, lambda suite: Path(args.out) / "runs" / suite / "results")
         raise
@@ -108,10 +117,12 @@ def cmd_export(args):
     from colonbench.pipeline import export_suite
 
     info = export_suite(args.suite, args.out, data=args.data, workers=args.workers, scheduler=args.scheduler,
-                        allow_unverified=args.allow_unverified, progress=not args.quiet)
+                        allow_unverified=args.allow_unverified, progress=not args.quiet, track=args.track)
     rec = info["suite"]
-    print(f"wrote {info['inputs']} inputs of {rec['id']} ({rec['signature']}, {rec['check']}) to {args.out}; predict "
-          f"PRED_DIR/<sample_id>.json for each, then colonbench score {rec['id']} PRED_DIR --out RUN{_data_flag(args)}")
+    track = "" if args.track == "points" else f" --track {args.track}"
+    print(f"wrote {info['inputs']} inputs of {rec['id']} ({rec['signature']}, {rec['check']}){track} to {args.out}; "
+          f"predict PRED_DIR/<sample_id>.json for each, then colonbench score {rec['id']} PRED_DIR --out "
+          f"RUN{track}{_data_flag(args)}")
 
 
 def cmd_score(args):
@@ -124,7 +135,8 @@ def cmd_score(args):
     from colonbench.benchmark.summary import summarize
 
     run = score_suite(args.suite, args.predictions, args.out, name=args.name, data=args.data, workers=args.workers,
-                      scheduler=args.scheduler, allow_unverified=args.allow_unverified, progress=not args.quiet)
+                      scheduler=args.scheduler, allow_unverified=args.allow_unverified, progress=not args.quiet,
+                      track=args.track)
     from colonbench.benchmark.colon_evaluate import is_colon_run
 
     if not is_colon_run(run):
@@ -167,6 +179,8 @@ def add_parsers(sub) -> None:
     add_external_args(p)
     p.add_argument("--no-shipped", action="store_true", help="leave the shipped reference results out")
     p.add_argument("--no-figures", action="store_true", help="tables only")
+    add_track_arg(p, "each segment's nominal arc length is given to the methods that take it (exec: programs get "
+                     "--length-mm L); --suites all leaves out colon-v1, which has no such track")
     p.set_defaults(func=cmd_benchmark)
 
     p = sub.add_parser("export", help="write a suite's inputs (one PLY per cloud, an index; no truth) for "
@@ -177,6 +191,7 @@ def add_parsers(sub) -> None:
     p.add_argument("suite", help="suite id or name (colonbench suites)")
     p.add_argument("--out", required=True, help="folder for the PLY files, index.csv and suite.json")
     _add_data_args(p)
+    add_track_arg(p, "index.csv adds each input's length_mm")
     p.set_defaults(func=cmd_export)
 
     p = sub.add_parser("score", help="score a folder of predictions (<sample_id>.json) on a suite into a run folder",
@@ -187,5 +202,6 @@ def add_parsers(sub) -> None:
     p.add_argument("--out", required=True, help="run folder to write")
     p.add_argument("--name", help="the method's row name (default: the predictions folder's name)")
     _add_data_args(p)
+    add_track_arg(p, "the predictions were made with each input's length (export --track length)")
     p.set_defaults(func=cmd_score)
 

@@ -23,6 +23,9 @@ def cmd_evaluate(args):
         raise ColonbenchError(f"{args.data} is a {made_for} dataset; --task {task} needs a "
                               f"{'task: colon' if task == 'colon' else 'segment'} manifest's data")
     if task == "colon":
+        if args.track != "points":
+            raise ColonbenchError("--track length is for segment data: a whole-colon map cuts the segments and knows "
+                                  "their planes itself")
         return _evaluate_colons(args)
     if args.context_model:
         raise ColonbenchError("--context-model is for whole-colon maps (--task colon), where segments have planes "
@@ -32,7 +35,7 @@ def cmd_evaluate(args):
                    limit=args.limit, workers=args.workers, model=args.model, device=args.device,
                    examples=args.examples, noise_seed=args.noise_seed, progress=not args.quiet,
                    scheduler=args.scheduler, allow_unverified=args.allow_unverified, timeout=args.timeout,
-                   batch=args.batch, tta=args.tta, retry_failed=args.retry_failed)
+                   batch=args.batch, tta=args.tta, retry_failed=args.retry_failed, track=args.track)
     meta, results = load_results(run)
     s = summarize(results)
     for _, r in s.iterrows():
@@ -97,7 +100,7 @@ def cmd_leaderboard(args):
 
 def _shipped_for(run_dirs) -> list:
     """The shipped results of the suite the runs evaluated, less the methods they hold."""
-    from colonbench.benchmark import suites
+    from colonbench.benchmark import suites, tracks
     from colonbench.benchmark.runfolder import read_run
     from colonbench.benchmark.shipped import shipped_items
 
@@ -108,9 +111,10 @@ def _shipped_for(run_dirs) -> list:
     if not rec.get("verified"):
         raise ColonbenchError(f"{run_dirs[0]}: its data is not the published {rec['id']} (unverified); the shipped "
                               "results are not comparable")
-    items = shipped_items(suites.get(rec["id"]), exclude={m for r in runs for m in r["methods"]})
+    track = tracks.of_run(runs[0])
+    items = shipped_items(suites.get(rec["id"]), exclude={m for r in runs for m in r["methods"]}, track=track)
     if not items:
-        raise ColonbenchError(f"no shipped results of {rec['id']} to merge")
+        raise ColonbenchError(f"no shipped results of {rec['id']} on the {tracks.label(track)} to merge")
     return items
 
 
@@ -142,6 +146,7 @@ def add_parsers(sub) -> None:
     p.add_argument("--noise-seed", type=int, default=0, help="root seed of the input noise (default 0)")
     add_suite_check_args(p, "the data and run folders")
     benchmark_verbs.add_external_args(p)
+    benchmark_verbs.add_track_arg(p, "each segment's length_mm is given to the methods that take it")
     p.add_argument("--task", choices=["segments", "colon"],
                    help="segments (the paper's protocol) or colon (whole-colon maps, docs/mapping.md); "
                         "default: what the dataset was made for")
