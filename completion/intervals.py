@@ -23,6 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
+from colonbench.errors import InputError
+
 #: Nominal coverage of the intervals.
 LEVEL = 0.9
 #: Estimate bands of the groups (upper edges, fractions).
@@ -35,6 +37,10 @@ MIN_GROUP = 30
 #: A span between the planes (``signals["span_mm"]``) shorter than this share of the segment's known length stops
 #: short of an unseen end (:func:`known_length`; chosen on the calibration set, decision records 0144 and 0155).
 SHORT_SHARE = 0.9
+#: A known length shorter than the segment's span between its planes over this share is refused as not the
+#: segment's: on the calibration set the span reaches 1.83 times the true length (planes pushed out past a cloud
+#: without rims); a length typed in cm for mm is a tenth of the true one.
+LONGEST_SHARE = 3.0
 #: Suffix of a model's calibration file.
 SUFFIX = ".intervals.json"
 #: The features of an estimate its interval is scaled by, per scaled scheme (:func:`features`; decision record 0156).
@@ -238,8 +244,11 @@ def known_length(est, length_mm: float) -> None:
     of it, the cloud stops short of an end nobody saw, and the coverage is scaled by the share it spans (the rest
     of the tube counted unobserved; decision record 0155). Marks the estimate's extent as known."""
     if not (length_mm > 0 and np.isfinite(length_mm)):
-        raise ValueError(f"a segment's length must be a positive number of mm, got {length_mm}")
+        raise InputError(f"a segment's length must be a positive number of mm, got {length_mm}")
     span = float(est.signals["span_mm"])
+    if span > LONGEST_SHARE * float(length_mm):
+        raise InputError(f"a segment's length of {length_mm:g} mm cannot be this cloud's: it spans {span:.0f} mm "
+                         f"between its planes, more than {LONGEST_SHARE:g} times that (a length in cm, not mm?)")
     share = span / float(length_mm)
     est.signals.update(extent="known", length_share=round(share, 4))
     if share < SHORT_SHARE and np.isfinite(est.coverage):

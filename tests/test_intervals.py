@@ -59,6 +59,9 @@ def test_a_known_length_counts_what_the_cloud_does_not_reach_as_unobserved():
     assert short_line.coverage == 0.9 and short_line.signals["length_share"] == pytest.approx(59 / 60, abs=1e-4)
     with pytest.raises(ValueError, match="positive"):
         intervals.known_length(near, -1.0)
+    with pytest.raises(InputError, match="cannot be this cloud's: it spans 59 mm.*in cm"):    # 6 cm typed as 6 mm
+        intervals.known_length(Estimate(0.9, np.zeros((0, 3)), np.zeros((0, 3)), "m",
+                                        signals={"length_mm": 55.0, "span_mm": 59.0}), 6.0)
 
 
 def test_review_fires_on_a_wide_interval_and_then_names_a_doubtful_rim_unless_the_extent_is_known():
@@ -116,6 +119,9 @@ def test_estimate_writes_the_interval_and_takes_a_known_length(demo_data, tmp_pa
     assert main(["estimate", str(tmp_path / "seg.npy"), "--out-dir", str(tmp_path / "c"), "--length-mm", "60",
                  "--method", "constant"]) == 2
     assert "does not take a segment's length" in capsys.readouterr().err
+    assert main(["estimate", str(tmp_path / "seg.npy"), "--out-dir", str(tmp_path / "d"), "--length-mm", "6"]) == 2
+    err = capsys.readouterr().err                      # 6 cm typed as mm: refused, never used silently
+    assert "seg.npy" in err and "a length in cm, not mm?" in err and not (tmp_path / "d" / "seg.json").exists()
 
 
 def test_the_benchmark_scores_intervals_and_says_n_a_for_methods_without(demo_data, tmp_path):
