@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
 import resource
 import time
 from pathlib import Path
@@ -45,7 +44,7 @@ from colonbench.benchmark.parallel import run_units
 from colonbench.benchmark.registry import load_method
 from colonbench.estimate import as_estimate
 from colonbench.benchmark.runfolder import (RUN_FILE, RunMismatch, begin_run, check_run_folder, read_rows, read_run,
-                                            write_csv, write_json)
+                                            save_example, write_csv, write_json)
 from colonbench.benchmark.summary import metric_columns, summarize
 from colonbench.completion.symmetry import check_tta
 from colonbench.errors import ColonbenchError, InputError
@@ -55,7 +54,7 @@ __all__ = ["RUN_FILE", "RunMismatch", "evaluate", "load_results", "noisy", "read
 
 #: Per-segment columns, in order (then the metric columns, ``seconds`` and ``error``).
 ID_COLUMNS = ["method", "shard", "index", "colon_id", "length_mm", "hole_model", "noise_mm", "true_coverage",
-              "coverage", "coverage_error", "interval_low", "interval_high"]
+              "coverage", "coverage_error", "interval_low", "interval_high", "review"]
 
 
 def result_columns() -> list[str]:
@@ -160,20 +159,6 @@ def _one(method, pts: np.ndarray, truth: dict, sid: str, length: float | None = 
     return est, (float(sum(stages.values())) if stages else wall)
 
 
-def _save_example(path: Path, pts, est, truth):
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    with open(tmp, "wb") as fh:
-        np.savez_compressed(fh, partial_points=pts.astype(np.float32),
-                            mesh_vertices=np.asarray(est.mesh_vertices, np.float32),
-                            mesh_faces=np.asarray(est.mesh_faces, np.int32),
-                            hole_vertices=np.asarray(est.hole_vertices, bool),
-                            centerline=np.asarray(est.centerline, np.float32),
-                            true_centerline=truth["centerline"].astype(np.float32),
-                            coverage=np.float64(est.coverage), true_coverage=np.float64(truth["coverage"]))
-    tmp.replace(path)
-
-
 def run_unit(data: str, shard_name: str, indices: list[int], sigma: float, noise_seed: int, names: list[str],
              examples: list[int], run_dir: str, track: str = tracks.DEFAULT, *,
              methods: dict) -> dict[str, list[dict]]:
@@ -209,17 +194,18 @@ def run_unit(data: str, shard_name: str, indices: list[int], sigma: float, noise
                     row.update({"coverage": np.nan, "coverage_error": np.nan, "interval_low": np.nan,
                                 "interval_high": np.nan, "seconds": np.nan,
                                 "error": msg.replace("\n", " ")[:1000]})
-                    row.update({c: np.nan for c in (*metric_columns(), *COUNT_COLUMNS)})
+                    row.update({c: np.nan for c in (*metric_columns(), *COUNT_COLUMNS, "review")})
                     # the truth's side is known: a failure's precision / recall is scored where it has points
                     row.update({k: v for k, v in point_counts((), (), truth).items() if k.endswith("_true_n")})
                 else:
                     metrics = segment_metrics(est.coverage, est.holes, est.centerline, truth)
                     low, high = est.coverage_interval if est.coverage_interval is not None else (np.nan, np.nan)
-                    row.update({"coverage": est.coverage, "interval_low": low, "interval_high": high, **metrics,
+                    row.update({"coverage": est.coverage, "interval_low": low, "interval_high": high,
+                                "review": est.review_count, **metrics,
                                 **point_counts(est.holes, est.centerline, truth), "seconds": seconds, "error": ""})
                     if i in examples and len(getattr(est, "mesh_faces", ())):
                         stem = shard_name.replace("/", "_").removesuffix(".h5")
-                        _save_example(Path(run_dir) / "examples" / m.name / f"{stem}-{i:03d}-noise{sigma:g}.npz",
+                        save_example(Path(run_dir) / "examples" / m.name / f"{stem}-{i:03d}-noise{sigma:g}.npz",
                                       pts, est, truth)
                 out[m.name].append(row)
     return out

@@ -50,6 +50,8 @@ def read_rows(path) -> pd.DataFrame:
         at = df.columns.get_loc("coverage_error") + 1
         df.insert(at, "interval_low", np.nan)
         df.insert(at + 1, "interval_high", np.nan)
+    if "interval_high" in df.columns and "review" not in df.columns:      # rows written before the review count
+        df.insert(df.columns.get_loc("interval_high") + 1, "review", np.nan)
     return df
 
 
@@ -203,3 +205,18 @@ def read_run(run_dir) -> dict:
     if run.get("format") != RUN_FORMAT or run.get("format_version") != RUN_FORMAT_VERSION:
         raise InputError(f"{path}: not a colonbench run of format version {RUN_FORMAT_VERSION}")
     return run
+
+
+def save_example(path: Path, pts, est, truth):
+    """One segment's input, completed mesh, holes and centerlines, kept as an example of a run (``examples/``)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    with open(tmp, "wb") as fh:
+        np.savez_compressed(fh, partial_points=pts.astype(np.float32),
+                            mesh_vertices=np.asarray(est.mesh_vertices, np.float32),
+                            mesh_faces=np.asarray(est.mesh_faces, np.int32),
+                            hole_vertices=np.asarray(est.hole_vertices, bool),
+                            centerline=np.asarray(est.centerline, np.float32),
+                            true_centerline=truth["centerline"].astype(np.float32),
+                            coverage=np.float64(est.coverage), true_coverage=np.float64(truth["coverage"]))
+    tmp.replace(path)

@@ -114,11 +114,33 @@ def interval_stats(g: pd.DataFrame, failures: bool = False) -> dict:
             "interval_width": 100 * float((high - low)[have].mean()), "interval_segments": int(have.sum()) + outside}
 
 
+#: An estimate off by more than this (fraction) is one its ``review`` should flag (decision record 0156).
+REVIEW_OFF = 0.15
+
+
+def review_stats(g: pd.DataFrame) -> dict:
+    """How a method's ``review`` did, over the answered rows with a truth where it says how sure it is (a ``review``
+    count, :attr:`colonbench.estimate.Estimate.review_count`): ``review_flagged``, the share flagged (%);
+    ``review_recall``, the share of the estimates off by more than :data:`REVIEW_OFF` that it flagged (%);
+    ``review_precision``, the share of its flags on such estimates (%); ``review_off``, how many were off. NaN (n/a)
+    for a method that gives none."""
+    if "review" not in g.columns:
+        g = g.assign(review=np.nan)
+    n = g["review"].to_numpy(float)
+    have = np.isfinite(n) & np.isfinite(g["coverage_error"].to_numpy(float))
+    if not have.any():
+        return {"review_flagged": np.nan, "review_recall": np.nan, "review_precision": np.nan, "review_off": 0}
+    flag, off = n[have] > 0, np.abs(g["coverage_error"].to_numpy(float)[have]) > REVIEW_OFF
+    share = lambda a, b: 100 * float((a & b).sum()) / b.sum() if b.any() else np.nan   # noqa: E731
+    return {"review_flagged": 100 * float(flag.mean()), "review_recall": share(flag, off),
+            "review_precision": share(off, flag), "review_off": int(off.sum())}
+
+
 def _stats(g: pd.DataFrame, metrics: list[str]) -> dict:
     err, bad = scored_errors(g), failed(g)
     row = {"segments": len(g), "failed": int(bad.sum()), "coverage_undefined": int(np.isnan(err[~bad]).sum()),
            **{f"coverage_{k}": v for k, v in error_stats(err).items()},
-           **interval_stats(g, failures=True), "seconds": float(g["seconds"].mean())}
+           **interval_stats(g, failures=True), **review_stats(g), "seconds": float(g["seconds"].mean())}
     for m in metrics:
         v = scored_metric(g, m)
         d = v[~np.isnan(v)]

@@ -56,6 +56,12 @@ class Estimate:
     review: list = field(default_factory=list)
     signals: dict = field(default_factory=dict)
 
+    @property
+    def review_count(self) -> float:
+        """How many reasons to review the estimate gives, where it says how sure it is (an interval or a reason);
+        NaN for an estimate that says nothing of it."""
+        return float(len(self.review)) if self.coverage_interval is not None or self.review else float("nan")
+
     def to_json(self) -> dict:
         """The ``estimate`` command's JSON: coverage (with its interval where the method gives one, and why to review
         it), holes, centerline (mm), method."""
@@ -142,7 +148,8 @@ def as_estimate(result, name: str) -> Estimate:
             raise InputError(f"{who} returned a dict without 'coverage'")
         est = Estimate(result["coverage"], result.get("holes"), result.get("centerline"), name,
                        coverage_interval=result.get("coverage_interval"),
-                       interval_level=result.get("coverage_interval_level") or 0.9)
+                       interval_level=result.get("coverage_interval_level") or 0.9,
+                       review=reasons(result.get("review"), who))
     else:
         raise InputError(f"{who} returned {type(result).__name__}; expected an Estimate or a dict")
     try:
@@ -158,6 +165,15 @@ def as_estimate(result, name: str) -> Estimate:
     est.centerline = points_array(est.centerline, "centerline", who)
     est.method = name
     return est
+
+
+def reasons(value, who: str) -> list:
+    """A method's ``review`` checked: a list of reasons (strings) to look at the estimate again; [] for None."""
+    if value is None:
+        return []
+    if not isinstance(value, (list, tuple)) or not all(isinstance(r, str) for r in value):
+        raise InputError(f"{who} returned review {value!r}; a list of reasons (strings) is expected")
+    return list(value)
 
 
 def interval(value, who: str) -> tuple | None:

@@ -24,6 +24,7 @@ import json
 import math
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
 from colonbench.benchmark import tracks
@@ -247,14 +248,19 @@ def interval_lines(g: pd.DataFrame) -> list[str]:
     if "interval_segments" not in g.columns or not (g["interval_segments"] > 0).any():
         return []
     lines = ["", "Coverage intervals (methods without: n/a): the share of segments whose true coverage lies inside "
-             "the method's interval (completion's are 90 % intervals), and their mean width.", "",
-             "| method | segments with an interval | truth inside | mean width, points |", "|---|---:|---:|---:|"]
+             "the method's interval (completion's are 90 % intervals), and their mean width; the share it flags for "
+             "`review`, the share of the segments off by more than 15 points it flags, and the share of its flags "
+             "that are.", "",
+             "| method | segments with an interval | truth inside | mean width, points | flagged | off > 15 flagged "
+             "| flags right |", "|---|---:|---:|---:|---:|---:|---:|"]
     for _, r in g.iterrows():
+        review = " | ".join(f"{_f(r.get(k, np.nan), 0)} %" if np.isfinite(r.get(k, np.nan)) else "n/a"
+                            for k in ("review_flagged", "review_recall", "review_precision"))
         if r["interval_segments"] > 0:
             lines.append(f"| {r['method']} | {r['interval_segments']} | {_f(r['interval_covered'], 1)} % | "
-                         f"{_f(r['interval_width'], 1)} |")
+                         f"{_f(r['interval_width'], 1)} | {review} |")
         else:
-            lines.append(f"| {r['method']} | 0 | n/a | n/a |")
+            lines.append(f"| {r['method']} | 0 | n/a | n/a | {review} |")
     return lines
 
 

@@ -131,8 +131,8 @@ def test_the_benchmark_scores_intervals_and_says_n_a_for_methods_without(demo_da
     class Sure:
         name, version = "sure", "1"
 
-        def estimate(self, points):
-            return {"coverage": 0.8, "coverage_interval": [0.7, 0.9]}
+        def estimate(self, points):              # flags the clouds with an odd number of points for review
+            return {"coverage": 0.8, "coverage_interval": [0.7, 0.9], "review": ["odd"] * (len(points) % 2)}
 
     class Plain:
         name, version = "plain", "1"
@@ -150,8 +150,16 @@ def test_the_benchmark_scores_intervals_and_says_n_a_for_methods_without(demo_da
     assert table.loc["sure", "interval_covered"] == pytest.approx(100 * inside)
     assert table.loc["sure", "interval_width"] == pytest.approx(20.0)
     assert np.isnan(table.loc["plain", "interval_covered"]) and table.loc["plain", "interval_segments"] == 0
+    flagged, off = rows["review"] > 0, (rows["true_coverage"] - 0.8).abs() > 0.15
+    assert set(rows["review"]) <= {0, 1} and 0 < flagged.mean() < 1 and off.any()
+    recall, precision = (flagged & off).sum() / off.sum(), (flagged & off).sum() / flagged.sum()
+    assert table.loc["sure", "review_flagged"] == pytest.approx(100 * flagged.mean())
+    assert table.loc["sure", "review_recall"] == pytest.approx(100 * recall)
+    assert table.loc["sure", "review_precision"] == pytest.approx(100 * precision)
+    assert np.isnan(table.loc["plain", "review_flagged"])
     md = (tmp_path / "lb" / "leaderboard.md").read_text()
-    assert f"| sure | 24 | {100 * inside:.1f} % | 20.0 |" in md and "| plain | 0 | n/a | n/a |" in md
+    assert (f"| sure | 24 | {100 * inside:.1f} % | 20.0 | {100 * flagged.mean():.0f} % | {100 * recall:.0f} % | "
+            f"{100 * precision:.0f} % |") in md and "| plain | 0 | n/a | n/a | n/a | n/a | n/a |" in md
     bd = (tmp_path / "lb" / "breakdowns.md").read_text()
     assert "| sure: interval |" in bd and "| plain: interval |" not in bd and "% inside, 20.0 wide" in bd
 
@@ -228,8 +236,8 @@ def test_a_calibrated_method_gives_each_segment_its_interval_around_the_maps_cov
     class Sure:
         name, version = "sure", "1"
 
-        def estimate(self, points):
-            return {"coverage": 0.8, "coverage_interval": [0.7, 0.9]}
+        def estimate(self, points):              # flags the clouds with an odd number of points for review
+            return {"coverage": 0.8, "coverage_interval": [0.7, 0.9], "review": ["odd"] * (len(points) % 2)}
 
     class Calibrated(Sure):
         intervals = Calibration()
