@@ -125,7 +125,7 @@ def run_benchmark(methods=(), suites_=("demo-v1",), out="runs/benchmark", data=N
 
     from colonbench.benchmark.registry import check_spec
 
-    chosen = suites.parse(suites_)
+    chosen = suites.parse(suites_, data)
     methods = method_list(methods)
     if not methods and not shipped:
         raise InputError("no methods to evaluate and --no-shipped: nothing to show")
@@ -237,7 +237,7 @@ def export_suite(suite, out, data=None, workers: int = 1, scheduler=None, allow_
     from colonbench.benchmark.evaluate import select
     from colonbench.benchmark.runfolder import write_json
 
-    suite = suites.get(suite)
+    suite = suites.get(suite, data)
     out = Path(out)
     if out.exists() and any(p for p in out.iterdir() if p.name != exchange.EXPORT_NAME and p.suffix != ".ply"
                             and p.name != exchange.INDEX_NAME):
@@ -297,7 +297,7 @@ def score_suite(suite, predictions, out, name: str | None = None, data=None, wor
         The run folder (``colonbench leaderboard RUN`` merges it with the shipped results' run folders, or
         ``colonbench benchmark --methods predictions:DIR`` does all at once).
     """
-    suite = suites.get(suite)
+    suite = suites.get(suite, data)
     folder = Path(predictions)
     if not folder.is_dir():
         raise InputError(f"{folder}: no such folder of predictions")
