@@ -56,7 +56,10 @@ def cmd_suites(args):
             print(f"{s.id}: not checked: {exc}")
             continue
         differs += not result.verified
-        print(f"{s.id}: {'verified, ' if result.verified else ''}{result.summary()} ({time.perf_counter() - t:.1f} s)")
+        summary = result.summary()
+        if isinstance(s, local_suites.LocalSuite):   # checked against the signature made when it was built
+            summary = summary.replace("the published data", "the data as built")
+        print(f"{s.id}: {'verified, ' if result.verified else ''}{summary} ({time.perf_counter() - t:.1f} s)")
     return 1 if differs else 0
 
 
@@ -85,7 +88,7 @@ def _card(args):
     from colonbench.benchmark import cards, local_suites, suites
     from colonbench.errors import InputError
 
-    for suite in suites.parse(args.suite):
+    for suite in suites.parse(args.suite, getattr(args, "data", None)):
         if isinstance(suite, local_suites.LocalSuite):
             raise InputError(f"{suite.id} was built here from a download: it has no card; its entry is "
                              f"{suite.folder}/{local_suites.FILE}")
