@@ -91,6 +91,14 @@ def build_sequence(seq, colon_id: int, out: str, settings, identity: dict, frame
     from colonbench.video.c3vd_fusion import fuse_sequence
     from colonbench.video.fisheye import read_intrinsics
 
+    clock = [time.perf_counter()]
+
+    def lap(stage):
+        now = time.perf_counter()
+        seconds[stage] = round(seconds.get(stage, 0.0) + now - clock[0], 2)
+        clock[0] = now
+
+    seconds = {}
     v, f, observed = c3vd.read_coverage_mesh(seq.mesh)
     extent = float(np.ptp(v, axis=0).max())
     if extent < 5.0:
@@ -100,12 +108,14 @@ def build_sequence(seq, colon_id: int, out: str, settings, identity: dict, frame
     areas = scene.areas
     report = {"folder": seq.folder.name, "layout": seq.layout, "mesh": seq.mesh.name, "faces": int(len(f)),
               "observed_share": float(areas[observed].sum() / areas.sum()), "poses": int(len(raw)),
-              "depth_frames": len(seq.depth), "convention": None, "fused_frames": 0}
+              "depth_frames": len(seq.depth), "convention": None, "fused_frames": 0, "seconds": seconds}
+    lap("read")
     fused = None
     if seq.depth:
         c3vd.check_frames(seq, raw)
         intr = read_intrinsics(seq.intrinsics)
         report["convention"] = c3vd.check_conventions(seq.name, raw, seq.depth, intr, scene.distance)
+        lap("check")
         conv = report["convention"]
         poses = c3vd.camera_to_world(raw, conv["transposed"], conv["scale"])
         bar = None
@@ -121,13 +131,16 @@ def build_sequence(seq, colon_id: int, out: str, settings, identity: dict, frame
             if bar is not None:
                 bar.close()
         report.update(fused_frames=len(fused["frames"]), pinhole=fused["pinhole"])
+        lap("fuse")
     try:
         centerline = open_tube_centerline(trimesh.Trimesh(v, f, process=False))
     except ColonbenchError as exc:
         raise InputError(f"sequence {seq.name} ({seq.mesh}): no centerline of its mesh ({exc})") from None
     report["centerline_mm"] = float(centerline.length)
+    lap("centerline")
     shards, skipped = write_sequence_shards(out, seq.name, colon_id, v, f, observed, centerline, fused, settings,
                                             identity)
+    lap("segments")
     report["samples"] = int(sum(s["samples"] for s in shards))
     return shards, skipped, report
 
@@ -190,6 +203,7 @@ def build(source, root=None, frames_every: int = 5, width_px: int = 240, workers
     options = {"frames_every": int(frames_every), "pinhole_width_px": int(width_px), "settings": settings.to_dict(),
                "noise_mm": list(NOISE_MM), "noise_seed": NOISE_SEED}
     digests = source_digests(sequences)
+    digest_seconds = round(time.perf_counter() - t0, 1)
     key = _digest({"importer": IMPORTER, "version": IMPORTER_VERSION, "options": options, "files": digests["files"]})
     sid = f"{IMPORTER}-{key[:12]}"
     root = Path(root) if root is not None else suites.default_data_root()
@@ -205,7 +219,9 @@ def build(source, root=None, frames_every: int = 5, width_px: int = 240, workers
     try:
         identity = {"manifest_name": sid, "manifest_sha256": key, "config_sha256": _digest(options)}
         results = _run_all(sequences, tmp, settings, identity, frames_every, width_px, workers, progress)
-        suite = _finish(tmp, sid, key, identity, sequences, skipped, results, options, digests, t0)
+        entry = _finish(tmp, sid, key, identity, sequences, skipped, results, options, digests, t0)
+        entry["digest_seconds"] = digest_seconds
+        (tmp / local_suites.FILE).write_text(json.dumps(entry, indent=1) + "\n")
         os.replace(tmp, target)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
@@ -214,7 +230,8 @@ def build(source, root=None, frames_every: int = 5, width_px: int = 240, workers
 
 
 def _finish(tmp: Path, sid, key, identity, sequences, skipped, results, options, digests, t0):
-    """Write the lock, signature, descriptive manifest and registry entry of a built suite's folder."""
+    """Write the lock, signature and descriptive manifest of a built suite's folder; its registry entry (to write
+    last)."""
     import yaml
 
     from colonbench.benchmark import verification
@@ -257,5 +274,4 @@ def _finish(tmp: Path, sid, key, identity, sequences, skipped, results, options,
              "source": {"digest": digests["digest"], "files": digests["files"], "sequences": reports,
                         "skipped": skipped},
              "licence": LICENCE, "cite": list(CITE)}
-    (tmp / local_suites.FILE).write_text(json.dumps(entry, indent=1) + "\n")
     return entry

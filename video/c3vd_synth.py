@@ -83,8 +83,21 @@ def withdrawal_poses(centerline: Centerline, frames: int, start_mm: float | None
     return poses
 
 
-def render(scene, fisheye: Fisheye, pose, depth_range_mm: float = 100.0) -> tuple[np.ndarray, np.ndarray]:
+def pixel_rays(fisheye: Fisheye) -> tuple[np.ndarray, np.ndarray]:
+    """Unit camera-frame rays of every pixel with one, float32 (k, 3), and their row-major pixel indices (k,)."""
+    u, v = fisheye.pixel_grid()
+    rays = fisheye.rays(u.ravel(), v.ravel())
+    ok = np.flatnonzero(np.isfinite(rays[:, 0]))
+    return (rays[ok] / np.linalg.norm(rays[ok], axis=1, keepdims=True)).astype(np.float32), ok
+
+
+def render(scene, fisheye: Fisheye, pose, depth_range_mm: float = 100.0, rays=None) -> tuple[np.ndarray, np.ndarray]:
     """One frame as C3VD stores it, by casting every pixel's ray.
+
+    Parameters
+    ----------
+    rays : tuple, optional
+        :func:`pixel_rays` of ``fisheye``, made once for many frames.
 
     Returns
     -------
@@ -93,17 +106,14 @@ def render(scene, fisheye: Fisheye, pose, depth_range_mm: float = 100.0) -> tupl
     faces : (k,) int
         The faces some pixel's ray meets first (at any distance).
     """
-    u, v = fisheye.pixel_grid()
-    rays = fisheye.rays(u.ravel(), v.ravel())
-    ok = np.isfinite(rays[:, 0])
-    unit = rays[ok] / np.linalg.norm(rays[ok], axis=1, keepdims=True)
+    unit, where = pixel_rays(fisheye) if rays is None else rays
     pose = np.asarray(pose, float)
-    t, face = scene.cast(np.broadcast_to(pose[:3, 3], unit.shape), unit @ pose[:3, :3].T)
+    t, face = scene.cast(np.broadcast_to(pose[:3, 3], unit.shape), unit @ pose[:3, :3].T.astype(np.float32))
     hit = face >= 0
     z = np.where(hit, t * unit[:, 2], 0.0)
     value = np.where(hit, np.floor(65535.0 * np.clip(z / depth_range_mm, 0.0, 1.0)), 0)
     depth = np.zeros(fisheye.width * fisheye.height, np.uint16)
-    depth[np.flatnonzero(ok)] = value.astype(np.uint16)
+    depth[where] = value.astype(np.uint16)
     return depth.reshape(fisheye.height, fisheye.width), np.unique(face[hit])
 
 
@@ -170,8 +180,9 @@ def write_sequence(folder, mesh: trimesh.Trimesh, poses, fisheye: Fisheye, layou
     vertices = np.round(np.asarray(mesh.vertices, float), 6)
     scene = SurfaceScene(vertices, mesh.faces)
     seen = np.zeros(len(mesh.faces), bool)
+    rays = pixel_rays(fisheye)
     for k, pose in enumerate(np.asarray(poses, float)):
-        depth, faces = render(scene, fisheye, pose, depth_range_mm)
+        depth, faces = render(scene, fisheye, pose, depth_range_mm, rays)
         seen[faces] = True
         tifffile.imwrite(depth_dir / f"{k:04d}_depth.tiff", depth)
         if progress is not None:
