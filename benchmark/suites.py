@@ -234,7 +234,8 @@ def data_dir(suite: Suite, root=None) -> Path:
 def ensure_data(suite: Suite, root=None, workers: int = 1, scheduler=None, progress: bool = True) -> Path:
     """The suite's data folder: fetched from its published archive where the registry names one and nothing is
     cached (:mod:`colonbench.benchmark.archive`), else generated (or finished) from its manifest, resumable like
-    ``generate``."""
+    ``generate``; a suite built from a download (:mod:`colonbench.benchmark.local_suites`) is never made here:
+    its folder, or an error saying to build it again."""
     from colonbench.shards.dataset import LOCK_NAME, generate
 
     out = data_dir(suite, root)

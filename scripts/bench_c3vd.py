@@ -1,6 +1,6 @@
 """Speed of ``colonbench suites build c3vd`` on a 1,000-frame sequence at C3VD's resolution (1350 x 1080).
 
-    python scripts/bench_c3vd.py [--work DIR] [--frames 1000] [--frames-every 5] [--workers 1]
+    python scripts/bench_c3vd.py [--work DIR] [--frames 1000] [--frames-every 5] [--workers 1] [--write-only]
 
 Writes (once; kept in ``--work`` and reused) a synthetic registered sequence in C3VD's layout
 (:mod:`colonbench.video.c3vd_synth`: a folded, bent 200 mm phantom tube of 104k faces, C3VD's own lens, every
@@ -39,12 +39,15 @@ def main() -> None:
     ap.add_argument("--frames", type=int, default=1000)
     ap.add_argument("--frames-every", type=int, default=5)
     ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument("--write-only", action="store_true", help="write the sequence (if missing), do not build")
     args = ap.parse_args()
     from colonbench.benchmark.c3vd_suite import build
 
     download = Path(args.work) / f"download-{args.frames}"
     if not download.is_dir():
         write(download, args.frames)
+    if args.write_only:
+        return
     data = Path(args.work) / "suites"
     shutil.rmtree(data, ignore_errors=True)
     t = time.perf_counter()
