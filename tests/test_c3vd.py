@@ -71,6 +71,26 @@ def test_fisheye_rays_project_back_to_their_pixels_and_scale():
     assert np.allclose(pts[:, 2], 40.0) and len(pts) == len(px)
 
 
+def test_the_stretch_matrix_is_the_renderers_and_the_pinhole_reads_the_right_pixels():
+    # C3VD's renderer: glm::mat2(c, d, e, 1) is filled column by column, S = [[c, e], [d, 1]], pixel = S (u'', v'')
+    lens = Fisheye(200, 200, 100.0, 100.0, 100.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.1, 0.0)
+    ray = lens.rays([110.0], [100.0])[0]
+    assert np.allclose(ray[:2] * 100.0, np.linalg.solve([[1.0, 0.0], [0.1, 1.0]], [10.0, 0.0]))
+    assert not np.allclose(ray[:2] * 100.0, np.linalg.solve([[1.0, 0.1], [0.0, 1.0]], [10.0, 0.0]))
+    from colonbench.video.c3vd_fusion import pinhole_for, resample
+
+    intr, index = pinhole_for(C3VD_CAMERA, 120)
+    assert (index >= 0).mean() > 0.95
+    # each pinhole pixel's ray and the ray of the fisheye pixel it reads differ by at most about a fisheye pixel
+    u, v = index[index >= 0] % C3VD_CAMERA.width, index[index >= 0] // C3VD_CAMERA.width
+    a = C3VD_CAMERA.rays(u, v)
+    b = intr.rays()[index >= 0]
+    cos = np.sum(a * b, 1) / np.linalg.norm(a, axis=1) / np.linalg.norm(b, axis=1)
+    assert np.degrees(np.arccos(np.clip(cos, -1, 1))).max() < 0.15
+    flat = resample(np.full((C3VD_CAMERA.height, C3VD_CAMERA.width), 30.0, np.float32), intr, index)
+    assert set(np.unique(flat)) <= {0.0, 30.0}
+
+
 def test_intrinsics_files(tmp_path):
     (tmp_path / "named.txt").write_text(CAMERA.text())
     assert read_intrinsics(tmp_path / "named.txt") == CAMERA
@@ -275,6 +295,11 @@ def test_refusals_name_the_file_and_leave_nothing(tmp_path, tube, download):
     dl, seq = copy("badtiff")
     (seq / "depth" / "0000_depth.tiff").write_bytes(b"not a tiff at all")
     _refused(dl, tmp_path / "badtiff" / "suites", r"0000_depth\.tiff: not a readable TIFF")
+    dl, seq = copy("small")
+    import tifffile
+
+    tifffile.imwrite(seq / "depth" / "0004_depth.tiff", np.ones((10, 12), np.uint16))
+    _refused(dl, tmp_path / "small" / "suites", r"0004_depth\.tiff: 12 x 10 pixels; the camera's intrinsics are for 135")
     dl, seq = copy("badpose")
     lines = (seq / "pose.txt").read_text().splitlines()
     (seq / "pose.txt").write_text("\n".join(lines[:3] + ["1,2,3"] + lines[4:]) + "\n")
