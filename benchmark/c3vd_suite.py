@@ -134,8 +134,9 @@ def build_sequence(seq, colon_id: int, out: str, settings, identity: dict, frame
         lap("fuse")
     try:
         centerline = open_tube_centerline(trimesh.Trimesh(v, f, process=False))
-    except ColonbenchError as exc:
-        raise InputError(f"sequence {seq.name} ({seq.mesh}): no centerline of its mesh ({exc})") from None
+    except Exception as exc:  # noqa: BLE001 - whatever the mesh did to the centerline, the sequence is named
+        why = str(exc) if isinstance(exc, ColonbenchError) else f"{type(exc).__name__}: {exc}"
+        raise InputError(f"sequence {seq.name} ({seq.mesh}): no centerline of its mesh ({why})") from None
     report["centerline_mm"] = float(centerline.length)
     lap("centerline")
     shards, skipped = write_sequence_shards(out, seq.name, colon_id, v, f, observed, centerline, fused, settings,

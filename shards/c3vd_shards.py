@@ -36,6 +36,7 @@ from colonbench._version import __version__
 from colonbench.datagen.camera import SurfaceScene
 from colonbench.datagen.sample import hole_areas
 from colonbench.datagen.segments import STRETCH_MARGIN_MM, clip_faces, segment_surface, windows
+from colonbench.errors import ColonbenchError
 from colonbench.grid import fit_grid
 from colonbench.heatmaps import HEATMAP_SCALE, empty_grids, pack_occupancy, sample_occupancy
 from colonbench.meshes import sample_surface
@@ -144,7 +145,11 @@ def write_sequence_shards(out_dir, name: str, colon_id: int, vertices, faces, ob
         lmm = int(round(length * 1000))
         rows, left_out = [], []
         for k, (s0, s1) in enumerate(wins):
-            surface = segment_surface(scene, centerline, s0, s1)
+            try:
+                surface = segment_surface(scene, centerline, s0, s1)
+            except ColonbenchError as exc:   # no wall there (a gap in the phantom's mesh)
+                left_out.append({"window_mm": [float(s0), float(s1)], "segment": k, "reason": str(exc)})
+                continue
             mesh = surface.mesh
             obs = observed[surface.parent_face]
             areas = mesh.area_faces
