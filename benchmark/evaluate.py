@@ -273,7 +273,7 @@ def suite_of(identity: dict, sigmas, noise_seed: int, task: str, data, allow_unv
     """The record of the suite a run's data and protocol are (checked against its published signature), or None."""
     from colonbench.benchmark import suites
 
-    suite = suites.match(identity, sigmas, noise_seed, task)
+    suite = suites.match(identity, sigmas, noise_seed, task, data)
     return suites.verify(suite, data, allow_unverified) if suite is not None else None
 
 

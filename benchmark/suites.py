@@ -158,8 +158,10 @@ def latest() -> dict[str, Suite]:
     return out
 
 
-def get(name) -> Suite:
-    """A suite by id (``paper-v1``) or name (``paper``: its newest version); a :class:`Suite` as it is.
+def get(name, root=None) -> Suite:
+    """A suite by id (``paper-v1``) or name (``paper``: its newest version); a :class:`Suite` as it is. A suite
+    built on this machine (:mod:`colonbench.benchmark.local_suites`, ``colonbench suites build``) is found by its
+    id, or by its name where one of that name is built, under ``root`` (default :func:`default_data_root`).
 
     Raises
     ------
@@ -174,12 +176,19 @@ def get(name) -> Suite:
             return s
     if name in latest():
         return latest()[name]
-    raise InputError(f"unknown suite {name!r}; the suites are {', '.join(s.id for s in SUITES)} (or all)")
+    from colonbench.benchmark import local_suites
+
+    local = local_suites.lookup(name, root)
+    if local is not None:
+        return local
+    built = [s.id for s in local_suites.found(root)]
+    raise InputError(f"unknown suite {name!r}; the suites are {', '.join(s.id for s in SUITES)} (or all)"
+                     + (f", and built here {', '.join(built)}" if built else ""))
 
 
-def parse(text) -> list[Suite]:
+def parse(text, root=None) -> list[Suite]:
     """``all`` (every newest suite), comma-separated ids/names, or a list of ids, names or suites; in the order
-    given, each once."""
+    given, each once (a locally built suite by its id or name under ``root``: :func:`get`; ``all`` holds none)."""
     names = [n.strip() for n in text.split(",") if n.strip()] if isinstance(text, str) else list(text)
     if not names:
         raise InputError("no suites given")
@@ -187,7 +196,7 @@ def parse(text) -> list[Suite]:
         return list(latest().values())
     out = []
     for n in names:
-        s = get(n)
+        s = get(n, root)
         if s not in out:
             out.append(s)
     return out
@@ -215,14 +224,18 @@ def default_data_root() -> Path:
 
 
 def data_dir(suite: Suite, root=None) -> Path:
-    """The data folder of a suite under ``root`` (default :func:`default_data_root`): ``root/<suite id>``."""
+    """The data folder of a suite under ``root`` (default :func:`default_data_root`): ``root/<suite id>``; a
+    locally built suite's own folder."""
+    if getattr(suite, "folder", ""):
+        return Path(suite.folder)
     return Path(root if root is not None else default_data_root()) / suite.id
 
 
 def ensure_data(suite: Suite, root=None, workers: int = 1, scheduler=None, progress: bool = True) -> Path:
     """The suite's data folder: fetched from its published archive where the registry names one and nothing is
     cached (:mod:`colonbench.benchmark.archive`), else generated (or finished) from its manifest, resumable like
-    ``generate``."""
+    ``generate``; a suite built from a download (:mod:`colonbench.benchmark.local_suites`) is never made here:
+    its folder, or an error saying to build it again."""
     from colonbench.shards.dataset import LOCK_NAME, generate
 
     out = data_dir(suite, root)
@@ -237,6 +250,9 @@ def ensure_data(suite: Suite, root=None, workers: int = 1, scheduler=None, progr
         if suite.split in done.get("splits", []) and not any(m.startswith(f"{suite.split}/")
                                                              for m in done.get("missing", [])):
             return out
+    if getattr(suite, "folder", ""):   # built from a download, never generated
+        raise InputError(f"{out}: the built suite {suite.id} is incomplete (its {LOCK_NAME} is missing or names "
+                         "missing shards); build it again (colonbench suites build)")
     if suite.archive_url and not out.exists():
         from colonbench.benchmark.archive import fetch
 
@@ -266,8 +282,10 @@ def fingerprint(suite: Suite, data) -> str:
 
 def published_signature(suite: Suite) -> dict:
     """The suite's published per-sample signature (:mod:`colonbench.benchmark.signature`)."""
-    from colonbench.benchmark import verification
+    from colonbench.benchmark import local_suites, verification
 
+    if isinstance(suite, local_suites.LocalSuite):
+        return local_suites.signature(suite)
     published = verification.load(suite.id, suite.signature)
     if published is None:
         raise InputError(f"this colonbench has no published signature of {suite.id} "
@@ -305,9 +323,19 @@ def verify(suite: Suite, data, allow_unverified: bool = False) -> dict:
     return suite.record(result)
 
 
-def match(identity: dict, noise_mm, noise_seed: int, task: str) -> Suite | None:
+def match(identity: dict, noise_mm, noise_seed: int, task: str, data=None) -> Suite | None:
     """The suite a run's data and protocol are, if any: the same manifest name, split, sample count, noise levels
-    and noise seed (:func:`colonbench.benchmark.evaluate.select`'s identity)."""
+    and noise seed (:func:`colonbench.benchmark.evaluate.select`'s identity); where ``data`` is a locally built
+    suite's folder, that suite, its id as the manifest name."""
+    if data is not None:
+        from colonbench.benchmark import local_suites
+
+        local = local_suites.load(data)
+        if (local is not None and local.id == identity.get("manifest_name") and local.split == identity.get("split")
+                and local.samples == identity.get("samples") and local.task == task
+                and sorted(float(x) for x in noise_mm) == sorted(local.noise_mm)
+                and int(noise_seed) == local.noise_seed):
+            return local
     for s in SUITES:
         manifest = manifest_path(s)
         name = _manifest_name(manifest)

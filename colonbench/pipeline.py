@@ -131,7 +131,7 @@ def run_benchmark(methods=(), suites_=("demo-v1",), out="runs/benchmark", data=N
     from colonbench.benchmark.registry import check_spec
 
     track = tracks.check(track)
-    chosen = suites.parse(suites_)
+    chosen = suites.parse(suites_, data)
     if track != tracks.DEFAULT:
         if suites_ == "all" or isinstance(suites_, (list, tuple)) and list(suites_) == ["all"]:  # those with it
             chosen = [s for s in chosen if s.task != "colon"]
@@ -250,7 +250,7 @@ def export_suite(suite, out, data=None, workers: int = 1, scheduler=None, allow_
     from colonbench.benchmark.evaluate import select
     from colonbench.benchmark.runfolder import write_json
 
-    suite = suites.get(suite)
+    suite = suites.get(suite, data)
     track = tracks.check(track, suite)
     out = Path(out)
     if out.exists() and any(p for p in out.iterdir() if p.name != exchange.EXPORT_NAME and p.suffix != ".ply"
@@ -315,7 +315,7 @@ def score_suite(suite, predictions, out, name: str | None = None, data=None, wor
         The run folder (``colonbench leaderboard RUN`` merges it with the shipped results' run folders, or
         ``colonbench benchmark --methods predictions:DIR`` does all at once).
     """
-    suite = suites.get(suite)
+    suite = suites.get(suite, data)
     track = tracks.check(track, suite)
     folder = Path(predictions)
     if not folder.is_dir():

@@ -40,7 +40,8 @@ def voxelize_lumen(mesh: trimesh.Trimesh, voxel_mm: float = 1.0):
     return out, lo
 
 
-def compute_centerline(mesh: trimesh.Trimesh, voxel_mm: float = 1.0, smooth_mm: float = 3.0) -> Centerline:
+def compute_centerline(mesh: trimesh.Trimesh, voxel_mm: float = 1.0, smooth_mm: float = 3.0,
+                       require_closed: bool = True) -> Centerline:
     """Centerline of a closed tubular mesh by the minimal path between its geodesic extremities.
 
     Parameters
@@ -51,6 +52,9 @@ def compute_centerline(mesh: trimesh.Trimesh, voxel_mm: float = 1.0, smooth_mm: 
         Voxel size; must resolve the narrowest part of the lumen.
     smooth_mm : float
         Gaussian smoothing of the voxel path.
+    require_closed : bool
+        Refuse a mesh that is not watertight (:func:`open_tube_centerline` closes an open tube first and lets
+        the small flaws of a real mesh through: the lumen is voxelized by ray parity).
 
     Returns
     -------
@@ -61,7 +65,7 @@ def compute_centerline(mesh: trimesh.Trimesh, voxel_mm: float = 1.0, smooth_mm: 
     import edt
     from colonbench import paths
 
-    if not mesh.is_watertight:
+    if require_closed and not mesh.is_watertight:
         raise InputError("computing a centerline needs a closed (watertight) mesh; give the centerline instead")
     inside, origin = voxelize_lumen(mesh, voxel_mm)
     if not inside.any():
@@ -76,3 +80,59 @@ def compute_centerline(mesh: trimesh.Trimesh, voxel_mm: float = 1.0, smooth_mm: 
     vox = vox[deep[0]: deep[-1] + 1]
     pts = origin + paths.smooth_path(vox, smooth_mm / voxel_mm) * voxel_mm
     return Centerline.from_points(pts).resample(0.5)
+
+
+def boundary_loops(faces) -> list[np.ndarray]:
+    """The closed loops of a triangle mesh's boundary edges (edges of one face), each (k,) int in the order its
+    faces run along it.
+
+    Raises
+    ------
+    InputError
+        The boundary does not form simple loops (a vertex where two boundaries meet).
+    """
+    f = np.asarray(faces, np.int64)
+    directed = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    key = np.sort(directed, axis=1)
+    _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    edges = directed[counts[inverse.ravel()] == 1]
+    nxt = {}
+    for a, b in edges:
+        if a in nxt:
+            raise InputError(f"the mesh's boundary meets itself at vertex {a}: its open ends cannot be closed")
+        nxt[int(a)] = int(b)
+    loops, left = [], set(nxt)
+    while left:
+        start = min(left)
+        loop, v = [], start
+        while True:
+            loop.append(v)
+            left.discard(v)
+            v = nxt.get(v)
+            if v is None:
+                raise InputError("the mesh's boundary is not closed loops: its open ends cannot be closed")
+            if v == start:
+                break
+        loops.append(np.array(loop, np.int64))
+    return loops
+
+
+def cap_open_ends(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
+    """The mesh with every boundary loop closed by a fan from the loop's centroid (orientation kept)."""
+    vertices, faces = np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int64)
+    new_v, new_f = [vertices], [faces]
+    n = len(vertices)
+    for loop in boundary_loops(faces):
+        centre = n
+        new_v.append(vertices[loop].mean(axis=0)[None])
+        n += 1
+        # a face runs along its boundary edge a -> b; the cap's triangle runs b -> a
+        new_f.append(np.stack([np.roll(loop, -1), loop, np.full(len(loop), centre)], axis=1))
+    return trimesh.Trimesh(np.concatenate(new_v), np.concatenate(new_f), process=False)
+
+
+def open_tube_centerline(mesh: trimesh.Trimesh, voxel_mm: float = 1.0, smooth_mm: float = 3.0) -> Centerline:
+    """The centerline of an open tube (a phantom's segment, open at its ends): its ends closed by flat caps
+    (:func:`cap_open_ends`), then :func:`compute_centerline`; its ends stop about half a radius inside the
+    caps."""
+    return compute_centerline(cap_open_ends(mesh), voxel_mm, smooth_mm, require_closed=False)

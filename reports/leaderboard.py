@@ -180,9 +180,12 @@ def suite_state(suite: dict) -> str:
         return f"**unverified**: content hash `{suite['sha256'][:16]}`, not the published suite"
     if "signature" not in suite:   # a run recorded before signatures: verified by its content hash
         return f"content hash `{suite['sha256'][:16]}`, verified against the published hash"
-    how = "bit-identical to the published data" if suite["bit_identical"] else (
-        f"within tolerance of the published data ({suite['tie_samples']} samples decided otherwise at a near-tie)")
-    return f"verified against its signature `{suite['signature']}`, {how}"
+    whose = "the data as built" if suite.get("local") else "the published data"
+    how = f"bit-identical to {whose}" if suite["bit_identical"] else (
+        f"within tolerance of {whose} ({suite['tie_samples']} samples decided otherwise at a near-tie)")
+    built = (f"; built here from a download by importer {suite['importer']['name']} {suite['importer']['version']} "
+             f"(source digest `{str((suite.get('source') or {}).get('digest'))[:12]}`)" if suite.get("local") else "")
+    return f"verified against its signature `{suite['signature']}`, {how}{built}"
 
 
 def markdown(meta: dict, tab: pd.DataFrame) -> str:

@@ -146,7 +146,7 @@ def cmd_score(args):
                       if r["failed"] else "")
             print(f"noise {r['noise_mm']:g} mm  {r['method']}: MAE {r['coverage_mae']:.2f} points over "
                   f"{r['segments'] - r['coverage_undefined']} of {r['segments']} segments{failed}")
-    warn_failures(pd.DataFrame(failures(suites.get(args.suite), run), columns=FAILURE_COLUMNS),
+    warn_failures(pd.DataFrame(failures(suites.get(args.suite, args.data), run), columns=FAILURE_COLUMNS),
                   lambda suite: run / "results")
     print(f"wrote {run}; the leaderboard with the shipped results: colonbench leaderboard {run} --out DIR "
           f"--shipped, or colonbench benchmark --suites {args.suite} --methods predictions:{args.predictions} "

@@ -1,4 +1,5 @@
-"""``colonbench suites``: list the suites, check the cached ones, archive a suite, fetch an archive, write a card."""
+"""``colonbench suites``: list the suites, check the cached ones, archive a suite, fetch an archive, write a card,
+build a suite from a dataset download (C3VD)."""
 
 from __future__ import annotations
 
@@ -20,6 +21,8 @@ def cmd_suites(args):
         return _fetch(args)
     if getattr(args, "action", None) == "card":
         return _card(args)
+    if getattr(args, "action", None) == "build":
+        return _build(args)
     rows = suites.SUITES if args.all_versions else tuple(suites.latest().values())
     for s in rows:
         here = suites.data_dir(s, args.data)
@@ -31,6 +34,14 @@ def cmd_suites(args):
               + (f", {s.limit} spread evenly" if s.limit else "")
               + f"\n          cite as {s.citation}; content hash of the published data {s.sha256}"
               + (f"\n          archive {s.archive_url} (sha256 {s.archive_sha256})" if s.archive_url else "") + "\n")
+    from colonbench.benchmark import local_suites
+
+    built = local_suites.found(args.data)
+    for s in built:
+        print(f"{s.id} {s.samples:4d} segments x noise {', '.join(f'{n:g}' for n in s.noise_mm)} mm; built here from a "
+              f"download ({s.folder})\n          {s.tests}\n          cite as {s.citation}, importer {s.name} "
+              f"{s.version}, with the dataset's own citation (docs/benchmark.md)\n")
+    rows = tuple(rows) + tuple(built)
     if not args.check:
         return 0
     differs = 0
@@ -45,7 +56,10 @@ def cmd_suites(args):
             print(f"{s.id}: not checked: {exc}")
             continue
         differs += not result.verified
-        print(f"{s.id}: {'verified, ' if result.verified else ''}{result.summary()} ({time.perf_counter() - t:.1f} s)")
+        summary = result.summary()
+        if isinstance(s, local_suites.LocalSuite):   # checked against the signature made when it was built
+            summary = summary.replace("the published data", "the data as built")
+        print(f"{s.id}: {'verified, ' if result.verified else ''}{summary} ({time.perf_counter() - t:.1f} s)")
     return 1 if differs else 0
 
 
@@ -71,11 +85,42 @@ def _fetch(args):
 
 
 def _card(args):
-    from colonbench.benchmark import cards, suites
+    from colonbench.benchmark import cards, local_suites, suites
+    from colonbench.errors import InputError
 
-    for suite in suites.parse(args.suite):
+    for suite in suites.parse(args.suite, getattr(args, "data", None)):
+        if isinstance(suite, local_suites.LocalSuite):
+            raise InputError(f"{suite.id} was built here from a download: it has no card; its entry is "
+                             f"{suite.folder}/{local_suites.FILE}")
         md, js = cards.write(suite, args.out)
         print(f"{suite.id}: wrote {md} and {js}")
+    return 0
+
+
+def _build(args):
+    from colonbench.benchmark import c3vd_suite
+
+    suite, built = c3vd_suite.build(args.source_dir, args.data, frames_every=args.frames_every, width_px=args.width_px,
+                                    workers=args.workers, intrinsics=args.intrinsics, progress=not args.quiet)
+    if not built:
+        print(f"{suite.id} is already built from this download in {suite.folder}: nothing to do")
+    else:
+        from pathlib import Path
+
+        from colonbench.benchmark.local_suites import read_entry
+
+        entry = read_entry(Path(suite.folder))
+        for name, seq in entry["source"]["sequences"].items():
+            conv = seq.get("convention")
+            check = (f"poses {conv['convention']}, depth on the mesh within {conv['median_mm']:.3f} mm (median)"
+                     if conv else "no depth frames: no pose check, no fused partial")
+            print(f"{name}: {seq['samples']} samples, {seq['observed_share']:.1%} of the phantom observed; {check}"
+                  + (f"; {len(seq['skipped_segments'])} segment sample(s) left out" if seq["skipped_segments"] else ""))
+        for s in entry["source"]["skipped"]:
+            print(f"skipped {s['folder']}: {s['reason']}")
+        print(f"built {suite.id}: {suite.samples} samples in {suite.folder} ({entry['build_seconds']:.0f} s)")
+    print(f"score it: colonbench benchmark --suites {suite.id} --methods METHOD --out DIR"
+          + (f" --data {args.data}" if args.data else ""))
     return 0
 
 
@@ -119,4 +164,24 @@ def add_parsers(sub) -> None:
                                        "from the suite registry, its manifest and its published signature; no data "
                                        "are needed. The project keeps every suite's pair in docs/suites/.")
     c.add_argument("suite", help="suite id or name (colonbench suites), comma-separated ones, or all")
+    b = actions.add_parser("build", help="build a suite from your download of a dataset colonbench may not ship "
+                                         "(C3VD / C3VDv2)",
+                           description="Build a suite from a C3VD or C3VDv2 download: every registered sequence "
+                                       "checked (its depth frames reprojected with its poses must land on its mesh), "
+                                       "its phantom cut into 50-70 mm segments along its centerline, truth from "
+                                       "C3VD's per-face coverage, partials on the observed faces and from the depth "
+                                       "frames fused by TSDF. The suite goes into the suite cache under an id made "
+                                       "from the download's file digests; a refused download leaves nothing behind "
+                                       "(docs/benchmark.md, 'Real trajectories: C3VD').")
+    b.add_argument("dataset", choices=["c3vd"], help="the dataset's layout (c3vd: C3VD and C3VDv2)")
+    b.add_argument("--from", dest="source_dir", required=True, metavar="DIR", help="the download's folder")
+    b.add_argument("--data", "--out", dest="data", default=argparse.SUPPRESS, help=DATA_HELP)
+    b.add_argument("--frames-every", type=int, default=5, metavar="K",
+                   help="fuse every K-th depth frame (default 5)")
+    b.add_argument("--width-px", type=int, default=240, metavar="W",
+                   help="width of the pinhole each fused fisheye frame is resampled into (default 240)")
+    b.add_argument("--intrinsics", metavar="FILE",
+                   help="the camera's camera_intrinsics.txt, where the download holds none beside its sequences")
+    b.add_argument("--workers", type=int, default=1, help="sequences built at a time (default 1)")
+    b.add_argument("--quiet", action="store_true", help="no progress bars")
     c.add_argument("--out", default=".", metavar="DIR", help="folder to write them into (default: the current folder)")

@@ -1,0 +1,278 @@
+"""A suite from the user's C3VD / C3VDv2 download: ``colonbench suites build c3vd --from DIR``.
+
+C3VD's licence (CC BY-NC-SA 4.0) forbids redistributing it, so colonbench ships this importer and never the data.
+:func:`build` reads a download (:mod:`colonbench.video.c3vd`), and for each registered sequence
+
+1. checks its conventions before using it: its depth frames, reprojected through the fisheye model with its poses,
+   must land on its mesh (median distance at most :data:`colonbench.video.c3vd.MAX_MEDIAN_MM`) in one of the pose
+   conventions tried (as written or transposed, translation in mm or m); the first that does is used and
+   recorded, and a sequence where none does is refused, naming it;
+2. fuses its depth frames (every ``frames_every``-th) into a reconstruction-like surface
+   (:mod:`colonbench.video.c3vd_fusion`);
+3. cuts its phantom into segments along the mesh's own centerline and writes their samples, truth from C3VD's
+   per-face coverage (:mod:`colonbench.shards.c3vd_shards`);
+
+then writes the suite's lock, its per-sample signature and its registry entry
+(:mod:`colonbench.benchmark.local_suites`). The suite is built in a hidden sibling folder and renamed into place
+only when complete: on any error it is removed, and nothing half-built remains. Its id is the digest of the
+importer's version, the build's options and every file of the download it reads, so the same download gives the
+same id on any machine. C3VDv2's screening withdrawals (poses over a whole colon, no coverage map) are listed as
+skipped: the whole-colon track is not built.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+import time
+from pathlib import Path
+
+import numpy as np
+
+from colonbench.benchmark import local_suites
+from colonbench.errors import ColonbenchError, InputError
+
+#: The importer's name and version: a change that moves a built suite's data is a new version (a new id).
+IMPORTER = "c3vd"
+IMPORTER_VERSION = 1
+NOISE_MM = (0.0, 0.5)
+NOISE_SEED = 0
+LICENCE = ("C3VD and C3VDv2 are licensed CC BY-NC-SA 4.0 (non-commercial, share alike): a suite built from them "
+           "may not be used commercially or redistributed under other terms")
+CITE = ("Bobrow, Golhar, Vijayan, Akshintala, Garcia and Durr, Colonoscopy 3D video dataset with paired depth from "
+        "2D-3D registration, Medical Image Analysis 90:102956, 2023",
+        "Golhar et al., C3VDv2, arXiv 2506.24074, 2025")
+
+
+def sha256_of(path: Path) -> str:
+    """A download file's sha256, or an error naming it."""
+    h = hashlib.sha256()
+    try:
+        with open(path, "rb") as fh:
+            for chunk in iter(lambda: fh.read(1 << 22), b""):
+                h.update(chunk)
+    except OSError as exc:
+        raise InputError(f"{path}: unreadable ({exc})") from None
+    return h.hexdigest()
+
+
+def source_digests(sequences) -> dict:
+    """Every file the importer reads, named ``<sequence>/<path in its folder>`` (the intrinsics
+    ``<sequence>/camera_intrinsics.txt`` wherever they lie), so that where the download was unpacked does not matter:
+    its sha256; and per sequence the count of its files and the digest of their digests."""
+    files, per = {}, {}
+    for seq in sequences:
+        mine = {}
+        for path in seq.files():
+            path = Path(path)
+            rel = path.relative_to(seq.folder).as_posix() if path.is_relative_to(seq.folder) else path.name
+            mine[f"{seq.name}/{rel}"] = sha256_of(path)
+        files.update(mine)
+        per[seq.name] = {"files": len(mine), "sha256": _digest(mine)}
+    return {"files": files, "sequences": per, "digest": _digest(files)}
+
+
+def _digest(obj) -> str:
+    return hashlib.sha256(json.dumps(obj, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
+
+
+def build_sequence(seq, colon_id: int, out: str, settings, identity: dict, frames_every: int, width_px: int,
+                   progress: bool = False) -> tuple[list, list, dict]:
+    """Check, fuse and cut one sequence into ``out`` (see the module's description); its shards, the segments left
+    out and what was found (convention, medians, frames fused, coverage, centerline length)."""
+    import trimesh
+
+    from colonbench.datagen.camera import SurfaceScene
+    from colonbench.datagen.mesh_centerline import open_tube_centerline
+    from colonbench.shards.c3vd_shards import write_sequence_shards
+    from colonbench.video import c3vd
+    from colonbench.video.c3vd_fusion import fuse_sequence
+    from colonbench.video.fisheye import read_intrinsics
+
+    clock = [time.perf_counter()]
+
+    def lap(stage):
+        now = time.perf_counter()
+        seconds[stage] = round(seconds.get(stage, 0.0) + now - clock[0], 2)
+        clock[0] = now
+
+    seconds = {}
+    v, f, observed = c3vd.read_coverage_mesh(seq.mesh)
+    extent = float(np.ptp(v, axis=0).max())
+    if extent < 5.0:
+        raise InputError(f"{seq.mesh}: only {extent:.3g} units across; C3VD's meshes are in millimetres")
+    raw = c3vd.read_poses(seq.poses)
+    scene = SurfaceScene(v, f)
+    areas = scene.areas
+    report = {"folder": seq.folder.name, "layout": seq.layout, "mesh": seq.mesh.name, "faces": int(len(f)),
+              "observed_share": float(areas[observed].sum() / areas.sum()), "poses": int(len(raw)),
+              "depth_frames": len(seq.depth), "convention": None, "fused_frames": 0, "seconds": seconds}
+    lap("read")
+    fused = None
+    if seq.depth:
+        c3vd.check_frames(seq, raw)
+        intr = read_intrinsics(seq.intrinsics)
+        report["convention"] = c3vd.check_conventions(seq.name, raw, seq.depth, intr, scene.distance)
+        lap("check")
+        conv = report["convention"]
+        poses = c3vd.camera_to_world(raw, conv["transposed"], conv["scale"])
+        bar = None
+        if progress:
+            from tqdm.auto import tqdm
+
+            bar = tqdm(total=len(range(0, len(seq.depth), frames_every)), unit="frame", desc=f"fuse {seq.name}",
+                       dynamic_ncols=True)
+        try:
+            fused = fuse_sequence(seq.depth, poses, intr, every=frames_every, width_px=width_px,
+                                  progress=None if bar is None else bar.update)
+        finally:
+            if bar is not None:
+                bar.close()
+        report.update(fused_frames=len(fused["frames"]), pinhole=fused["pinhole"])
+        lap("fuse")
+    try:
+        centerline = open_tube_centerline(trimesh.Trimesh(v, f, process=False))
+    except Exception as exc:  # noqa: BLE001 - whatever the mesh did to the centerline, the sequence is named
+        why = str(exc) if isinstance(exc, ColonbenchError) else f"{type(exc).__name__}: {exc}"
+        raise InputError(f"sequence {seq.name} ({seq.mesh}): no centerline of its mesh ({why})") from None
+    report["centerline_mm"] = float(centerline.length)
+    lap("centerline")
+    shards, skipped = write_sequence_shards(out, seq.name, colon_id, v, f, observed, centerline, fused, settings,
+                                            identity)
+    lap("segments")
+    report["samples"] = int(sum(s["samples"] for s in shards))
+    return shards, skipped, report
+
+
+def _run_all(sequences, tmp: Path, settings, identity, frames_every, width_px, workers, progress):
+    args = [(seq, k, str(tmp), settings, identity, frames_every, width_px) for k, seq in enumerate(sequences)]
+    if workers > 1 and len(sequences) > 1:
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+
+        with ProcessPoolExecutor(max_workers=min(workers, len(args)),
+                                 mp_context=multiprocessing.get_context("spawn")) as pool:
+            return list(pool.map(build_sequence, *zip(*args)))
+    return [build_sequence(*a, progress=progress) for a in args]
+
+
+def build(source, root=None, frames_every: int = 5, width_px: int = 240, workers: int = 1, intrinsics=None,
+          progress: bool = True) -> tuple[local_suites.LocalSuite, bool]:
+    """Build (or find already built) the suite of a C3VD download.
+
+    Parameters
+    ----------
+    source : path
+        The download's folder (registered sequences at any depth; :func:`colonbench.video.c3vd.find_sequences`).
+    root : path, optional
+        The suite data root (default :func:`colonbench.benchmark.suites.default_data_root`).
+    frames_every : int
+        Fuse every this many-th depth frame.
+    width_px : int
+        Width of the virtual pinhole the fused frames are resampled into, pixels.
+    workers : int
+        Sequences built at a time (processes).
+    intrinsics : path, optional
+        ``camera_intrinsics.txt`` where the download holds none near its sequences.
+    progress : bool
+
+    Returns
+    -------
+    suite : LocalSuite
+    built : bool
+        False where it was already built (nothing was done).
+
+    Raises
+    ------
+    InputError
+        A file that cannot be read (named), an unknown layout, a sequence whose conventions cannot be made to
+        agree (named); nothing is left in the data root.
+    """
+    from colonbench.benchmark import suites
+    from colonbench.shards.c3vd_shards import ImportSettings
+    from colonbench.video.c3vd import find_sequences
+
+    if frames_every < 1 or width_px < 16 or workers < 1:
+        raise InputError(f"--frames-every must be >= 1, the pinhole width >= 16 and --workers >= 1; got "
+                         f"{frames_every}, {width_px}, {workers}")
+    t0 = time.perf_counter()
+    source = Path(source)
+    sequences, skipped = find_sequences(source, intrinsics)
+    settings = ImportSettings()
+    options = {"frames_every": int(frames_every), "pinhole_width_px": int(width_px), "settings": settings.to_dict(),
+               "noise_mm": list(NOISE_MM), "noise_seed": NOISE_SEED}
+    digests = source_digests(sequences)
+    digest_seconds = round(time.perf_counter() - t0, 1)
+    key = _digest({"importer": IMPORTER, "version": IMPORTER_VERSION, "options": options, "files": digests["files"]})
+    sid = f"{IMPORTER}-{key[:12]}"
+    root = Path(root) if root is not None else suites.default_data_root()
+    target = root / sid
+    if (target / local_suites.FILE).is_file():
+        return local_suites.load(target), False
+    if target.exists():
+        raise InputError(f"{target}: exists and is not a built suite; remove it and build again")
+    root.mkdir(parents=True, exist_ok=True)
+    tmp = root / f".{sid}.tmp-{os.getpid()}"
+    shutil.rmtree(tmp, ignore_errors=True)
+    tmp.mkdir()
+    try:
+        identity = {"manifest_name": sid, "manifest_sha256": key, "config_sha256": _digest(options)}
+        results = _run_all(sequences, tmp, settings, identity, frames_every, width_px, workers, progress)
+        entry = _finish(tmp, sid, key, identity, sequences, skipped, results, options, digests, t0)
+        entry["digest_seconds"] = digest_seconds
+        (tmp / local_suites.FILE).write_text(json.dumps(entry, indent=1) + "\n")
+        os.replace(tmp, target)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return local_suites.load(target), True
+
+
+def _finish(tmp: Path, sid, key, identity, sequences, skipped, results, options, digests, t0):
+    """Write the lock, signature and descriptive manifest of a built suite's folder; its registry entry (to write
+    last)."""
+    import yaml
+
+    from colonbench.benchmark import verification
+    from colonbench.benchmark.evaluate import select
+    from colonbench.benchmark.fingerprint import segments_fingerprint
+    from colonbench.shards.c3vd_shards import write_lock
+
+    shards = [s for r in results for s in r[0]]
+    if not shards:
+        why = "; ".join(f"{seq.name}: {r[1][0]['reason'] if r[1] else 'too short to cut'}"
+                        for seq, r in zip(sequences, results))
+        raise InputError(f"no segment of the download could be made ({why})")
+    lock = write_lock(tmp, identity, shards)
+    (tmp / "manifest.yaml").write_text(yaml.safe_dump(
+        {"name": sid, "task": "segments", "description": "built by colonbench suites build c3vd from a C3VD "
+         "download (not a generator manifest: it cannot be generated again without the download)",
+         "importer": f"{IMPORTER} {IMPORTER_VERSION}", "options": options, "source_digest": digests["digest"]},
+        sort_keys=False))
+    _, picks = select(tmp, "test", None)
+    sha256, records = segments_fingerprint(tmp, picks, NOISE_MM, NOISE_SEED)
+    for r in records:   # the camera sample is drawn on the true surface, the video one on a fused surface
+        r["cloud"] = "reconstruction" if r["hole_model"] == "video" else "surface"
+    stub = local_suites.LocalSuite(IMPORTER, IMPORTER_VERSION, "", "segments", "", len(records), sha256, 0.0,
+                                   noise_mm=NOISE_MM, noise_seed=NOISE_SEED, local_id=sid)
+    published = verification.make(stub, lock, sha256, records)
+    verification.write(published, tmp / local_suites.SIGNATURE_FILE)
+    reports = {seq.name: {**digests["sequences"][seq.name], **r[2], "skipped_segments": r[1]}
+               for seq, r in zip(sequences, results)}
+    depth = sum(1 for seq in sequences if seq.depth)
+    tests = (f"real colonoscope trajectories of C3VD: {len(sequences)} registered sequence(s) of silicone phantoms "
+             f"({', '.join(seq.name for seq in sequences[:4])}{', ...' if len(sequences) > 4 else ''}) cut into "
+             f"50-70 mm segments along their centerlines, truth from C3VD's per-face coverage; partials on the observed "
+             f"faces (camera) and, for {depth} with depth frames, the frames fused by TSDF (video)")
+    entry = {"format": local_suites.FORMAT, "format_version": local_suites.FORMAT_VERSION, "id": sid,
+             "name": IMPORTER, "version": IMPORTER_VERSION, "task": "segments", "tests": tests,
+             "samples": len(records), "sha256": sha256, "signature": verification.digest(published),
+             "noise_mm": list(NOISE_MM), "noise_seed": NOISE_SEED,
+             "build_seconds": round(time.perf_counter() - t0, 1),
+             "importer": {"name": IMPORTER, "version": IMPORTER_VERSION}, "options": options,
+             "source": {"digest": digests["digest"], "files": digests["files"], "sequences": reports,
+                        "skipped": skipped},
+             "licence": LICENCE, "cite": list(CITE)}
+    return entry
