@@ -43,13 +43,12 @@ SHORT_SHARE = 0.9
 LONGEST_SHARE = 3.0
 #: Suffix of a model's calibration file.
 SUFFIX = ".intervals.json"
-#: The features of an estimate its interval is scaled by, per scaled scheme (:func:`features`; decision record 0156).
+#: The features of an estimate its interval is scaled by, per scaled scheme (:func:`features`; decision records 0156
+#: and 0158; 0156's measurement also tried features the method does not compute, kept in its session script).
 SCALE_FEATURES = {
     "scaled": ("one", "estimate", "length", "span_ratio", "no_rim", "one_rim", "doubtful"),
     "scaled2": ("one", "estimate", "length", "span_ratio", "no_rim", "one_rim", "doubtful"),
     "scaled2-gaps": ("one", "estimate", "length", "span_ratio", "no_rim", "one_rim", "doubtful", "gap_share"),
-    "scaled+": ("one", "estimate", "length", "span_ratio", "no_rim", "one_rim", "doubtful", "unwrap_gap",
-                "unwrap_gap_abs", "threshold_gap", "largest_hole", "aspect", "log_density", "roughness"),
 }
 #: Added to ``|true - estimated|`` before its log is fitted: a floor of the scale (fractions).
 SCALE_FLOOR = 0.005
@@ -57,26 +56,17 @@ SCALE_FLOOR = 0.005
 
 def features(coverage: float, signals: dict, names) -> np.ndarray:
     """The features ``names`` (:data:`SCALE_FEATURES`) of an estimate, from its coverage and its signals
-    (:func:`colonbench.completion.method.from_heatmap` and :func:`sureness_signals`); a signal the estimate lacks
-    counts 0.
+    (:func:`colonbench.completion.method.from_heatmap`); a signal the estimate lacks counts 0.
 
-    ``estimate``: the coverage; ``length``: the line between the planes / 60 mm; ``span_ratio``: the span between
-    the planes / that line; ``no_rim``, ``one_rim``: how many cut rims were found; ``doubtful``: a doubtful rim;
-    ``unwrap_gap`` (``_abs``): the coverage minus the unwrapping coverage of the cloud around the method's line;
-    ``threshold_gap``: minus the thresholding coverage of the same prediction; ``largest_hole``: the area share of
-    the largest patch of hole faces; ``gap_share``: the area share of the wall-gap patches; ``aspect``: the tube's diameter / the line's length; ``log_density``: the log of
-    the cloud's points/mm^2; ``roughness``: its points' rms distance from their neighbours' plane, mm."""
+    ``one``: 1; ``estimate``: the coverage; ``length``: the line between the planes / 60 mm; ``span_ratio``: the span
+    between the planes / that line; ``no_rim``, ``one_rim``: how many cut rims were found; ``doubtful``: a doubtful
+    rim; ``gap_share``: the area share of the wall-gap patches."""
     g = lambda k: float(signals.get(k, 0.0) or 0.0)          # noqa: E731
     length = g("length_mm")
     rims = int(g("rims"))
     value = {"one": 1.0, "estimate": float(coverage), "length": length / 60.0,
              "span_ratio": g("span_mm") / max(length, 1.0), "no_rim": float(rims == 0), "one_rim": float(rims == 1),
-             "doubtful": float(g("rims_doubtful") > 0),
-             "unwrap_gap": float(coverage) - g("unwrap_coverage") if "unwrap_coverage" in signals else 0.0,
-             "threshold_gap": float(coverage) - g("threshold_coverage") if "threshold_coverage" in signals else 0.0,
-             "largest_hole": g("largest_hole"), "gap_share": g("gap_share"), "aspect": 2.0 * g("radius_mm") / max(length, 1.0),
-             "log_density": float(np.log(max(g("density"), 1e-3))), "roughness": g("roughness_mm")}
-    value["unwrap_gap_abs"] = abs(value["unwrap_gap"])
+             "doubtful": float(g("rims_doubtful") > 0), "gap_share": g("gap_share")}
     out = np.array([value[n] for n in names], float)
     return np.where(np.isfinite(out), out, 0.0)
 

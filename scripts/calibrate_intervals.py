@@ -8,7 +8,7 @@ training colons are left out) and validation-real.yaml, the real validation colo
 calibration-real.yaml's real training colons, which are reported, never calibrated on (the network saw them).
 Estimates every segment with the completion method (its intervals off) at 0 and 0.5 mm noise, as the suites do,
 with the signals its intervals are scaled by (cached per model and steps in ``<data>/<manifest>``), then chooses
-the scheme by decision record 0156's rule: every scheme is measured leave-one-colon-out (a colon's estimates get the
+the scheme by decision record 0156's rule (0158's candidates among them): every scheme is measured leave-one-colon-out (a colon's estimates get the
 intervals of a calibration fitted on all the other colons); of those whose truth-inside share lies within 85-95 % in
 each of ``V_real`` and ``V_wide`` at each noise level, the one with the smallest mean width on ``V_real`` (else the
 one whose worst cell lies closest to the level). The review width comes from the same held-out intervals. The
@@ -39,11 +39,10 @@ ROOT = Path(__file__).resolve().parents[1] / "data_manifests"
 #: The calibration's datasets: manifest name -> the set its segments belong to (``train_real``: reported only).
 MANIFESTS = {"calibration": "V_wide", "validation-real": "V_real", "calibration-real": "train_real"}
 CALIBRATED = ("V_wide", "V_real")
-SCHEMES = ("length+band", "scaled", "scaled+", "length+scaled+")
+SCHEMES = ("length+band", "scaled", "scaled2", "scaled2-gaps")
 NOISE_MM = (0.0, 0.5)
 #: The signals an estimate's interval may be scaled by, as columns of the estimates' table.
-SIGNALS = ("rims", "rims_doubtful", "gap_share", "length_mm", "span_mm", "unwrap_coverage", "threshold_coverage", "largest_hole",
-           "radius_mm", "density", "roughness_mm")
+SIGNALS = ("rims", "rims_doubtful", "gap_share", "length_mm", "span_mm")
 #: The review rule (decision record 0156): flag at least this share of the estimates off by more than BIG.
 REVIEW_RECALL, BIG = 0.8, 0.15
 #: Colon ids of real meshes start here (data_manifests: 900000 + the atlas number).
