@@ -223,7 +223,13 @@ def build(source, root=None, frames_every: int = 5, width_px: int = 240, workers
         entry = _finish(tmp, sid, key, identity, sequences, skipped, results, options, digests, t0)
         entry["digest_seconds"] = digest_seconds
         (tmp / local_suites.FILE).write_text(json.dumps(entry, indent=1) + "\n")
-        os.replace(tmp, target)
+        try:
+            os.replace(tmp, target)
+        except OSError:                        # another build of the same download finished first: keep its suite
+            if local_suites.load(target) is None:
+                raise InputError(f"{target}: cannot put the built suite in place (a folder is there that is not "
+                                 "a built suite; remove it)") from None
+            shutil.rmtree(tmp, ignore_errors=True)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise

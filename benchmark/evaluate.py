@@ -189,6 +189,8 @@ def run_unit(data: str, shard_name: str, indices: list[int], sigma: float, noise
                 row = {"method": m.name, **base}
                 try:
                     est, seconds = _one(m, pts, truth, sid, float(geo["length_mm"]) if given[m.name] else None)
+                    if not np.isfinite(est.coverage):     # no answer: a failure, scored as one (never left out)
+                        raise InputError(f"{m.name} gave no coverage (NaN)")
                 except Exception as exc:  # noqa: BLE001 - recorded in the row and counted in the tables
                     msg = str(exc) if isinstance(exc, ColonbenchError) else f"{type(exc).__name__}: {exc}"
                     row.update({"coverage": np.nan, "coverage_error": np.nan, "interval_low": np.nan,

@@ -25,7 +25,7 @@ import math
 from pathlib import Path
 
 from colonbench.errors import InputError
-from colonbench.estimate import Estimate, interval, level, points_array
+from colonbench.estimate import Estimate, interval, level, points_array, reasons
 
 #: Columns of an export's ``index.csv``; the known-length track adds :data:`LENGTH_COLUMN`.
 INDEX_COLUMNS = ["sample_id", "file", "noise_mm", "points"]
@@ -126,6 +126,7 @@ def read_prediction(path, method: str = "predictions") -> Estimate:
                     points_array(obj.get("centerline"), "centerline", path.name), method,
                     seconds=program_seconds(obj.get("seconds"), path.name),
                     coverage_interval=interval(obj.get("coverage_interval"), path.name),
+                    review=reasons(obj.get("review"), path.name),
                     interval_level=level(obj.get("coverage_interval_level"), path.name))
 
 

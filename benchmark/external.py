@@ -163,7 +163,7 @@ class ExecMethod(PredictionMethod):
         root = Path(predictions) if predictions is not None else Path(tempfile.mkdtemp(prefix="colonbench-exec-"))
         super().__init__(root / name, name, command_version(self.argv))
         #: Each call's standard output and error and its record (:mod:`colonbench.benchmark.calls`).
-        self.logs = root.parent / "logs" / name
+        self.logs = (root.parent if predictions is not None else root) / "logs" / name
 
     def missing(self, sids) -> list[str]:
         """The ids among ``sids`` with neither an answer (a prediction, the program's ``.error``) nor a note of

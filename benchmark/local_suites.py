@@ -94,6 +94,11 @@ def load(folder) -> LocalSuite | None:
     entry = read_entry(Path(folder))
     if not entry:
         return None
+    missing = [k for k in ("name", "version", "tests", "samples", "sha256", "noise_mm", "noise_seed", "signature", "id")
+               if k not in entry]
+    if missing:
+        raise InputError(f"{Path(folder) / FILE}: not a built suite's record (no {', '.join(missing)}); build it again "
+                         "(colonbench suites build)")
     return LocalSuite(entry["name"], int(entry["version"]), "", entry.get("task", "segments"), entry["tests"],
                       int(entry["samples"]), entry["sha256"], float(entry.get("build_seconds", 0.0)),
                       noise_mm=tuple(float(x) for x in entry["noise_mm"]), noise_seed=int(entry["noise_seed"]),

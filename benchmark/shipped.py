@@ -46,6 +46,8 @@ TOLERANCE = 1e-6
 #: moved, by 8e-5 (completion) and 1e-4 (thresholding); none of demo-v1's 48.
 FLIPPED_ROWS = 0.02
 FLIPPED_STEP = 2e-3
+#: Methods whose coverage no float noise moves measurably (docs/benchmark.md, Results on another machine).
+EXACT = ("constant", "unwrap-pca", "unwrap-gt")
 #: Points a threshold metric (a precision or recall: a share of points within 1 or 2 mm) or a point count may move
 #: by on another machine: a point whose distance lies within float noise of the threshold falls on either side
 #: (seen: one true hole point of 6,500 in demo-v1, 1.5e-4 of recall). Allowed: this many points of the count.
@@ -154,7 +156,7 @@ def publish(run_dir, suite, methods=None, track: str | None = None) -> Path:
 
 
 def differences(ours: pd.DataFrame, reference: pd.DataFrame, flips: int = FLIPS,
-                tolerance: float = TOLERANCE) -> pd.DataFrame:
+                tolerance: float = TOLERANCE, counted: bool = True) -> pd.DataFrame:
     """Where rows of a method differ from its reference rows (its shipped ones) by more than a reproduction on
     another machine may: a continuous column (:data:`CONTINUOUS`) by more than ``tolerance`` (a coverage, in a few rows,
     by up to :data:`FLIPPED_STEP`), a point count by
@@ -166,7 +168,10 @@ def differences(ours: pd.DataFrame, reference: pd.DataFrame, flips: int = FLIPS,
     ours, reference : DataFrame
         Results rows (:func:`colonbench.benchmark.evaluate.result_columns`) of one method on the same segments,
         keyed by ``shard``, ``index`` and ``noise_mm``; rows made before the counts existed compare their threshold
-        metrics with the counts of the other side.
+        metrics with the counts of the other side (neither side's: to ``tolerance``).
+    counted : bool
+        Whether the method's coverage counts vertices, voxels or cells that float noise can move (the methods on
+        the network): then a few rows may move by up to :data:`FLIPPED_STEP`; else (:data:`EXACT`) none.
 
     Returns
     -------
@@ -187,14 +192,15 @@ def differences(ours: pd.DataFrame, reference: pd.DataFrame, flips: int = FLIPS,
 
     allowed = {c: np.full(len(a), tolerance) for c in CONTINUOUS}
     allowed.update({c: np.full(len(a), float(flips)) for c in set(SHARE_OF.values())})
-    allowed.update({c: flips / np.maximum(count(n), 1.0) + 1e-12 for c, n in SHARE_OF.items()})
+    allowed.update({c: np.where(np.isfinite(count(n)), flips / np.maximum(count(n), 1.0) + 1e-12, tolerance)
+                    for c, n in SHARE_OF.items()})          # no count on either side: float noise only
     spare = max(1, int(FLIPPED_ROWS * len(a)))
     for col, bound in allowed.items():
         if col not in a.columns or col not in b.columns:
             continue
         x, y = a[col].to_numpy(float), b[col].to_numpy(float)
         bad = (np.isnan(x) != np.isnan(y)) | (np.abs(x - y) > bound + tolerance * np.abs(y))
-        if col in CONTINUOUS and col != "true_coverage":      # a few rows may move by a vertex's or voxel's share
+        if counted and col in CONTINUOUS and col != "true_coverage":   # a few rows may move by a vertex's share
             flipped = bad & (np.abs(x - y) <= FLIPPED_STEP)
             if flipped.sum() <= spare and not (bad & ~flipped).any():
                 bad[:] = False

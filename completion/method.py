@@ -1,8 +1,7 @@
 """The paper's coverage estimation, end to end: partial points (mm) -> coverage, holes, centerline (mm).
 
-:class:`CompletionMethod` is the one API for it: the ``estimate`` command, the
-benchmark harness and users' scripts all call :meth:`CompletionMethod.estimate`.
-Steps and where they live:
+:class:`CompletionMethod` is the one API for it: the ``estimate`` command, the benchmark harness and users'
+scripts all call :meth:`CompletionMethod.estimate`. Steps and where they live:
 
 1. grid from the partial points alone (:func:`colonbench.grid.fit_grid`) and the
    input heatmap (:func:`colonbench.heatmaps.input_from_points`), exactly as the
@@ -12,8 +11,8 @@ Steps and where they live:
 4. completed mesh, hole vertices and coverage (:mod:`colonbench.completion.surface`);
 5. back to mm in the input's frame.
 
-:meth:`CompletionMethod.from_heatmap` runs steps 3-5 on any target heatmap,
-e.g. the ground truth, which bounds the error of everything after the network.
+:meth:`CompletionMethod.from_heatmap` runs steps 3-5 on any target heatmap, e.g. the ground truth, which bounds
+the error of everything after the network.
 """
 
 from __future__ import annotations

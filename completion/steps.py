@@ -10,10 +10,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from colonbench.completion.gaps import GAP_VALLEY, wall_gaps
-from colonbench.meshes import triangle_areas
 from colonbench.completion.planes import clip_to_segment, segment_planes
 from colonbench.completion.surface import (HOLE_DISTANCE, SHELL_LEVEL, clip_to_shell, extract_mesh, hole_vertices,
                                            mesh_coverage, resigned_field)
+from colonbench.meshes import triangle_areas
 
 
 #: Revision of the steps after the network, part of the methods' versions: 1 the paper's, 2 the sparse

@@ -187,6 +187,29 @@ def test_leaderboard_merges_runs_counts_failures_and_refuses_other_data(smoke_da
         merge_runs([a, b])
 
 
+def test_a_method_that_answers_no_coverage_fails_and_is_scored_as_a_failure(smoke_dataset, tmp_path):
+    """A Python method returning NaN on a segment gains nothing by it: the row is a failure, scored as the farther of
+    coverage 0 and 1 (exec programs cannot return NaN at all)."""
+    data, _ = smoke_dataset
+
+    class Shy:                                          # no coverage for the first of the two segments
+        name, version, calls = "shy", "1", 0
+
+        def estimate(self, points):
+            self.calls += 1
+            return {"coverage": float("nan") if self.calls == 1 else 0.5}
+
+    run = evaluate(data, [Shy()], tmp_path / "run", noise=[0], progress=False)
+    rows = pd.read_csv(run / "results" / "shy.csv")
+    nan = rows["error"].fillna("").str.contains("gave no coverage")
+    assert 0 < nan.sum() < len(rows) and rows.loc[nan, "coverage"].isna().all()
+    write_leaderboard([run], tmp_path / "lb", figures=False)
+    tab = pd.read_csv(tmp_path / "lb" / "leaderboard.csv")
+    true = rows["true_coverage"]
+    expected = np.where(nan, np.maximum(true, 1 - true), (true - 0.5).abs()).mean()
+    assert tab.loc[0, "failed"] == nan.sum() and tab.loc[0, "coverage_mae"] == pytest.approx(100 * expected)
+
+
 def test_cli_evaluates_the_real_methods_in_parallel_like_in_one_process(smoke_dataset, tmp_path, capsys):
     data, _ = smoke_dataset
     methods = "completion,thresholding,unwrap,gt-heatmap,unwrap-gt"

@@ -185,7 +185,7 @@ def test_a_programs_own_seconds_are_its_rows_seconds(demo_data, tmp_path):
     table = truth(data, limit=5, noise=(0.0,))
     sids = list(table)
     plan = {sids[0]: {"seconds": 7.25}, sids[1]: {"seconds": {"network": 1.0, "rest": 0.5}},
-            sids[2]: {"seconds": "fast"}}
+            sids[2]: {"seconds": "fast"}, sids[3]: {"coverage_interval": [0.0, 1.0], "review": ["look again"]}}
     run = evaluate(data, [oracle(tmp_path / "program", table, plan)], tmp_path / "run", noise=[0], limit=5,
                    progress=False)
     rows = pd.read_csv(run / "results" / "oracle.csv").fillna({"error": ""}).set_index("sample_id")
@@ -197,6 +197,9 @@ def test_a_programs_own_seconds_are_its_rows_seconds(demo_data, tmp_path):
     assert share.iloc[0] == pytest.approx(record["seconds"] / 5, abs=1e-3)
     methods = json.loads((run / "run.json").read_text())["methods"]
     assert methods["oracle"]["seconds_from"] == {"program": 2, "call": 3}
+    # a program's review reasons are counted as a Python method's are (none said: n/a)
+    assert rows.loc[sids[3], "review"] == 1 and rows.loc[sids[3], "interval_high"] == 1.0
+    assert rows.loc[sids[4], "review"] != rows.loc[sids[4], "review"]
 
 
 def test_a_long_call_reports_each_input_as_it_answers_it(tmp_path):

@@ -7,7 +7,7 @@ import time
 
 from colonbench.commands import benchmark as benchmark_verbs
 from colonbench.commands.common import add_model_args, add_suite_check_args, finite, floats, method_list, positive
-from colonbench.errors import ColonbenchError
+from colonbench.errors import ColonbenchError, InputError
 from colonbench.mapping import CONTEXT_MM, SEGMENT_MM
 
 
@@ -112,7 +112,11 @@ def _shipped_for(run_dirs) -> list:
         raise ColonbenchError(f"{run_dirs[0]}: its data is not the published {rec['id']} (unverified); the shipped "
                               "results are not comparable")
     track = tracks.of_run(runs[0])
-    items = shipped_items(suites.get(rec["id"]), exclude={m for r in runs for m in r["methods"]}, track=track)
+    try:
+        suite = suites.get(rec["id"])
+    except InputError:      # a suite built on this machine (colonbench suites build) under another data folder
+        raise ColonbenchError(f"{rec['id']}: no shipped results (a suite built on this machine has none)") from None
+    items = shipped_items(suite, exclude={m for r in runs for m in r["methods"]}, track=track)
     if not items:
         raise ColonbenchError(f"no shipped results of {rec['id']} on the {tracks.label(track)} to merge")
     return items

@@ -178,10 +178,6 @@ def add_parsers(sub) -> None:
     p.add_argument("--bn-data", nargs="+", required=True, metavar="PACK",
                    help="packs (colonbench pack) whose training samples recompute the batch-norm statistics: those "
                         "the models trained on")
-    p.add_argument("--hole-weight", type=finite, default=0.0, metavar="A",
-                   help="each voxel's squared error counts 1 + A times where the complete surface lies and the input "
-                        "has no partial point within 2 voxels: the missing wall weighs more in the loss (default 0, "
-                        "the paper's plain L2)")
     p.add_argument("--repeat", type=repeats, default=None, metavar="N,N,...",
                    help="weights of the packs' samples, as colonbench train --repeat (default 1 each)")
     p.add_argument("--bn-samples", type=positive(int), default=1000,
