@@ -139,6 +139,10 @@ class Intervals:
     source : dict
         What it was calibrated on: model, manifests and their hashes (``known_manifests``: those :attr:`known` was
         fitted on), noise levels, samples.
+    map : dict
+        ``{"scheme", "groups"}``: the map's segments' own quantiles per group (``track=context``,
+        ``track=segment-only``, ``...,below=<b>``; ``signals["map_track"]`` says a map segment's track), calibrated on
+        maps (``scripts/map_intervals.py``); empty: the map's segments get :attr:`known`.
     known : dict
         ``{"low", "high", "n"}`` of segments whose extent is known (``signals["extent"] == "known"``: a length
         given to :func:`known_length`, or planes the caller clips at, as ``colonbench map`` does).
@@ -150,10 +154,18 @@ class Intervals:
     review_width: float
     source: dict = field(default_factory=dict)
     known: dict = field(default_factory=dict)
+    map: dict = field(default_factory=dict)
 
     def quantiles(self, coverage: float, signals: dict) -> tuple[float, float]:
         """The residual quantiles of an estimate's group (the coarser scheme's group where its own had too few
         calibration segments), times the estimate's scale in a scaled scheme."""
+        if signals.get("map_track") and self.map:
+            key = f"track={signals['map_track']}"
+            if self.map.get("scheme") == "track+band":
+                key += f",below={next(b for b in BANDS if coverage < b):g}"
+            g = self.map["groups"].get(key) or self.map["groups"].get(key.split(",")[0])
+            if g is not None:
+                return g["low"], g["high"]
         if signals.get("extent") == "known" and self.known:
             return _scale(self.known, coverage, signals)
         for scheme in (self.scheme, self.scheme.split("+")[0], "marginal"):

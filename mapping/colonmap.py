@@ -403,6 +403,7 @@ def map_colon(points: np.ndarray, method, segment_mm: float = SEGMENT_MM, positi
         if seg.unreconstructed_mm > 0:
             add_unreconstructed(seg, radius)
         if est.coverage_interval is not None:  # the method's interval, around the segment's own coverage
+            est.signals["map_track"] = "context" if context_mm > 0 else "segment-only"   # a calibration's map part
             seg.coverage_interval = moved_interval(method, est, seg.coverage)
         seg.review = list(est.review)
         out.append(seg)

@@ -269,3 +269,20 @@ def test_a_scaled_interval_follows_the_scale_its_signals_give():
     assert hi_s - 0.5 > 2.5 * (hi_l - 0.5) and 0.5 - lo_s < 1.5 * (0.5 - lo_l)
     ends = np.array([two.interval(0.5, s) for s in sig])
     assert ((ends[:, 0] - 1e-12 <= 0.5 + skew) & (0.5 + skew <= ends[:, 1] + 1e-12)).all()
+
+
+def test_a_calibration_with_a_map_part_gives_each_map_track_its_own_interval():
+    cal = intervals.fit([0.8] * 40, [0.8] * 40, [{"length_mm": 70.0}] * 40, "length", 0.4)
+    cal.known = {"low": -0.08, "high": 0.1, "n": 40}
+    cal.map = {"scheme": "track", "groups": {"track=context": {"low": -0.02, "high": 0.03, "n": 300},
+                                             "track=segment-only": {"low": -0.3, "high": 0.2, "n": 300}}}
+    known = {"length_mm": 70.0, "extent": "known"}
+    assert cal.interval(0.5, {**known, "map_track": "context"}) == pytest.approx((0.48, 0.53))
+    assert cal.interval(0.5, {**known, "map_track": "segment-only"}) == pytest.approx((0.2, 0.7))
+    assert cal.interval(0.5, known) == pytest.approx((0.42, 0.6))             # not a map segment: the known extent
+    cal.map = {"scheme": "track+band", "groups": {"track=context": {"low": -0.02, "high": 0.03, "n": 300},
+                                                  "track=context,below=1.01": {"low": -0.05, "high": 0.0, "n": 40}}}
+    assert cal.interval(0.9, {**known, "map_track": "context"}) == pytest.approx((0.85, 0.9))
+    assert cal.interval(0.5, {**known, "map_track": "context"}) == pytest.approx((0.48, 0.53))   # its track's
+    again = intervals.Intervals(**json.loads(json.dumps(cal.to_json())))
+    assert again.interval(0.9, {**known, "map_track": "context"}) == pytest.approx((0.85, 0.9))
