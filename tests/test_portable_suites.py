@@ -168,6 +168,14 @@ def test_suites_check_reports_each_cached_suite_and_fails_only_on_a_real_differe
     assert main(["suites", "--check", "--data", str(demo_data)]) == 0
     out = capsys.readouterr().out
     assert f"cite as {suites.get(DEMO).citation}" in out and f"{DEMO}: verified, " in out
+    # only the named suites: listed and checked; an unknown one, or one with no data, is refused in a line
+    assert main(["suites", "--check", "demo", "--data", str(demo_data)]) == 0
+    out = capsys.readouterr().out
+    assert f"{DEMO}: verified, " in out and "paper-v1" not in out
+    for name, words in (("demo-v9", "unknown suite 'demo-v9'"), ("paper", "nothing to check: paper-v1 has no data")):
+        assert main(["suites", "--check", DEMO, name, "--data", str(demo_data)]) == 2
+        captured = capsys.readouterr()
+        assert words in captured.err and "Traceback" not in captured.err and "verified" not in captured.out
     data = _copy(demo_data, tmp_path)
     shard = sorted((data / "test").glob("*.h5"))[1]
     with h5py.File(shard, "r+") as h5:

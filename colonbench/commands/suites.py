@@ -11,7 +11,8 @@ DATA_HELP = ("suite data folder (default $COLONBENCH_DATA, else $XDG_CACHE_HOME/
 
 
 def cmd_suites(args):
-    """List the named suites; with --check, check every cached one against its published signature."""
+    """List the named suites; with --check, check the named ones (default: every cached one) against their
+    published signatures."""
     from colonbench.benchmark import suites
     from colonbench.errors import InputError
 
@@ -23,7 +24,20 @@ def cmd_suites(args):
         return _card(args)
     if getattr(args, "action", None) == "build":
         return _build(args)
+    from colonbench.benchmark import local_suites
+
+    named = suites.parse(",".join(args.check), args.data) if args.check else None
     rows = suites.SUITES if args.all_versions else tuple(suites.latest().values())
+    built = local_suites.found(args.data)
+    if named is not None:   # only those, each with its data, or nothing is checked
+        missing = [s for s in named if not (suites.data_dir(s, args.data) / "dataset.lock.json").is_file()]
+        if missing:
+            raise InputError("nothing to check: " + "; ".join(f"{s.id} has no data in {suites.data_dir(s, args.data)}"
+                                                              for s in missing)
+                             + " (colonbench benchmark --suites ID generates a suite's data, colonbench suites "
+                               "fetch downloads them)")
+        rows = [s for s in named if not isinstance(s, local_suites.LocalSuite)]
+        built = [s for s in named if isinstance(s, local_suites.LocalSuite)]
     for s in rows:
         here = suites.data_dir(s, args.data)
         state = "cached" if (here / "dataset.lock.json").is_file() else "not generated"
@@ -34,15 +48,12 @@ def cmd_suites(args):
               + (f", {s.limit} spread evenly" if s.limit else "")
               + f"\n          cite as {s.citation}; content hash of the published data {s.sha256}"
               + (f"\n          archive {s.archive_url} (sha256 {s.archive_sha256})" if s.archive_url else "") + "\n")
-    from colonbench.benchmark import local_suites
-
-    built = local_suites.found(args.data)
     for s in built:
         print(f"{s.id} {s.samples:4d} segments x noise {', '.join(f'{n:g}' for n in s.noise_mm)} mm; built here from a "
               f"download ({s.folder})\n          {s.tests}\n          cite as {s.citation}, importer {s.name} "
               f"{s.version}, with the dataset's own citation (docs/benchmark.md)\n")
     rows = tuple(rows) + tuple(built)
-    if not args.check:
+    if args.check is None:
         return 0
     differs = 0
     for s in rows:
@@ -132,9 +143,10 @@ def add_parsers(sub) -> None:
                                    "against its published signature; 'suites archive' writes a suite's data as one "
                                    "file and 'suites fetch' puts such a file into the suite cache.")
     p.add_argument("--data", help=DATA_HELP)
-    p.add_argument("--check", action="store_true",
-                   help="check the cached data of each suite against its published signature: bit-identical, within "
-                        "tolerance, or what differs (exit 1 only where data differ)")
+    p.add_argument("--check", nargs="*", metavar="SUITE",
+                   help="check the cached data of the named suites (ids or names; default: every cached one) against "
+                        "their published signatures: bit-identical, within tolerance, or what differs (exit 1 only "
+                        "where data differ)")
     p.add_argument("--all-versions", action="store_true", help="also list older versions of the suites")
     p.set_defaults(func=cmd_suites, action=None)
     actions = p.add_subparsers(dest="action", metavar="ACTION")
