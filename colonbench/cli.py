@@ -29,6 +29,65 @@ class VerbParser(argparse.ArgumentParser):
         return f"{summary}\n\n{text}" if summary else text
 
 
+class _Refused(Exception):
+    """A verb parser's error, held until it is known whether an unrecognised option should be named first."""
+
+
+class _Verb(VerbParser):
+    """A verb's parser: what it does not recognise is refused here, with the verb's usage and, for a mistyped
+    option, the closest of its options (argparse would hand the leftovers to the top-level parser, whose usage
+    names no option of the verb). An unrecognised option is named before any other error (a mistyped required
+    option would otherwise be reported as missing)."""
+
+    _holding = False
+
+    def error(self, message):
+        if self._holding:
+            raise _Refused(message)
+        super().error(message)
+
+    def parse_known_args(self, args=None, namespace=None):
+        args = list(sys.argv[1:] if args is None else args)
+        message = None
+        self._holding = True
+        try:
+            namespace, extras = super().parse_known_args(args, namespace)
+        except _Refused as refused:
+            message, extras = str(refused), self._leftovers(args)
+        finally:
+            self._holding = False
+        if extras:
+            self.error(f"unrecognized arguments: {' '.join(extras)}{self._did_you_mean(extras)}")
+        if message:
+            self.error(message)
+        return namespace, extras
+
+    def _leftovers(self, args) -> list:
+        """What a parse that requires nothing leaves unrecognised in ``args`` (none if it fails otherwise)."""
+        required = [a for a in self._actions if a.required]
+        for a in required:
+            a.required = False
+        self._holding = True
+        try:
+            return super().parse_known_args(args, None)[1]
+        except _Refused:
+            return []
+        finally:
+            for a in required:
+                a.required = True
+
+    def _did_you_mean(self, extras) -> str:
+        import difflib
+
+        options = [o for o in self._option_string_actions if o.startswith("--")]
+        for arg in extras:
+            if arg.startswith("-"):
+                close = difflib.get_close_matches(arg.split("=", 1)[0], options, n=1, cutoff=0.6)
+                if close:
+                    return f" (did you mean {close[0]}?)"
+        return ""
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The ``colonbench`` parser: each verb group's module adds its verbs (:mod:`colonbench.commands`)."""
     import importlib
@@ -38,7 +97,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="colonbench: synthetic colonoscopy coverage data and a benchmark of coverage-estimation methods. "
                     "All geometry is in millimetres.")
     parser.add_argument("--version", action="version", version=f"colonbench {__version__}")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=VerbParser)
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Verb)
     for group in GROUPS:
         importlib.import_module(f"colonbench.commands.{group}").add_parsers(sub)
     for action in sub._choices_actions:  # each verb's help line opens its --help
