@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import io
 import json
+import logging
 import os
 import re
 import shutil
@@ -27,6 +28,8 @@ import tarfile
 from pathlib import Path
 
 from colonbench.errors import InputError
+
+logger = logging.getLogger(__name__)
 
 FORMAT = "colonbench-suite-archive"
 FORMAT_VERSION = 1
@@ -157,7 +160,7 @@ def fetch(suite, url: str, sha256: str, root=None, progress: bool = True) -> Pat
     try:
         try:
             path = pooch.retrieve(url, known_hash=f"sha256:{sha256}", fname="archive.tar", path=staging,
-                                  progressbar=progress)
+                                  progressbar=_download_bar(url, progress))
         except ValueError as exc:           # pooch: the download's hash is not the known one
             raise InputError(f"{url}: refused, {_hash_words(exc)}") from None
         except Exception as exc:  # noqa: BLE001 - any transport failure is the user's to see, in one line
@@ -175,6 +178,7 @@ def fetch(suite, url: str, sha256: str, root=None, progress: bool = True) -> Pat
             raise InputError(f"{url}: not a colonbench suite archive (no {INFO_NAME})") from None
         if info.get("format") != FORMAT or info.get("suite") != suite.id:
             raise InputError(f"{url}: an archive of {info.get('suite')!r} ({info.get('format')}), not of {suite.id}")
+        logger.info("%s: downloaded; checking its data against %s", suite.id, suite.signature)
         result = suites.check(suite, folder)
         if not result.verified:
             raise InputError(f"{url}: its data do not verify against {suite.signature}: {result.first_difference()}")
@@ -182,6 +186,51 @@ def fetch(suite, url: str, sha256: str, root=None, progress: bool = True) -> Pat
     finally:
         shutil.rmtree(staging, ignore_errors=True)
     return target
+
+
+class _PoochBar:
+    """pooch's progress bar interface over :func:`colonbench.progress.bar`, one bar that only goes forwards.
+
+    pooch counts whole chunks (past the size on the last one), then calls ``reset()`` and ``update(total)`` to
+    show the bar full: on its own tqdm bar that jumps back to 0 % before 100 %. Here ``reset`` does nothing and the
+    count stops at the total.
+    """
+
+    def __init__(self, enabled: bool):
+        self.enabled = enabled
+        self._bar = None
+
+    @property
+    def total(self):
+        return None if self._bar is None else self._bar.total
+
+    @total.setter
+    def total(self, value):   # pooch sets it once it knows the size (0: no Content-Length)
+        from colonbench.progress import bar
+
+        self._bar = bar(total=int(value) or None, desc="download", unit="B", enabled=self.enabled)
+
+    def update(self, n):
+        if self._bar is None:
+            self.total = 0
+        self._bar.update(n)
+
+    def reset(self):
+        pass
+
+    def close(self):
+        if self._bar is not None:
+            self._bar.close()
+
+
+def _download_bar(url: str, progress: bool):
+    """pooch's ``progressbar``: one forward-only bar (http(s), doi); pooch's own tqdm for ftp and sftp, which take
+    no other, only on a terminal."""
+    from colonbench.progress import on_terminal
+
+    if str(url).lower().startswith(("ftp:", "sftp:")):
+        return bool(progress and on_terminal())
+    return _PoochBar(progress) if progress else False
 
 
 def _hash_words(exc: Exception) -> str:

@@ -118,18 +118,15 @@ def build_sequence(seq, colon_id: int, out: str, settings, identity: dict, frame
         lap("check")
         conv = report["convention"]
         poses = c3vd.camera_to_world(raw, conv["transposed"], conv["scale"])
-        bar = None
-        if progress:
-            from tqdm.auto import tqdm
+        from colonbench.progress import bar as progress_bar
 
-            bar = tqdm(total=len(range(0, len(seq.depth), frames_every)), unit="frame", desc=f"fuse {seq.name}",
-                       dynamic_ncols=True)
+        bar = progress_bar(total=len(range(0, len(seq.depth), frames_every)), unit="frame", desc=f"fuse {seq.name}",
+                           enabled=progress)
         try:
             fused = fuse_sequence(seq.depth, poses, intr, every=frames_every, width_px=width_px,
-                                  progress=None if bar is None else bar.update)
+                                  progress=bar.update if progress else None)
         finally:
-            if bar is not None:
-                bar.close()
+            bar.close()
         report.update(fused_frames=len(fused["frames"]), pinhole=fused["pinhole"])
         lap("fuse")
     try:

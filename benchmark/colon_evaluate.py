@@ -299,7 +299,7 @@ def evaluate_colons(data, methods, out, noise=(0.0, 0.5), contexts=CONTEXTS_MM, 
 
 def _run(out, run, data, picks, sigmas, contexts, segment_mm, loaded, options, workers, noise_seed, progress,
          t0, scheduler=None) -> Path:
-    from tqdm.auto import tqdm
+    from colonbench.progress import bar as progress_bar
 
     flat = [(n, i) for n, idx in picks for i in idx]
     units, keys = [], []
@@ -311,8 +311,7 @@ def _run(out, run, data, picks, sigmas, contexts, segment_mm, loaded, options, w
             if todo:
                 example = str(out / "examples" / f"{key}.pkl") if (n, i) == flat[0] and s == sigmas[0] else None
                 units.append((n, i, s, todo, example, key))
-    bar = tqdm(total=len(units), unit="map", desc="evaluate colons", disable=None if progress else True,
-               dynamic_ncols=True)
+    bar = progress_bar(total=len(units), unit="map", desc="evaluate colons", enabled=progress)
     args = lambda u: (str(data), u[0], u[1], u[2], noise_seed, u[3], contexts, segment_mm, u[4])  # noqa: E731
     try:
         for u, rows in run_units(run_colon_unit, units, args, loaded, options, workers, scheduler):

@@ -357,9 +357,8 @@ def evaluate(data, methods, out, noise=(0.0, 0.5), split: str = "test", limit: i
 def _run_programs(out, data, units, loaded, noise_seed, workers, progress, track=tracks.DEFAULT) -> None:
     """Run every ``exec:`` method's program on the inputs its unfinished units need, in batches across units (on
     the known-length track with each input's length: one call per length and batch)."""
-    from tqdm.auto import tqdm
-
     from colonbench.benchmark.external import ExecMethod
+    from colonbench.progress import bar as progress_bar
     from colonbench.shards.reader import Shard
 
     for name, (_, m) in loaded.items():
@@ -376,8 +375,7 @@ def _run_programs(out, data, units, loaded, noise_seed, workers, progress, track
                         items.append((sid, noisy(geo["partial_points"], sigma, noise_seed, shard_name, ids[sid]),
                                       float(geo["length_mm"]) if track == "length" else None))
         if items:
-            with tqdm(total=len(items), unit="input", desc=f"run {name}", disable=None if progress else True,
-                      dynamic_ncols=True) as bar:
+            with progress_bar(total=len(items), unit="input", desc=f"run {name}", enabled=progress) as bar:
                 m.run(items, workers=workers, progress=bar.update)
 
 
@@ -419,10 +417,10 @@ def _run(out, run, data, picks, sigmas, loaded, options, workers, examples, nois
     if retry_failed:
         units += _retry_units(out, picks, sigmas, loaded)
     _run_programs(out, data, units, loaded, noise_seed, workers, progress, track)
-    from tqdm.auto import tqdm
+    from colonbench.progress import bar as progress_bar
 
     total = sum(len(u[1]) for u in units)
-    bar = tqdm(total=total, unit="segment", desc="evaluate", disable=None if progress else True, dynamic_ncols=True)
+    bar = progress_bar(total=total, unit="segment", desc="evaluate", enabled=progress)
     args = lambda u: (str(data), u[0], u[1], u[2], noise_seed, u[3], u[4], str(out), track)  # noqa: E731
     try:
         for u, rows in run_units(run_unit, units, args, loaded, options, workers, scheduler):

@@ -2,11 +2,16 @@
 
 Errors in user input are printed as one line naming the problem
 (``colonbench: error: ...``) with exit status 2; a traceback means a bug.
+A mistyped option of a verb is refused with that verb's usage. The library
+speaks through :mod:`logging`; the command line shows its ``colonbench``
+messages of level INFO and above on stderr (WARNING and above with
+``--quiet``), each as its bare message.
 """
 
 from __future__ import annotations
 
 import argparse
+import logging
 import sys
 
 from colonbench import __version__
@@ -113,6 +118,7 @@ def main(argv=None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 0
+    handler = _log_to_stderr(logging.WARNING if getattr(args, "quiet", False) else logging.INFO)
     try:
         status = args.func(args)
     except ColonbenchError as exc:
@@ -121,7 +127,43 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print("colonbench: interrupted", file=sys.stderr)
         return 130
+    finally:
+        handler.close()
     return int(status or 0)
+
+
+class _Stderr(logging.StreamHandler):
+    """A handler writing each record's bare message to whatever ``sys.stderr`` is when it is written."""
+
+    def __init__(self):
+        super().__init__()
+        self.setFormatter(logging.Formatter("%(message)s"))
+
+    @property
+    def stream(self):
+        return sys.stderr
+
+    @stream.setter
+    def stream(self, value):
+        pass
+
+    def close(self):
+        logger = logging.getLogger("colonbench")
+        logger.removeHandler(self)
+        logger.setLevel(self.previous_level)
+        super().close()
+
+
+def _log_to_stderr(level: int) -> _Stderr:
+    """Show the library's ``colonbench`` log records at ``level`` and above on stderr, for one command (the
+    returned handler's ``close()`` undoes it): a Python user of the library sees them only where they configure
+    logging themselves."""
+    logger = logging.getLogger("colonbench")
+    handler = _Stderr()
+    handler.previous_level = logger.level
+    logger.addHandler(handler)
+    logger.setLevel(level)
+    return handler
 
 
 if __name__ == "__main__":

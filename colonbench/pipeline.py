@@ -32,6 +32,7 @@ from pathlib import Path
 
 from colonbench.benchmark import suites, tracks
 from colonbench.errors import ColonbenchError, InputError
+from colonbench.progress import bar as progress_bar
 
 #: Columns of :func:`failures`.
 FAILURE_COLUMNS = ["suite", "method", "noise_mm", "samples", "failed", "first_error"]
@@ -244,8 +245,6 @@ def export_suite(suite, out, data=None, workers: int = 1, scheduler=None, allow_
     dict
         ``suite.json``'s content: ``suite``, ``track``, ``inputs``, ``contract``.
     """
-    from tqdm.auto import tqdm
-
     from colonbench.benchmark import exchange
     from colonbench.benchmark.evaluate import select
     from colonbench.benchmark.runfolder import write_json
@@ -261,8 +260,8 @@ def export_suite(suite, out, data=None, workers: int = 1, scheduler=None, allow_
     out.mkdir(parents=True, exist_ok=True)
     _, picks = select(data_dir, suite.split, suite.limit)
     rows = []
-    bar = tqdm(total=sum(len(i) for _, i in picks) * len(suite.noise_mm), unit="sample", desc="export",
-               disable=None if progress else True)
+    bar = progress_bar(total=sum(len(i) for _, i in picks) * len(suite.noise_mm), unit="sample", desc="export",
+                       enabled=progress)
     for shard_name, indices in picks:
         for i in indices:
             for sigma in suite.noise_mm:

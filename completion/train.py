@@ -370,7 +370,7 @@ def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "a
         with open(log_path, "w", newline="") as fh:
             csv.writer(fh).writerow(LOG_FIELDS)
 
-    from tqdm.auto import tqdm
+    from colonbench.progress import bar as progress_bar
 
     # Ctrl-C or SIGTERM: finish the batch, write last.pt, stop (one process only: under DDP the ranks
     # would stop after different batches and hang in the next all-reduce, so torchrun keeps the default)
@@ -410,8 +410,8 @@ def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "a
             train_ds.set_epoch(epoch)
             batches = torch.utils.data.DataLoader(torch.utils.data.Subset(train_ds, slots[todo].tolist()),
                                                   **loader_kwargs)
-        bar = tqdm(total=n_batches, initial=state["position"], desc=f"epoch {epoch}", unit="batch",
-                   disable=None if (progress and rank == 0) else True, dynamic_ncols=True)
+        bar = progress_bar(total=n_batches, initial=state["position"], desc=f"epoch {epoch}", unit="batch",
+                           enabled=progress and rank == 0)
         for k, (x, y) in enumerate(batches):
             x, y = x.to(dev, non_blocking=True), y.to(dev, non_blocking=True)
             batch_slots = todo[k * bs:(k + 1) * bs]    # the slots of this batch (augmentations are drawn per slot)

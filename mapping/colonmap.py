@@ -295,10 +295,9 @@ def map_colon(points: np.ndarray, method, segment_mm: float = SEGMENT_MM, positi
         No tube found, or a colon no longer than two segments (a single
         segment: use ``colonbench estimate``).
     """
-    from tqdm import tqdm
-
     from colonbench.estimate import as_estimate
     from colonbench.errors import ColonbenchError
+    from colonbench.progress import bar as progress_bar
     from colonbench.slab import stretch
 
     if segment_mm <= 0:
@@ -343,8 +342,8 @@ def map_colon(points: np.ndarray, method, segment_mm: float = SEGMENT_MM, positi
     # an in-context model is given the segment's stretch of centerline: in every track when it is the method's
     # model, in the tracks with context when it is its context model
     in_context = bool(getattr(method, "needs_slab", False)) or (context_mm > 0 and getattr(method, "takes_slab", False))
-    for seg, mask, ctx, (pa, ps, last, radius) in tqdm(segments, desc="segments", unit="seg",
-                                                        disable=not progress):
+    for seg, mask, ctx, (pa, ps, last, radius) in progress_bar(segments, desc="segments", unit="seg",
+                                                                enabled=progress):
         length = seg.end_mm - seg.start_mm
         if seg.points < MIN_POINTS and seg.unreconstructed_mm >= 0.5 * length:
             # the scope passed, nothing was reconstructed: all of it unobserved (a tube of the colon's radius)

@@ -107,9 +107,8 @@ def _shard_ok(path: Path, digest: str) -> bool:
 
 
 def _progress(total: int, initial: int, enabled: bool):
-    from tqdm.auto import tqdm
-    return tqdm(total=total, initial=initial, unit="shard", desc="generate", disable=None if enabled else True,
-                dynamic_ncols=True)
+    from colonbench.progress import bar
+    return bar(total=total, initial=initial, unit="shard", desc="generate", enabled=enabled)
 
 
 def generate(manifest, out_dir, workers: int = 1, scheduler=None, splits=None, progress: bool = True,

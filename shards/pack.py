@@ -120,7 +120,7 @@ def write_pack(data_dir, out_dir, splits=("train", "validation"), workers: int =
     workers : int
         Processes reading and checking shards (spawn pool; 1 = this process).
     progress : bool
-        tqdm progress bar.
+        A progress bar (:mod:`colonbench.progress`).
 
     Returns
     -------
@@ -191,13 +191,13 @@ def write_split(out: Path, split: str, size: int, n: int, grids, parts, progress
         Per part, its rows: grid name -> (k, S^3 / 8) uint8.
     progress : bool
     """
-    from tqdm.auto import tqdm
+    from colonbench.progress import bar as progress_bar
 
     row = size ** 3 // 8
     final = out / f"{split}.h5"
     tmp = out / f"{split}.h5.tmp-{os.getpid()}"
     at = 0
-    bar = tqdm(total=n, desc=f"pack {split}", unit="sample", disable=None if progress else True)
+    bar = progress_bar(total=n, desc=f"pack {split}", unit="sample", enabled=progress)
     try:
         with h5py.File(tmp, "w", track_order=True) as h5:
             h5.attrs["grid_size"] = size

@@ -145,9 +145,8 @@ def write_video(colon, out, seed: int = 0, start_mm: float | None = None, end_mm
     dict
         The content of ``video.json``.
     """
-    from tqdm import tqdm
-
     from colonbench.datagen.camera import SurfaceScene
+    from colonbench.progress import bar as progress_bar
     from colonbench.video.mucosa import ColourRenderer, mucosa_colours
     from colonbench.video.withdrawal import FrameCaster, Intrinsics, pose_to_tum, withdrawal
 
@@ -176,7 +175,7 @@ def write_video(colon, out, seed: int = 0, start_mm: float | None = None, end_mm
     gif_n = min(n, int(round(gif_seconds * fps)))
     offsets, seen_all, gif = [0], [], []
     timing = {"depth": 0.0, "visibility": 0.0, "rgb": 0.0, "write": 0.0}
-    bar = tqdm(total=n, unit="frame", desc="video", disable=None if progress else True, dynamic_ncols=True)
+    bar = progress_bar(total=n, unit="frame", desc="video", enabled=progress)
     renderer = ColourRenderer(intr, far_mm=far_mm)
     try:
         for c0 in range(0, n, CHUNK_FRAMES):
