@@ -5,7 +5,7 @@ A locally built suite lives in one folder under the suite data root (``$COLONBEN
 ``$XDG_CACHE_HOME/colonbench/suites``, else ``~/.cache/colonbench/suites``, or ``--data``), named by its id, and
 holds beside its shards and lock:
 
-``suite.json``
+``built-suite.json``
     its registry entry (:func:`entry`): id, name, importer and its version, the build's options, what it
     tests, its sample count, content hash and signature digest, and its source: the digest of every file of
     the download it read, per sequence what was checked and found;
@@ -31,7 +31,7 @@ from colonbench.benchmark.suites import SEGMENT_METRICS, Suite
 from colonbench.errors import InputError
 
 #: A locally built suite's registry entry and its signature, in its folder.
-FILE = "suite.json"
+FILE = "built-suite.json"
 SIGNATURE_FILE = "signature.json.gz"
 FORMAT = "colonbench-local-suite"
 FORMAT_VERSION = 1
@@ -59,7 +59,7 @@ class LocalSuite(Suite):
     def record(self, check) -> dict:
         """:meth:`Suite.record`, and what it was built from: ``local``, ``importer``, ``options`` and ``source``
         (per sequence of the download the count and digest of its files; every file's digest is in the suite's
-        ``suite.json``)."""
+        ``built-suite.json``)."""
         entry = read_entry(Path(self.folder))
         source = entry.get("source", {})
         return {**super().record(check), "local": True, "importer": entry.get("importer"),
@@ -70,7 +70,7 @@ class LocalSuite(Suite):
 
 
 def read_entry(folder: Path) -> dict:
-    """A local suite folder's ``suite.json`` ({} when there is none).
+    """A local suite folder's ``built-suite.json`` ({} when there is none).
 
     Raises
     ------
@@ -90,7 +90,7 @@ def read_entry(folder: Path) -> dict:
 
 
 def load(folder) -> LocalSuite | None:
-    """The local suite whose folder this is, or None (no ``suite.json``)."""
+    """The local suite whose folder this is, or None (no ``built-suite.json``)."""
     entry = read_entry(Path(folder))
     if not entry:
         return None

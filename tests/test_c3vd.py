@@ -208,7 +208,7 @@ def test_a_sequence_without_depth_known_coverage(tmp_path):
     assert {g["hole_model"] for _, g in rows} == {"camera"}
     for _, g in rows:
         assert g["coverage"] == pytest.approx(0.5, abs=0.004)
-    entry = json.loads((tmp_path / "suites" / suite.id / "suite.json").read_text())
+    entry = json.loads((tmp_path / "suites" / suite.id / "built-suite.json").read_text())
     assert entry["source"]["sequences"]["straight"]["convention"] is None
 
 
