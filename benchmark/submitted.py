@@ -387,10 +387,10 @@ def load(suite, track: str = tracks.DEFAULT, root=None) -> tuple[list, list[str]
         try:
             checked = check(d, name)
         except InputError as exc:
-            notes.append(f"submitted {name} left out: {exc}")
+            notes.append(f"submitted {name}: {exc}")
             continue
         if checked.suite.id != suite.id or checked.track != track:
-            notes.append(f"submitted {name} left out: {d} holds a run of {folder_name(checked.suite.id, checked.track)}")
+            notes.append(f"submitted {name}: {d} holds a run of {folder_name(checked.suite.id, checked.track)}")
             continue
         run = read_run(d)
         run = {**run, "methods": {name: run["methods"][name]}}
@@ -423,9 +423,9 @@ def leaderboard_items(suite, track: str = tracks.DEFAULT, mine=(), shipped: bool
         for item in found:
             name = next(iter(item[0]["methods"]))
             if name in mine:
-                notes.append(f"submitted {name} left out: a method of the runs given has its name")
+                notes.append(f"submitted {name}: a method of the runs given has its name")
             elif name in taken:
-                notes.append(f"submitted {name} left out: a shipped method has its name")
+                notes.append(f"submitted {name}: a shipped method has its name")
             else:
                 items.append(item)
     return items, notes
