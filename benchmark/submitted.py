@@ -161,8 +161,12 @@ def _published_suite(rec: dict, problems: list):
 
 
 def _protocol(run: dict, suite, problems: list) -> None:
-    data = run.get("data") or {}
-    noise = sorted(float(x) for x in run.get("noise_mm") or ())
+    """The run's data and noise protocol are the suite's."""
+    data = _dict(run.get("data"))
+    try:
+        noise = sorted(float(x) for x in run.get("noise_mm") or ())
+    except (TypeError, ValueError):
+        noise = run.get("noise_mm")
     if (data.get("split"), data.get("samples")) != (suite.split, suite.samples):
         problems.append(f"it evaluated {data.get('samples')} samples of split {data.get('split')!r}, {suite.id} "
                         f"scores {suite.samples} of split {suite.split!r}")
@@ -184,11 +188,11 @@ def _track(run: dict, run_dir: Path, names: list, problems: list) -> str:
         except (OSError, json.JSONDecodeError):
             problems.append(f"results/{name}.json, {name}'s summary, is missing or unreadable")
             continue
-        other = tracks.of_run(summary)
+        other = tracks.of_run(_dict(summary))
         if other != track:
             problems.append(f"it mixes tracks: results/{name}.json is of the {tracks.label(other)}, run.json of the "
                             f"{tracks.label(track)}; a submitted run holds one track")
-        given = "takes_length" in run["methods"][name]
+        given = "takes_length" in _dict(run["methods"][name])
         if given != (track != tracks.DEFAULT):
             problems.append(f"it mixes tracks: method {name}'s record {'has' if given else 'lacks'} takes_length, "
                             f"which a run of the known-length track records and no other")
@@ -202,7 +206,7 @@ def _records(run: dict, names: list, problems: list) -> None:
     if not run.get("complete"):
         problems.append("it is not finished (run.json has no complete: true): run the same command into it again")
     for name in names:
-        rec = run["methods"][name]
+        rec = _dict(run["methods"][name])
         if not PLAIN_NAME.match(name):
             problems.append(f"the method's name {name!r} is not a plain folder name (letters, digits, . _ + -; "
                             "NAME= before the method names its row)")
@@ -220,22 +224,27 @@ def _records(run: dict, names: list, problems: list) -> None:
             problems.append(f"the machine {name} ran on is not recorded (run.json's environment)")
 
 
+def _dict(x) -> dict:
+    """``x`` where it is a JSON object, else an empty one (a hand-edited record)."""
+    return x if isinstance(x, dict) else {}
+
+
 def _first(ids) -> str:
-    ids = sorted(ids)
+    """How many ids, and the first in order."""
+    ids = sorted(map(str, ids))
     return f"{len(ids)} (first: {ids[0]})" if ids else "0"
 
 
 def _rows(run_dir: Path, name: str, expected: dict, tie: float, problems: list) -> dict:
     """Check ``results/<name>.csv`` holds the results columns and one answered or failed row per expected segment,
-    with the suite's truth; its counts."""
+    with the suite's truth; its counts (``rows`` present of the expected, ``failed``)."""
     from colonbench.benchmark.evaluate import result_columns
 
     path = run_dir / "results" / f"{name}.csv"
     where = f"results/{name}.csv"
     try:
         head = list(pd.read_csv(path, nrows=0).columns)
-        rows = with_sample_ids(read_rows(path))
-    except (OSError, ValueError, KeyError) as exc:
+    except (OSError, ValueError) as exc:
         problems.append(f"{where} is missing or unreadable ({type(exc).__name__}: {exc})")
         return {}
     want = result_columns()
@@ -246,6 +255,15 @@ def _rows(run_dir: Path, name: str, expected: dict, tie: float, problems: list) 
                                                 f"extra {', '.join(extra)}" if extra else "",
                                                 "in another order" if not missing and not extra else "") if x))
         return {}
+    try:
+        return _segments(read_rows(path), name, where, expected, tie, problems)
+    except (OSError, ValueError, TypeError) as exc:
+        problems.append(f"{where} holds a value that is not what its column holds ({type(exc).__name__}: {exc})")
+        return {}
+
+
+def _segments(rows: pd.DataFrame, name: str, where: str, expected: dict, tie: float, problems: list) -> dict:
+    """:func:`_rows` of rows with the results columns."""
     if set(rows["method"]) != {name}:
         problems.append(f"{where} holds rows of {', '.join(sorted(map(str, set(rows['method']) - {name})))}")
     ids = [sample_id(s, i, n) for s, i, n in zip(rows["shard"], rows["index"], rows["noise_mm"])]
@@ -267,8 +285,9 @@ def _rows(run_dir: Path, name: str, expected: dict, tie: float, problems: list) 
     stray = set(ids) - set(expected)
     if stray:
         problems.append(f"{where}: {_first(stray)} rows are of no segment of the suite")
-    if ((cov[answered] < 0) | (cov[answered] > 1)).any():
-        problems.append(f"{where}: {int(((cov[answered] < 0) | (cov[answered] > 1)).sum())} coverages outside [0, 1]")
+    outside = (cov[answered] < 0) | (cov[answered] > 1)
+    if outside.any():
+        problems.append(f"{where}: {int(outside.sum())} coverages outside [0, 1]")
     true = rows["true_coverage"].to_numpy(float)
     published = np.array([expected.get(x, math.nan) for x in ids])
     off = np.isfinite(published) & ~(np.abs(true - published) <= tie + FLOAT)
@@ -281,7 +300,7 @@ def _rows(run_dir: Path, name: str, expected: dict, tie: float, problems: list) 
     if wrong.any():
         problems.append(f"{where}: {int(wrong.sum())} rows' coverage_error is not coverage - true_coverage (first: "
                         f"{ids[int(np.flatnonzero(wrong)[0])]})")
-    return {"version": None, "rows": int(len(present & set(expected))), "failed": int(failed.sum())}
+    return {"rows": int(len(present & set(expected))), "failed": int(failed.sum())}
 
 
 def check(run_dir, method: str | None = None) -> Checked:
@@ -313,6 +332,8 @@ def check(run_dir, method: str | None = None) -> Checked:
         if inner:
             raise InputError(f"{run_dir} is a colonbench benchmark folder: check one of its runs ({', '.join(inner)})")
     run = read_run(run_dir)
+    if not isinstance(run.get("methods"), dict) or not run["methods"]:
+        raise NotSubmittable(f"{run_dir} cannot be submitted: its run.json names no methods")
     if run.get("task") == "colon":
         raise NotSubmittable(f"{run_dir} cannot be submitted: it is a whole-colon run, whose results cannot be "
                              "submitted yet (segment suites only)")
@@ -320,7 +341,7 @@ def check(run_dir, method: str | None = None) -> Checked:
         raise InputError(f"{run_dir} holds no method {method!r}; it holds {', '.join(run['methods']) or 'none'}")
     names = [method] if method is not None else list(run["methods"])
     problems: list[str] = []
-    suite = _published_suite(run.get("suite") or {}, problems)
+    suite = _published_suite(_dict(run.get("suite")), problems)
     track = _track(run, run_dir, names, problems)
     counts, expected = {}, {}
     if suite is not None:
@@ -330,8 +351,8 @@ def check(run_dir, method: str | None = None) -> Checked:
         from colonbench.benchmark.signature import TOLERANCES
 
         for name in names:
-            counts[name] = {**_rows(run_dir, name, published, TOLERANCES.coverage_tie, problems),
-                            "version": run["methods"][name].get("version")}
+            counts[name] = {"version": _dict(run["methods"][name]).get("version"),
+                            **_rows(run_dir, name, published, TOLERANCES.coverage_tie, problems)}
         expected = published
     if problems:
         raise NotSubmittable(f"{run_dir} cannot be submitted: " + "; ".join(problems))

@@ -322,10 +322,10 @@ def index_page(pages: list[dict]) -> str:
             (esc(s.tests if s else "not a named suite"), None),
             (esc(tracks.cite(s, p["track"])) if s else "", None),
             (inline(suite_state(lb["suite"])) if lb.get("suite") else "", None),
-            (esc(", ".join(mine) or "none (shipped results only)"), None)]))
+            (esc(", ".join(mine) or "none (shipped or submitted results only)"), None)]))
     body = ["<h1>colonbench leaderboard</h1>", "<p>Coverage estimation for colonoscopy: each page is one suite (or "
-            "dataset) and track, the built-in methods' shipped results (†) and the submitted results (‡) beside the "
-            "runs given; * marks reference rows. Click a column header to sort.</p>",
+            "dataset) and track, the built-in methods' shipped results (†) and the submitted results (‡) beside "
+            "the runs given; * marks reference rows. Click a column header to sort.</p>",
             table("pages", [("suite", False), ("track", False), ("what it tests", False), ("cite as", False),
                             ("data", False), ("runs given", False)], rows)]
     recs = {m: r for p in pages for m, r in p["lb"]["methods"].items()}

@@ -64,6 +64,12 @@ def _failed_row_blank(rows):
     return rows
 
 
+def _word(rows):
+    rows["coverage"] = rows["coverage"].astype(object)
+    rows.loc[4, "coverage"] = "most"
+    return rows
+
+
 def _truth_moved(rows):
     rows.loc[5, "true_coverage"] += 0.1
     return rows
@@ -99,6 +105,11 @@ BROKEN = [
     ("another truth", lambda d: _rows(d / "results" / "halfway.csv", _truth_moved),
      "1 rows' true_coverage is not the suite's"),
     ("an unfinished run", lambda d: _json(d / "run.json", lambda r: _del(r, "complete")), "it is not finished"),
+    ("a word for a coverage", lambda d: _rows(d / "results" / "halfway.csv", _word),
+     "results/halfway.csv holds a value that is not what its column holds"),
+    ("no methods", lambda d: _json(d / "run.json", lambda r: _set(r, ("methods",), [])), "its run.json names no methods"),
+    ("a suite record that is not one", lambda d: _json(d / "run.json", lambda r: _set(r, ("suite",), "demo-v1")),
+     "it is not a run of a named suite"),
 ]
 
 
