@@ -343,10 +343,10 @@ def check(run_dir, method: str | None = None) -> Checked:
     problems: list[str] = []
     suite = _published_suite(_dict(run.get("suite")), problems)
     track = _track(run, run_dir, names, problems)
+    _records(run, names, problems)
     counts, expected = {}, {}
     if suite is not None:
         _protocol(run, suite, problems)
-        _records(run, names, problems)
         published = expected_rows(suite.id, suite.signature, tuple(suite.noise_mm))
         from colonbench.benchmark.signature import TOLERANCES
 

@@ -124,6 +124,17 @@ def test_a_finished_run_checks_and_a_failed_segment_counts_as_present(run, capsy
                    "segment evaluations (24 samples x 2 noise levels), 1 failed; versions and environment recorded"]
 
 
+def test_a_run_within_tolerance_on_another_machine_checks(run, tmp_path):
+    """Data that verified within tolerance (another CPU) has its own content hash: it may be submitted."""
+    copy = tmp_path / "copy"
+    shutil.copytree(run, copy)
+    _json(copy / "run.json", lambda r: r["suite"].update(check="within tolerance", bit_identical=False, tie_samples=1,
+                                                         sha256="cb1-" + "0" * 64))
+    assert submitted.check(copy).lines()[0].endswith("demo-v1 (cbs1-0cd018e664f0), data within tolerance: 48 of 48 "
+                                                     "segment evaluations (24 samples x 2 noise levels), 1 failed; "
+                                                     "versions and environment recorded")
+
+
 @pytest.mark.parametrize("what, breaks, reason", BROKEN, ids=[b[0] for b in BROKEN])
 def test_a_broken_copy_is_refused_with_its_reason(run, tmp_path, capsys, what, breaks, reason):
     copy = tmp_path / "copy"
