@@ -118,7 +118,6 @@ def publish(run_dir, suite, methods=None, track: str | None = None) -> Path:
                          f"{rec or 'none'})")
     if not run.get("complete"):
         raise InputError(f"{run_dir}: not finished")
-    colon = run.get("task") == "colon"
     if methods is not None:
         missing = sorted(set(methods) - set(run["methods"]))
         if missing:
@@ -128,7 +127,23 @@ def publish(run_dir, suite, methods=None, track: str | None = None) -> Path:
         fresh = {m: {**run["methods"][m], "versions": run.get("versions"), "environment": run.get("environment")}
                  for m in methods}
         run = {**old, "methods": {**old["methods"], **fresh}, "suite": run["suite"]}
-    out = folder(suite, track)
+    return write_results(run_dir, run, folder(suite, track), methods)
+
+
+def write_results(run_dir, run: dict, out, methods=None) -> Path:
+    """Write a run's record and result files into ``out`` as shipped results are kept (``run.json`` without its
+    ``data_path``; ``results/`` with each float to :data:`DIGITS` significant digits), written aside and put in place
+    whole. Every method of ``run["methods"]`` comes from ``run_dir``, or where ``methods`` is given only those, the
+    others from what ``out`` held (:func:`publish` of some methods; a submitted result:
+    :mod:`colonbench.benchmark.submitted`).
+
+    Returns
+    -------
+    Path
+        ``out``.
+    """
+    run_dir, out = Path(run_dir), Path(out)
+    colon = run.get("task") == "colon"
     staging = out.with_name(f".{out.name}.new")
     shutil.rmtree(staging, ignore_errors=True)
     (staging / "results").mkdir(parents=True)

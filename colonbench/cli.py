@@ -19,7 +19,7 @@ from colonbench.errors import ColonbenchError
 
 
 #: The verb groups, in the order ``colonbench --help`` lists them (data flow: data, model, maps, video, benchmark).
-GROUPS = ("data", "model", "maps", "video", "evaluation", "suites", "benchmark", "demo")
+GROUPS = ("data", "model", "maps", "video", "evaluation", "suites", "benchmark", "results", "demo")
 
 
 class VerbParser(argparse.ArgumentParser):

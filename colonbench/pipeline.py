@@ -11,8 +11,9 @@ data (``shards``), evaluates (``benchmark``) and writes reports (``reports``).
 2. the methods are evaluated on it into ``RUN/runs/<suite id>/`` (a run
    folder of ``colonbench evaluate``: resumable, in parallel or on Dask);
 3. the shipped reference results of the built-in methods
-   (:mod:`colonbench.benchmark.shipped`) join them, except for methods the
-   user evaluated themselves;
+   (:mod:`colonbench.benchmark.shipped`) and the submitted results of the
+   repository's ``results/`` (:mod:`colonbench.benchmark.submitted`) join
+   them, except for methods the user evaluated themselves;
 4. per suite ``RUN/suites/<suite id>/leaderboard.md`` (and ``.csv``, ``.json``,
    breakdowns, figures), and across suites ``RUN/leaderboard.md``, ``.csv``
    and ``.json`` (:mod:`colonbench.reports.benchmark_report`); unless a
@@ -77,7 +78,7 @@ def run_benchmark(methods=(), suites_=("demo-v1",), out="runs/benchmark", data=N
                   scheduler=None, model=None, device: str = "cpu", allow_unverified: bool = False,
                   shipped: bool = True, timeout: float | None = None, batch: int | None = None,
                   figures: bool = True, progress: bool = True, retry_failed: bool = False,
-                  track: str = tracks.DEFAULT) -> dict:
+                  track: str = tracks.DEFAULT, submitted: bool = True) -> dict:
     """Evaluate methods on named suites and write the cross-suite leaderboard, of one track.
 
     Parameters
@@ -101,6 +102,9 @@ def run_benchmark(methods=(), suites_=("demo-v1",), out="runs/benchmark", data=N
         shipped results then stay out).
     shipped : bool
         Merge the shipped reference results.
+    submitted : bool
+        Merge the submitted results of the same suites and track (the repository's ``results/``; none for an
+        installed colonbench), less those named as a method evaluated here.
     timeout, batch
         ``exec:`` methods: seconds per input, inputs per call.
     figures, progress : bool
@@ -139,8 +143,8 @@ def run_benchmark(methods=(), suites_=("demo-v1",), out="runs/benchmark", data=N
         for s in chosen:
             tracks.check(track, s)
     methods = method_list(methods)
-    if not methods and not shipped:
-        raise InputError("no methods to evaluate and --no-shipped: nothing to show")
+    if not methods and not shipped and not submitted:
+        raise InputError("no methods to evaluate, --no-shipped and --no-submitted: nothing to show")
     for spec in methods:  # a program or script that is not there: refused before any data is made or written
         if isinstance(spec, str):
             check_spec(spec)
@@ -172,7 +176,7 @@ def run_benchmark(methods=(), suites_=("demo-v1",), out="runs/benchmark", data=N
         raise RunFailed(f"{', '.join(dead)} failed on every sample (first, {first['suite']} at noise "
                         f"{first['noise_mm']:g} mm: {first['first_error']}); no leaderboard was written: every "
                         f"sample's row and its error are in {out / 'runs'}/<suite>/results", failed)
-    result = write_report(out, chosen, runs, shipped=shipped, figures=figures, track=track)
+    result = write_report(out, chosen, runs, shipped=shipped, figures=figures, track=track, submitted=submitted)
     result["runs"], result["seconds"], result["failures"] = runs, timing, failed
     return result
 

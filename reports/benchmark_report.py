@@ -13,9 +13,14 @@ with the shipped results merged in), then one summary across suites:
   averaged over; methods ranked by their mean MAE over the suites;
 * ``leaderboard.csv``: one row per suite, noise level and method (``mae``,
   ``mae_lo``, ``mae_hi``, ``segments``, ``failed``, ``version``,
-  ``reference``, ``source``: ``shipped`` or the run folder);
+  ``reference``, ``source``: ``shipped``, ``submitted`` or the run folder);
 * ``leaderboard.json``: the same rows with each suite's id, content hash and
-  whether the data was verified, and the track.
+  whether the data was verified, the track, and the submitted results left
+  out (``notes``).
+
+Beside the shipped results, the submitted ones of the same suite and track join
+(:mod:`colonbench.benchmark.submitted`, marked ‡), less any whose name a method
+of the user's runs (or a shipped one) has: the tables say which were left out.
 
 One report is of one track (:mod:`colonbench.benchmark.tracks`): on the
 known-length track the shipped results merged are that track's, and the
@@ -31,6 +36,7 @@ from pathlib import Path
 import pandas as pd
 
 from colonbench.benchmark import tracks
+from colonbench.benchmark.submitted import is_submitted
 from colonbench.errors import InputError
 
 SUMMARY_COLUMNS = ["suite", "noise_mm", "method", "version", "reference", "mae", "mae_lo", "mae_hi", "segments",
@@ -56,13 +62,15 @@ def _rows(suite, folder: Path) -> tuple[list[dict], dict]:
                          "failed": r["failed"]})
     for row in rows:
         rec = methods.get(row["method"], {})
+        source = "shipped" if str(rec.get("run", "")).startswith("shipped") else (
+            "submitted" if is_submitted(rec) else str(rec.get("run", "")))
         row.update(suite=suite.id, version=rec.get("version", ""), reference=bool(rec.get("reference", False)),
-                   source="shipped" if str(rec.get("run", "")).startswith("shipped") else str(rec.get("run", "")))
+                   source=source)
     return rows, lb.get("suite") or {}
 
 
 def write_report(out, chosen, runs: dict, shipped: bool = True, figures: bool = True,
-                 track: str = tracks.DEFAULT) -> dict:
+                 track: str = tracks.DEFAULT, submitted: bool = True) -> dict:
     """Per-suite leaderboards and the cross-suite summary under ``out``, of one track.
 
     Parameters
@@ -73,7 +81,9 @@ def write_report(out, chosen, runs: dict, shipped: bool = True, figures: bool = 
         ``{suite id: run folder}`` of the methods evaluated (a suite may have none: shipped results only).
     shipped, figures : bool
     track : str
-        The runs' track; the shipped results of that track are merged.
+        The runs' track; the shipped (and submitted) results of that track are merged.
+    submitted : bool
+        Merge the submitted results (:mod:`colonbench.benchmark.submitted`) where the shipped ones may be.
 
     Returns
     -------
@@ -81,22 +91,25 @@ def write_report(out, chosen, runs: dict, shipped: bool = True, figures: bool = 
         ``summary`` (DataFrame, :data:`SUMMARY_COLUMNS`), ``markdown``, ``paths``.
     """
     from colonbench.benchmark.runfolder import read_run
-    from colonbench.benchmark.shipped import shipped_items
+    from colonbench.benchmark.submitted import leaderboard_items
     from colonbench.reports.leaderboard import write_leaderboard
 
     out = Path(out)
-    rows, records, paths, skipped, no_length = [], {}, [], [], set()
+    rows, records, paths, skipped, no_length, notes = [], {}, [], [], set(), {}
     for suite in chosen:
         run_dir = runs.get(suite.id)
         mine = read_run(run_dir) if run_dir is not None else None
-        extra = []
-        if shipped and (mine is None or (mine.get("suite") or {}).get("verified")):
-            extra = shipped_items(suite, exclude=mine["methods"] if mine else (), track=track)
+        extra, left_out = [], []
+        if (shipped or submitted) and (mine is None or (mine.get("suite") or {}).get("verified")):
+            extra, left_out = leaderboard_items(suite, track, mine=mine["methods"] if mine else (), shipped=shipped,
+                                                submitted=submitted)
         if mine is None and not extra:
             skipped.append(suite.id)
             continue
         folder = out / "suites" / suite.id
-        res = write_leaderboard([run_dir] if run_dir is not None else [], folder, figures=figures, extra=extra)
+        notes[suite.id] = left_out
+        res = write_leaderboard([run_dir] if run_dir is not None else [], folder, figures=figures, extra=extra,
+                                notes=left_out)
         paths += res["paths"]
         suite_rows, records[suite.id] = _rows(suite, folder)
         lb = json.loads((folder / "leaderboard.json").read_text())
@@ -106,14 +119,15 @@ def write_report(out, chosen, runs: dict, shipped: bool = True, figures: bool = 
         raise InputError(f"nothing to show for {', '.join(s.id for s in chosen)}: no methods were evaluated and no "
                          "shipped results match these suites")
     summary = pd.DataFrame(rows, columns=SUMMARY_COLUMNS)
-    text = markdown(summary, chosen, records, skipped, track, sorted(no_length))
+    text = markdown(summary, chosen, records, skipped, track, sorted(no_length), notes)
     out.mkdir(parents=True, exist_ok=True)
     (out / "leaderboard.md").write_text(text)
     summary.to_csv(out / "leaderboard.csv", index=False)
     suites_ = {s.id: {**records.get(s.id, {}), "tests": s.tests, "samples": s.samples} for s in chosen
                if s.id in records}
     (out / "leaderboard.json").write_text(json.dumps(
-        {"track": track, "suites": suites_, "rows": json.loads(summary.to_json(orient="records"))}, indent=1))
+        {"track": track, "suites": suites_, "rows": json.loads(summary.to_json(orient="records")),
+         "notes": {k: v for k, v in notes.items() if v}}, indent=1))
     paths += [out / "leaderboard.md", out / "leaderboard.csv", out / "leaderboard.json"]
     return {"summary": summary, "markdown": text, "paths": paths}
 
@@ -131,8 +145,9 @@ def _cell(r) -> str:
 
 
 def markdown(summary: pd.DataFrame, chosen, records: dict, skipped: list[str], track: str = tracks.DEFAULT,
-             no_length=()) -> str:
-    """The cross-suite leaderboard as Markdown (``no_length``: the methods that took no length, on that track)."""
+             no_length=(), notes=None) -> str:
+    """The cross-suite leaderboard as Markdown (``no_length``: the methods that took no length, on that track;
+    ``notes``: per suite id, the submitted results left out and why)."""
     from colonbench.reports.leaderboard import suite_state
 
     ids = [s.id for s in chosen if s.id in records]
@@ -160,7 +175,8 @@ def markdown(summary: pd.DataFrame, chosen, records: dict, skipped: list[str], t
         for _, o in order.iterrows():
             m = o["method"]
             first = next(keyed[(m, s)] for s in ids if (m, s) in keyed)
-            mark = (" *" if first["reference"] else "") + (" †" if first["source"] == "shipped" else "")
+            mark = (" *" if first["reference"] else "") + (" †" if first["source"] == "shipped" else "") + (
+                " ‡" if first["source"] == "submitted" else "")
             lines.append(f"| {m}{mark} | {first['version']} | "
                          + " | ".join(_cell(keyed.get((m, s))) for s in ids) + " |")
         lines.append("")
@@ -172,6 +188,12 @@ def markdown(summary: pd.DataFrame, chosen, records: dict, skipped: list[str], t
             state = suite_state(records[s.id])
             cite = s.id if track == tracks.DEFAULT else tracks.cite(s, track)
             lines.append(f"- `{cite}`: {s.tests}. {state[0].upper()}{state[1:]}.")
+    if (summary["source"] == "submitted").any():
+        lines += ["", "Rows marked ‡ are submitted results: others' runs, checked by `colonbench results check` and "
+                  "kept in the repository's `results/` (docs/benchmark.md, Submitting results)."]
+    left = [f"- `{sid}`: {n}." for sid, ns in (notes or {}).items() for n in ns]
+    if left:
+        lines += ["", "Left out of the tables:", ""] + left
     if skipped:
         lines += ["", f"No results for {', '.join(skipped)}: no method was evaluated there and no shipped results "
                   "match."]

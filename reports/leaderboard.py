@@ -28,6 +28,7 @@ import numpy as np
 import pandas as pd
 
 from colonbench.benchmark import tracks
+from colonbench.benchmark.submitted import is_submitted
 from colonbench.benchmark.evaluate import load_results
 from colonbench.benchmark.summary import scored_errors, summarize
 from colonbench.errors import InputError
@@ -188,8 +189,14 @@ def suite_state(suite: dict) -> str:
     return f"verified against its signature `{suite['signature']}`, {how}{built}"
 
 
-def markdown(meta: dict, tab: pd.DataFrame) -> str:
-    """The leaderboard as Markdown."""
+def _name(r, meta: dict) -> str:
+    """A row's method with its marks: * a reference, ‡ a submitted result."""
+    return r["method"] + (" *" if r["reference"] else "") + (
+        " ‡" if is_submitted(meta["methods"].get(r["method"], {})) else "")
+
+
+def markdown(meta: dict, tab: pd.DataFrame, notes=()) -> str:
+    """The leaderboard as Markdown (``notes``: submitted results left out, and why)."""
     lines = ["# colonbench leaderboard", "", data_line(meta, "segments") + " Input noise: Gaussian, sigma in mm, "
              f"seed {meta['noise_seed']}. Coverage errors in percentage points (estimated - true); MAE with its 95 % "
              "bootstrap interval over segments; Δ = the paired mean difference of the absolute error against the "
@@ -200,6 +207,10 @@ def markdown(meta: dict, tab: pd.DataFrame) -> str:
              "score. *Undefined*: answered segments where a metric has no value.", "",
              "Rows marked * are references that bound the problem, not methods: they are given ground truth (the GT "
              "target heatmap or centerline) or guess the training data's mean coverage.", ""]
+    if any(is_submitted(rec) for rec in meta["methods"].values()):
+        lines += ["Rows marked ‡ are submitted results: others' runs of the suite, checked by `colonbench results "
+                  "check` and kept in the repository's `results/` (docs/benchmark.md, Submitting results).", ""]
+    lines += [f"Left out of this table: {n}." for n in notes] + ([""] if notes else [])
     ths = meta["thresholds_mm"]
     on_length = "takes_length" in tab.columns
     if on_length:
@@ -211,7 +222,7 @@ def markdown(meta: dict, tab: pd.DataFrame) -> str:
                   "| Δ vs best baseline [95 % CI] | median | bias | q95 | undefined | failed | s/segment |",
                   "|---|---|" + ("---|" if on_length else "") + "---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
         for _, r in g.iterrows():
-            name = r["method"] + (" *" if r["reference"] else "")
+            name = _name(r, meta)
             vs = ("(best baseline)" if r["method"] == r["baseline"] else
                   f"{_f(r['vs_baseline'], 2, '+')} {interval(r['vs_baseline_lo'], r['vs_baseline_hi'], '+')}"
                   if r["baseline"] and not math.isnan(r["vs_baseline"]) else "n/a")
@@ -238,7 +249,7 @@ def markdown(meta: dict, tab: pd.DataFrame) -> str:
             t2 = f"{ths[-1]:g}mm"
             undef = (f"{max(r[f'holes_precision_{t2}_undefined'], r[f'holes_recall_{t2}_undefined'])} / "
                      f"{max(r[f'centerline_precision_{t2}_undefined'], r[f'centerline_recall_{t2}_undefined'])}")
-            lines.append(f"| {r['method'] + (' *' if r['reference'] else '')} | " + " | ".join(cells) + f" | {undef} |")
+            lines.append(f"| {_name(r, meta)} | " + " | ".join(cells) + f" | {undef} |")
         lines.append("")
     lines += ["Breakdowns by hole model, segment length, true coverage, unseen end and noise: breakdowns.md. Runs: "
               + ", ".join(f"`{r['path']}`" for r in meta["runs"]) + ".", ""]
@@ -303,12 +314,13 @@ def breakdown_markdown(meta: dict, bd: pd.DataFrame) -> str:
     return "\n".join(lines)
 
 
-def write_leaderboard(run_dirs, out, figures: bool = True, extra=()) -> dict:
+def write_leaderboard(run_dirs, out, figures: bool = True, extra=(), notes=()) -> dict:
     """Write ``leaderboard.md``, ``.csv`` and ``.json`` (and the figures) for runs on the same data.
 
     Whole-colon runs (``evaluate --task colon``) get their own leaderboard
     (:func:`colonbench.reports.colon_leaderboard.write_colon_leaderboard`). ``extra``: runs already loaded,
-    as :func:`merge_runs` takes them (whole-colon ones as ``(run, segments, colons, label)``).
+    as :func:`merge_runs` takes them (whole-colon ones as ``(run, segments, colons, label)``); ``notes``: what
+    the tables say was left out of them (:func:`colonbench.benchmark.submitted.leaderboard_items`).
 
     Returns
     -------
@@ -330,7 +342,7 @@ def write_leaderboard(run_dirs, out, figures: bool = True, extra=()) -> dict:
     bd = breakdowns(results)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    text = markdown(meta, tab)
+    text = markdown(meta, tab, notes)
     paths = [out / "leaderboard.md", out / "leaderboard.csv", out / "leaderboard.json", out / "breakdowns.md",
              out / "breakdowns.csv"]
     paths[0].write_text(text)
@@ -340,7 +352,7 @@ def write_leaderboard(run_dirs, out, figures: bool = True, extra=()) -> dict:
     paths[2].write_text(json.dumps({"data": meta["data"], "suite": meta["suite"], "track": meta["track"],
                                     "noise_mm": meta["noise_mm"],
                                     "noise_seed": meta["noise_seed"], "thresholds_mm": meta["thresholds_mm"],
-                                    "methods": meta["methods"], "runs": meta["runs"],
+                                    "methods": meta["methods"], "runs": meta["runs"], "notes": list(notes),
                                     "rows": json.loads(tab.to_json(orient="records"))}, indent=1))
     if figures:
         from colonbench.reports import figures as fig

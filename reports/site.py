@@ -3,8 +3,10 @@
 :func:`write_site` takes run folders (``colonbench evaluate``, ``score``) and
 ``colonbench benchmark --out`` folders, groups their runs by suite (or data)
 and *track* (``track`` in run.json, ``points`` where absent), merges the
-shipped results of the built-in methods as ``colonbench benchmark`` does, and
-writes, with no server needed (``file://`` or a project page):
+shipped results of the built-in methods and the submitted results of the
+repository's ``results/`` (marked ‡; :mod:`colonbench.benchmark.submitted`) as
+``colonbench benchmark`` does, and writes, with no server needed (``file://``
+or a project page):
 
 * ``SITE/index.html``: the pages, what each suite tests and how to cite it, and
   the coverage MAE of every method on every page, per noise level;
@@ -32,6 +34,7 @@ import pandas as pd
 from colonbench._version import __version__
 from colonbench.benchmark import tracks
 from colonbench.benchmark.runfolder import RUN_FILE, read_run, write_json
+from colonbench.benchmark.submitted import is_submitted
 from colonbench.errors import InputError
 from colonbench.reports.leaderboard import data_line, suite_state
 from colonbench.reports.webpage import esc, fmt, inline, kv_table, page, slug, table, with_interval
@@ -102,11 +105,12 @@ def _suite(sid):
         return None
 
 
-def groups(paths, shipped: bool = True) -> dict:
-    """``{(page id, track): {"runs", "records", "extra", "suite"}}``: the runs of each suite (or data) and track,
-    and the shipped results of that suite and track merged into them as ``colonbench benchmark`` merges them (its
-    runs' data verified, the methods they hold left out of the shipped ones)."""
-    from colonbench.benchmark.shipped import shipped_items
+def groups(paths, shipped: bool = True, submitted: bool = True) -> dict:
+    """``{(page id, track): {"runs", "records", "extra", "notes", "suite"}}``: the runs of each suite (or data) and
+    track, and the shipped and submitted results of that suite and track merged into them as ``colonbench
+    benchmark`` merges them (its runs' data verified, the methods they hold left out of the others; ``notes``: the
+    submitted results left out)."""
+    from colonbench.benchmark.submitted import leaderboard_items
 
     run_dirs, ids = expand(paths)
     out = {}
@@ -116,18 +120,20 @@ def groups(paths, shipped: bool = True) -> dict:
         pid = rec.get("id") or "-".join(str(x) for x in (data.get("manifest_name", "data"), data.get("split", ""),
                                                           str(data.get("samples_sha256", ""))[:8]))
         g = out.setdefault((pid, str(run.get("track") or DEFAULT_TRACK)),
-                           {"runs": [], "records": [], "extra": [], "suite": _suite(pid) if rec else None})
+                           {"runs": [], "records": [], "extra": [], "notes": [],
+                            "suite": _suite(pid) if rec else None})
         g["runs"].append(d)
         g["records"].append((run, str(d)))
-    for sid, track in ids if shipped else ():
+    for sid, track in ids if shipped or submitted else ():
         s = _suite(sid)
         if s is not None:
-            out.setdefault((s.id, track), {"runs": [], "records": [], "extra": [], "suite": s})
+            out.setdefault((s.id, track), {"runs": [], "records": [], "extra": [], "notes": [], "suite": s})
     for (pid, track), g in out.items():
         verified = all((run.get("suite") or {}).get("verified") for run, _ in g["records"])
-        if shipped and g["suite"] is not None and track in tracks.TRACKS and verified:
-            g["extra"] = shipped_items(g["suite"], exclude={m for run, _ in g["records"] for m in run["methods"]},
-                                       track=track)
+        if (shipped or submitted) and g["suite"] is not None and track in tracks.TRACKS and verified:
+            g["extra"], g["notes"] = leaderboard_items(
+                g["suite"], track, mine={m for run, _ in g["records"] for m in run["methods"]}, shipped=shipped,
+                submitted=submitted)
             g["records"] += [(item[0], item[-1]) for item in g["extra"]]
     return {k: g for k, g in out.items() if g["runs"] or g["extra"]}
 
@@ -149,14 +155,19 @@ def _is_shipped(rec: dict) -> bool:
     return str(rec.get("run", "")).startswith("shipped")
 
 
+def _source(rec: dict) -> str:
+    """``shipped``, ``submitted`` or ``mine``: where a method's rows came from."""
+    return "shipped" if _is_shipped(rec) else "submitted" if is_submitted(rec) else "mine"
+
+
 def _method_cell(m: str, methods: dict, root: str) -> tuple[str, str]:
     rec = methods.get(m, {})
-    mark = (" *" if rec.get("reference") else "") + (" †" if _is_shipped(rec) else "")
+    mark = (" *" if rec.get("reference") else "") + {"shipped": " †", "submitted": " ‡"}.get(_source(rec), "")
     return f'<a href="{root}methods/{esc(slug(m))}.html">{esc(m)}</a>{mark}', m
 
 
 def _row(m: str, methods: dict) -> dict:
-    return {"data-method": m, "class": "shipped" if _is_shipped(methods.get(m, {})) else "mine"}
+    return {"data-method": m, "class": _source(methods.get(m, {}))}
 
 
 def main_table(tid: str, g: pd.DataFrame, methods: dict, root: str) -> str:
@@ -170,7 +181,7 @@ def main_table(tid: str, g: pd.DataFrame, methods: dict, root: str) -> str:
     for _, r in g.iterrows():
         rec = methods.get(r["method"], {})
         run = str(rec.get("run", ""))
-        src = "shipped" if _is_shipped(rec) else "/".join(Path(run).parts[-2:])
+        src = _source(rec) if _source(rec) != "mine" else "/".join(Path(run).parts[-2:])
         cells = [_method_cell(r["method"], methods, root), (f'<span title="{esc(run)}">{esc(src)}</span>', src),
                  (esc(rec.get("version", r.get("version", ""))), None)]
         for c in cols:
@@ -225,7 +236,10 @@ def suite_page(key, g: dict, folder: Path, lb: dict, tab: pd.DataFrame, bd, figu
               '<p class="note">Coverage errors in percentage points (estimated - true), MAE with its 95 % bootstrap '
               "interval over segments; Δ: the paired difference of the absolute error against the best baseline "
               "(negative: better). Rows marked * are references (given ground truth, or the constant guess); † marks "
-              "the shipped reference results. Click a column header to sort.</p>", "<p>Files: " + " ".join(
+              "the shipped reference results, ‡ submitted results (others' runs, checked by colonbench results check "
+              "and kept in the repository's results/). Click a column header to sort.</p>"]
+    html_ += [f'<p class="note">Left out of this page: {esc(n)}.</p>' for n in lb.get("notes") or ()]
+    html_ += ["<p>Files: " + " ".join(
                   f'<a href="{f}">{f}</a>' for f in ("leaderboard.md", "leaderboard.csv", "leaderboard.json",
                                                      "breakdowns.md", "breakdowns.csv") if (folder / f).is_file())
               + "</p>"]
@@ -273,7 +287,9 @@ def method_page(name: str, seen: list[dict]) -> str:
                "given ground truth": "yes" if rec.get("uses_truth") else "no",
                **({"takes the length": "yes" if rec["takes_length"] else "no (answers as on the points track)"}
                   if "takes_length" in rec else {}),
-               "source": "shipped reference results" if _is_shipped(rec) else rec.get("run", "")}
+               "source": {"shipped": "shipped reference results",
+                          "submitted": f"submitted results ({rec.get('run', '')[len('submitted '):]} in the "
+                                       "repository's results/)"}.get(_source(rec), rec.get("run", ""))}
         mae = [({}, [(esc(f"{r['noise_mm']:g}"), repr(r["noise_mm"])),
                      (esc(with_interval(r, "mae")[0]), fmt(r["mae"])[1])]) for _, r in a["mae"].iterrows()]
         body += [f'<h2><a href="../{esc(a["pid"])}/{esc(a["track"])}/index.html">{esc(a["pid"])} · track '
@@ -300,16 +316,16 @@ def index_page(pages: list[dict]) -> str:
     rows = []
     for p in pages:
         s, lb = p["suite"], p["lb"]
-        mine = sorted(m for m, r in lb["methods"].items() if not _is_shipped(r))
+        mine = sorted(m for m, r in lb["methods"].items() if _source(r) == "mine")
         rows.append(({"data-page": p["name"]}, [
             (f'<a href="{esc(p["name"])}/index.html">{esc(p["pid"])}</a>', p["pid"]), (esc(p["track"]), p["track"]),
             (esc(s.tests if s else "not a named suite"), None),
             (esc(tracks.cite(s, p["track"])) if s else "", None),
             (inline(suite_state(lb["suite"])) if lb.get("suite") else "", None),
-            (esc(", ".join(mine) or "none (shipped results only)"), None)]))
+            (esc(", ".join(mine) or "none (shipped or submitted results only)"), None)]))
     body = ["<h1>colonbench leaderboard</h1>", "<p>Coverage estimation for colonoscopy: each page is one suite (or "
-            "dataset) and track, the built-in methods' shipped results (†) beside the runs given; * marks reference "
-            "rows. Click a column header to sort.</p>",
+            "dataset) and track, the built-in methods' shipped results (†) and the submitted results (‡) beside "
+            "the runs given; * marks reference rows. Click a column header to sort.</p>",
             table("pages", [("suite", False), ("track", False), ("what it tests", False), ("cite as", False),
                             ("data", False), ("runs given", False)], rows)]
     recs = {m: r for p in pages for m, r in p["lb"]["methods"].items()}
@@ -339,7 +355,7 @@ def _write_pages(found: dict, out: Path, figures: bool) -> tuple[list, dict, lis
     for key in sorted(found):
         g, (pid, track) = found[key], (slug(key[0]), slug(key[1]))
         folder = out / pid / track
-        res = write_leaderboard(g["runs"], folder, figures=figures, extra=g["extra"])
+        res = write_leaderboard(g["runs"], folder, figures=figures, extra=g["extra"], notes=g["notes"])
         lb = json.loads((folder / "leaderboard.json").read_text())
         tab = pd.read_csv(folder / "leaderboard.csv")
         bd = pd.read_csv(folder / "breakdowns.csv") if (folder / "breakdowns.csv").is_file() else None
@@ -361,7 +377,7 @@ def _write_pages(found: dict, out: Path, figures: bool) -> tuple[list, dict, lis
     return pages, seen, written
 
 
-def write_site(paths, out, figures: bool = True, shipped: bool = True) -> dict:
+def write_site(paths, out, figures: bool = True, shipped: bool = True, submitted: bool = True) -> dict:
     """Write the leaderboard site of run folders and ``benchmark --out`` folders into ``out``.
 
     Parameters
@@ -374,6 +390,9 @@ def write_site(paths, out, figures: bool = True, shipped: bool = True) -> dict:
         Draw each page's figures.
     shipped : bool
         Merge the shipped results of the built-in methods where the runs' data verified.
+    submitted : bool
+        Merge the submitted results (the repository's ``results/``) likewise, less those named as a method of the
+        runs: the page says which were left out.
 
     Returns
     -------
@@ -392,7 +411,7 @@ def write_site(paths, out, figures: bool = True, shipped: bool = True) -> dict:
     if final.is_dir() and not (final / SITE_FILE).is_file() and any(not p.name.startswith(".")
                                                                     for p in final.iterdir()):
         raise InputError(f"{final} is not empty and holds no {SITE_FILE}: give a new or empty folder for the site")
-    found = groups(paths, shipped=shipped)
+    found = groups(paths, shipped=shipped, submitted=submitted)
     if not found:
         raise InputError(f"nothing to show for {', '.join(map(str, paths))}: no runs, and no shipped results merged")
     out = final.with_name(f".{final.name}.new")    # written aside, then put in place: never a half-written site

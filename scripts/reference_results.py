@@ -45,7 +45,7 @@ def main() -> None:
             t = time.perf_counter()
             methods = only or list(ALL_METHODS if suite.task == "colon" else DEFAULT_METHODS)
             result = run_benchmark(methods, [suite], out, data=args.data, workers=args.workers, shipped=False,
-                                   figures=False, progress=False, track=track)
+                                   submitted=False, figures=False, progress=False, track=track)
             where = shipped.publish(result["runs"][suite.id], suite, methods=only, track=track)
             sec = result["seconds"][suite.id]
             print(f"{suite.id} ({tracks.label(track)}): {len(methods)} methods, data {sec['data_seconds']:.0f} s, "

@@ -33,6 +33,16 @@ def real_dir():
 MANIFESTS = Path(__file__).resolve().parents[1] / "data_manifests"
 
 
+@pytest.fixture(scope="session", autouse=True)
+def no_submitted_results(tmp_path_factory):
+    """Every test sees an empty registry of submitted results (the repository's results/ grows by pull request,
+    and the tables a test checks must not change with it); a test of submitted results sets its own
+    ($COLONBENCH_RESULTS)."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("COLONBENCH_RESULTS", str(tmp_path_factory.mktemp("no-submitted-results")))
+        yield
+
+
 @pytest.fixture(scope="session")
 def smoke_dataset(tmp_path_factory):
     """``data_manifests/smoke.yaml`` generated in one process: (folder, lock)."""

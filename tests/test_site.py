@@ -141,3 +141,30 @@ def test_pages_are_per_suite_and_track(bench, tmp_path):
     assert "constant_method" in set(pd.read_csv(out / "demo-v1" / "points" / "leaderboard.csv")["method"])
     method = (out / "methods" / "constant_method.html").read_text()
     assert "demo-v1 · track length" in method and "demo-v1 · track points" in method
+
+
+def test_submitted_results_show_on_the_pages_marked(bench, tmp_path, monkeypatch):
+    """A submitted result is a row of its suite's page, marked ‡ and of source submitted, with a method page saying
+    so; where a run given has a method of its name, the run's row is shown and the page says the submitted one is
+    left out."""
+    from colonbench.benchmark import submitted
+
+    monkeypatch.setenv(submitted.ENV, str(tmp_path / "results"))
+    submitted.add(bench / "runs" / "demo-v1", "constant_method")
+    alone = tmp_path / "alone"          # the shipped results alone, and the submitted ones beside them
+    assert main(["benchmark", "--suites", "demo-v1", "--out", str(alone), "--no-figures", "--quiet"]) == 0
+    out = tmp_path / "site"
+    assert main(["leaderboard", str(alone), "--out", str(out), "--html", "--no-figures"]) == 0
+    page = (out / "demo-v1" / "points" / "index.html").read_text()
+    assert ('<tr data-method="constant_method" class="submitted"><td data-v="constant_method"><a href="../../methods/'
+            'constant_method.html">constant_method</a> ‡</td><td data-v="submitted">') in page
+    assert "‡ submitted results" in page and "Left out" not in page
+    assert "submitted results (demo-v1/constant_method in the repository" in \
+        (out / "methods" / "constant_method.html").read_text()
+    assert "none (shipped or submitted results only)" in (out / "index.html").read_text()   # not the runs given
+    assert main(["leaderboard", str(bench), "--out", str(out), "--html", "--no-figures"]) == 0
+    page = (out / "demo-v1" / "points" / "index.html").read_text()
+    assert '<tr data-method="constant_method" class="mine">' in page and 'class="submitted"' not in page
+    assert "Left out of this page: submitted constant_method: a method of the runs given has its name." in page
+    assert main(["leaderboard", str(alone), "--out", str(out), "--html", "--no-figures", "--no-submitted"]) == 0
+    assert "constant_method" not in (out / "demo-v1" / "points" / "index.html").read_text()

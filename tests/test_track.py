@@ -215,6 +215,9 @@ def test_benchmark_on_the_length_track_cites_it_and_merges_only_its_shipped_resu
         shipped.publish(out / "runs" / "demo-v1", suite, track="points")
     where = shipped.publish(out / "runs" / "demo-v1", suite)
     assert where == tmp_path / "shipped" / "demo-v1@length" and shipped.load(suite) is None
+    assert sorted(str(p.relative_to(where)) for p in where.rglob("*") if p.is_file()) == \
+        ["results/echo.csv", "results/echo.json", "run.json"]            # the run's working files are not kept
+    assert "data_path" not in json.loads((where / "run.json").read_text())
     run, rows, label = shipped.load(suite, track="length")
     assert tracks.of_run(run) == "length" and set(rows["method"]) == {"echo"} and label == "shipped demo-v1@length"
     site = tmp_path / "site"

@@ -82,6 +82,7 @@ def cmd_benchmark(args):
         result = run_benchmark(methods, args.suites, args.out, data=args.data, workers=args.workers,
                                scheduler=args.scheduler, model=args.model, device=args.device,
                                allow_unverified=args.allow_unverified, shipped=not args.no_shipped,
+                               submitted=not args.no_submitted,
                                timeout=args.timeout, batch=args.batch, figures=not args.no_figures,
                                progress=not args.quiet, retry_failed=args.retry_failed, track=args.track)
     except RunFailed as exc:  # no tables: the warnings say what failed, then the error
@@ -178,6 +179,8 @@ def add_parsers(sub) -> None:
     p.add_argument("--device", default="cpu", help="cpu, cuda, auto (default cpu)")
     add_external_args(p)
     p.add_argument("--no-shipped", action="store_true", help="leave the shipped reference results out")
+    p.add_argument("--no-submitted", action="store_true", help="leave the submitted results (the repository's "
+                                                               "results/) out")
     p.add_argument("--no-figures", action="store_true", help="tables only")
     add_track_arg(p, "each segment's nominal arc length is given to the methods that take it (exec: programs get "
                      "--length-mm L); --suites all leaves out colon-v1, which has no such track")

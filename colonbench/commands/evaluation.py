@@ -85,41 +85,46 @@ def cmd_leaderboard(args):
     if args.html:
         from colonbench.reports.site import write_site
 
-        site = write_site(args.runs, args.out, figures=not args.no_figures, shipped=not args.no_shipped)
+        site = write_site(args.runs, args.out, figures=not args.no_figures, shipped=not args.no_shipped,
+                          submitted=not args.no_submitted)
         print(f"wrote the leaderboard site {args.out}: {len(site['pages'])} page(s) ({', '.join(site['pages'])}) "
               f"and {len(site['methods'])} method page(s); open {site['index'].resolve().as_uri()}")
         return
-    if args.no_shipped:
-        raise ColonbenchError("--no-shipped is for --html (without it the tables hold the runs alone unless "
-                              "--shipped)")
-    extra = _shipped_for(args.runs) if args.shipped else []
-    result = write_leaderboard(args.runs, args.out, figures=not args.no_figures, extra=extra)
+    if args.no_shipped or args.no_submitted:
+        raise ColonbenchError("--no-shipped and --no-submitted are for --html (without it the tables hold the runs "
+                              "alone unless --shipped or --submitted)")
+    extra, notes = _published_for(args.runs, args.shipped, args.submitted) if args.shipped or args.submitted \
+        else ([], [])
+    result = write_leaderboard(args.runs, args.out, figures=not args.no_figures, extra=extra, notes=notes)
     print(result["markdown"])
     print(f"wrote {', '.join(p.name for p in result['paths'])} to {args.out}")
 
 
-def _shipped_for(run_dirs) -> list:
-    """The shipped results of the suite the runs evaluated, less the methods they hold."""
+def _published_for(run_dirs, shipped: bool, submitted: bool) -> tuple[list, list[str]]:
+    """The shipped and/or submitted results of the suite and track the runs evaluated, less the methods they hold,
+    and the notes on the submitted ones left out (colonbench.benchmark.submitted.leaderboard_items)."""
     from colonbench.benchmark import suites, tracks
     from colonbench.benchmark.runfolder import read_run
-    from colonbench.benchmark.shipped import shipped_items
+    from colonbench.benchmark.submitted import leaderboard_items
 
     runs = [read_run(r) for r in run_dirs]
     rec = runs[0].get("suite") if runs else None
     if not rec:
-        raise ColonbenchError(f"{run_dirs[0]} is not a run of a named suite: there are no shipped results for it")
+        raise ColonbenchError(f"{run_dirs[0]} is not a run of a named suite: there are no shipped or submitted "
+                              "results for it")
     if not rec.get("verified"):
         raise ColonbenchError(f"{run_dirs[0]}: its data is not the published {rec['id']} (unverified); the shipped "
-                              "results are not comparable")
+                              "and submitted results are not comparable")
     track = tracks.of_run(runs[0])
     try:
         suite = suites.get(rec["id"])
     except InputError:      # a suite built on this machine (colonbench suites build) under another data folder
         raise ColonbenchError(f"{rec['id']}: no shipped results (a suite built on this machine has none)") from None
-    items = shipped_items(suite, exclude={m for r in runs for m in r["methods"]}, track=track)
-    if not items:
+    items, notes = leaderboard_items(suite, track, mine={m for r in runs for m in r["methods"]}, shipped=shipped,
+                                     submitted=submitted)
+    if not items and shipped and not submitted:
         raise ColonbenchError(f"no shipped results of {rec['id']} on the {tracks.label(track)} to merge")
-    return items
+    return items, notes
 
 
 def cmd_methods(args):
@@ -179,6 +184,12 @@ def add_parsers(sub) -> None:
                                                                 "suite (methods the runs hold are left out of them; "
                                                                 "--html does by default)")
     shipped.add_argument("--no-shipped", action="store_true", help="--html: leave the shipped results out")
+    submitted = p.add_mutually_exclusive_group()
+    submitted.add_argument("--submitted", action="store_true", help="merge the submitted results of the runs' suite "
+                                                                    "and track (the repository's results/; those "
+                                                                    "named as a method of the runs are left out, and "
+                                                                    "the tables say so; --html does by default)")
+    submitted.add_argument("--no-submitted", action="store_true", help="--html: leave the submitted results out")
     p.set_defaults(func=cmd_leaderboard)
 
     p = sub.add_parser("methods", help="list the registered coverage-estimation methods")
