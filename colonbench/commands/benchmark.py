@@ -151,7 +151,8 @@ def cmd_score(args):
                   lambda suite: run / "results")
     print(f"wrote {run}; the leaderboard with the shipped results: colonbench leaderboard {run} --out DIR "
           f"--shipped, or colonbench benchmark --suites {args.suite} --methods predictions:{args.predictions} "
-          f"--out DIR{_data_flag(args)}")
+          f"--out DIR{_data_flag(args)}" + (f" --track {args.track}" if getattr(args, "track", "points") != "points"
+                                            else ""))
 
 
 def _data_flag(args) -> str:
