@@ -76,18 +76,27 @@ def intervals_rows(model: Path) -> list[str]:
         return []
     src = cal.source
     manifests = src.get("manifests") or {src.get("manifest", "?"): src.get("manifest_sha256", "")}  # one before 0147
-    known_on = src.get("known_manifests") or list(manifests)
+    scaled = any("features" in g for g in cal.groups.values())
+    how = (f"scaled by `exp(w . f)` of the estimate's signals ({', '.join(next(iter(cal.groups.values()))['features'])})"
+           if scaled else f"grouped by {cal.scheme}")
+    held = src.get("held_out")
     out = ["", "## Coverage intervals", "",
            f"`{intervals.path_for(model).name}` (id `{src.get('id')}`): {cal.level:.0%} split-conformal intervals "
-           f"for {src.get('steps')}, grouped by {cal.scheme}, calibrated by `python scripts/calibrate_intervals.py` on "
-           f"{' and '.join(f'`{name}` (sha256 `{sha[:16]}...`)' for name, sha in manifests.items())}, {src.get('segments')} "
-           f"segments at noise {', '.join(f'{x:g}' for x in src.get('noise_mm', []))} mm ({src.get('estimates')} "
-           f"estimates); an interval wider than {100 * cal.review_width:.0f} points flags its estimate for review.", "",
-           "| group | calibration estimates | interval around the estimate, points |", "|---|---:|---|"]
-    rows = [(k, g) for k, g in cal.groups.items() if k != "all"] + \
-        ([(f"extent known (on {' and '.join(known_on)})", cal.known)] if cal.known else [])
+           f"for {src.get('steps')}, {how}, calibrated by `python scripts/calibrate_intervals.py` on "
+           f"{' and '.join(f'`{name}` (sha256 `{sha[:16]}...`)' for name, sha in manifests.items())}, "
+           f"{src.get('estimates')} estimates at noise {', '.join(f'{x:g}' for x in src.get('noise_mm', []))} mm"
+           + (f" (chosen {held}; left out: {src.get('not_calibrated_on')})" if held else "")
+           + f"; an interval wider than {100 * cal.review_width:.0f} points flags its estimate for review.", "",
+           "| group | calibration estimates | interval around the estimate | scale weights |", "|---|---:|---|---|"]
+    rows = [(k, g) for k, g in cal.groups.items() if k != "all" or scaled] + \
+        ([("extent known", cal.known)] if cal.known else [])
     for key, g in rows:
-        out.append(f"| {key} | {g['n']} | {100 * g['low']:+.1f} to {100 * g['high']:+.1f} |")
+        ends = (f"{g['low']:+.2f} s to {g['high']:+.2f} s" if "features" in g
+                else f"{100 * g['low']:+.1f} to {100 * g['high']:+.1f} points")
+        weights = ", ".join(f"{n} {w:+.2f}" for n, w in zip(g.get("features", ()), g.get("weights", ())))
+        out.append(f"| {key} | {g['n']} | {ends} | {weights} |")
+    for track, g in (cal.map.get("groups") or {}).items():
+        out.append(f"| map segments, {track} | {g['n']} | {100 * g['low']:+.1f} to {100 * g['high']:+.1f} points | |")
     return out
 
 
