@@ -8,8 +8,8 @@ training colons are left out) and validation-real.yaml, the real validation colo
 calibration-real.yaml's real training colons, which are reported, never calibrated on (the network saw them).
 Estimates every segment with the completion method (its intervals off) at 0 and 0.5 mm noise, as the suites do,
 with the signals its intervals are scaled by (cached per model and steps in ``<data>/<manifest>``), then chooses
-the scheme by decision record 0156's rule (0158's candidates among them): every scheme is measured leave-one-colon-out (a colon's estimates get the
-intervals of a calibration fitted on all the other colons); of those whose truth-inside share lies within 85-95 % in
+the scheme by decision record 0156's rule (0158's candidates among them): every scheme is measured
+leave-one-colon-out (a colon's estimates get the intervals of a calibration fitted on all the other colons); of those whose truth-inside share lies within 85-95 % in
 each of ``V_real`` and ``V_wide`` at each noise level, the one with the smallest mean width on ``V_real`` (else the
 one whose worst cell lies closest to the level). The review width comes from the same held-out intervals. The
 chosen scheme is fitted on all of ``V_wide`` and ``V_real`` and written beside the model
