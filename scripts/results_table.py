@@ -1,6 +1,8 @@
-"""The README's results table, made from the shipped reference results (never typed by hand).
+"""The README's results table and docs/method.md's intervals table, made from the shipped reference results (never
+typed by hand).
 
-    python scripts/results_table.py      # prints the Markdown table; tests/test_docs.py checks the README holds it
+    python scripts/results_table.py              # the results table; tests/test_docs.py checks README.md holds it
+    python scripts/results_table.py --intervals  # completion's intervals and review per suite (docs/method.md)
 """
 
 from __future__ import annotations
@@ -11,7 +13,7 @@ import numpy as np
 
 from colonbench.benchmark import shipped, suites, tracks
 from colonbench.benchmark.registry import BASELINES
-from colonbench.benchmark.summary import scored_errors
+from colonbench.benchmark.summary import interval_stats, review_stats, scored_errors
 
 #: The rows of the README's table: the paper's method, its baselines, the classical reference and the constant guess;
 #: then the paper's method on the known-length track (``method@track``).
@@ -52,5 +54,32 @@ def tables() -> str:
     return "\n".join(lines)
 
 
+def interval_table(method: str = "completion") -> str:
+    """Per segment suite and track: the share of truths inside the method's intervals, their mean width, the share
+    flagged for review, the share of the estimates off by more than 15 points it flags and the share of its flags
+    that are (noiseless / 0.5 mm)."""
+    lines = ["| suite | truth inside the 90 % interval | mean width, points | flagged for review | off by > 15 points: "
+             "flagged | flags off by > 15 points |", "|---|---:|---:|---:|---:|---:|"]
+    for suite in suites.latest().values():
+        for track in tracks.TRACKS:
+            item = shipped.load(suite, track=track) if suite.task != "colon" else None
+            if item is None:
+                continue
+            rows = item[1][item[1]["method"] == method]
+            st = {n: {**interval_stats(g, failures=True), **review_stats(g)} for n, g in rows.groupby("noise_mm")}
+
+            def pair(key, digits=1, unit=" %"):
+                got = [st[n][key] for n in (0.0, 0.5)]
+                return "n/a" if all(v != v for v in got) else \
+                    " / ".join(f"{v:.{digits}f}" if v == v else "n/a" for v in got) + unit
+
+            name = suite.id + ("" if track == tracks.DEFAULT else ", length known")
+            lines.append(f"| `{name}` | {pair('interval_covered')} | {pair('interval_width', 0, '')} | "
+                         f"{pair('review_flagged', 0)} | {pair('review_recall', 0)} | {pair('review_precision', 0)} |")
+    return "\n".join(lines)
+
+
 if __name__ == "__main__":
-    print(tables())
+    import sys
+
+    print(interval_table() if "--intervals" in sys.argv[1:] else tables())

@@ -42,6 +42,8 @@ def test_the_results_tables_are_the_shipped_results():
     for page in ("README.md", "docs/benchmark.md"):
         assert mod.tables().strip() in (ROOT / page).read_text(), \
             f"regenerate {page}'s results table with: python scripts/results_table.py"
+    assert mod.interval_table().strip() in (ROOT / "docs" / "method.md").read_text(), \
+        "regenerate docs/method.md's intervals table with: python scripts/results_table.py --intervals"
 
 
 def test_the_readme_stays_a_front_door():
