@@ -198,7 +198,10 @@ class Intervals:
                               "had its unseen side clipped off (over-estimated)")
 
     def to_json(self) -> dict:
-        return asdict(self)
+        out = asdict(self)
+        if not out["map"]:                 # no map part (the map's segments get the known extent): as before it existed
+            del out["map"]
+        return out
 
 
 def _scale_of(group: dict, coverage: float, signals: dict, side: str = "") -> float:
