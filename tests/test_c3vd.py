@@ -323,7 +323,10 @@ def test_layouts_v1_and_screening_withdrawals(tmp_path, tube):
         c3vd.find_sequences(root)
     (seq,), skipped = c3vd.find_sequences(root, intrinsics=tmp_path / "camera_intrinsics.txt")
     assert seq.layout == "v1" and seq.mesh.name == "outputMesh.obj" and len(seq.depth) == FRAMES
-    assert skipped[0]["folder"] == "c1_screening_v1" and "whole-colon track is not built" in skipped[0]["reason"]
+    assert skipped[0]["folder"] == "c1_screening_v1" and "not a registered sequence" in skipped[0]["reason"]
+    # not a screening withdrawal either (not named cN_full_..., no whole-colon mesh): nothing of the download
+    _, screening, skipped = c3vd.find_download(root, intrinsics=tmp_path / "camera_intrinsics.txt")
+    assert screening == [] and "not named as a screening withdrawal" in skipped[0]["reason"]
 
 
 def test_the_command_line(download, tmp_path, capsys):

@@ -17,8 +17,9 @@ folder holding (checked against the dataset's renderer, ``rendergt`` in github.c
 - ``camera_intrinsics.txt`` in the sequence's folder or a folder above it (C3VDv2: the download's root): the
   fisheye model of :mod:`colonbench.video.fisheye`.
 
-A folder with ``pose.txt`` but no coverage mesh (C3VDv2's simulated screening withdrawals over whole colons) is
-listed as skipped, with the reason.
+A folder with ``pose.txt`` but no coverage mesh is a C3VDv2 screening withdrawal over a whole colon where its name
+and its whole-colon mesh say so (:mod:`colonbench.video.c3vd_screening`, read by :func:`find_download`), and is
+listed as skipped, with the reason, otherwise.
 """
 
 from __future__ import annotations
@@ -107,8 +108,37 @@ def _intrinsics_for(folder: Path, root: Path, given) -> Path | None:
     return None
 
 
-def find_sequences(root, intrinsics=None) -> tuple[list[Sequence], list[dict]]:
-    """The registered sequences under a download's folder, and the folders skipped with the reason.
+def _walk(root: Path, intrinsics) -> tuple[list[Sequence], list[Path]]:
+    """The registered sequences under a download, and the folders holding ``pose.txt`` but no coverage mesh."""
+    if not root.is_dir():
+        raise InputError(f"{root}: no such folder (the C3VD download)")
+    sequences, bare = [], []
+    for pose in sorted(root.rglob(POSE_NAME)):
+        folder = pose.parent
+        mesh = next((folder / n for n in MESH_NAMES if (folder / n).is_file()), None)
+        if mesh is None:
+            bare.append(folder)
+            continue
+        depth, layout = _depth_frames(folder)
+        intr = _intrinsics_for(folder, root, intrinsics)
+        if depth and intr is None:
+            raise InputError(f"{folder}: depth frames but no {INTRINSICS_NAME} in it or a folder above it up to "
+                             f"{root}; give the camera's intrinsics file with --intrinsics")
+        sequences.append(Sequence(folder.name, folder, mesh, pose, depth, intr, layout))
+    return sequences, bare
+
+
+def _no_sequence(root: Path, skipped: list, what: str) -> InputError:
+    zips = sorted(p.name for p in root.rglob("*.zip"))
+    hint = (f"; it holds {len(zips)} .zip file(s) ({zips[0]}, ...): unzip them first" if zips else
+            f"; a registered sequence is a folder with {POSE_NAME} and {MESH_NAMES[0]}")
+    return InputError(f"{root}: no {what} found" + hint
+                      + (f" ({len(skipped)} folder(s) skipped: {skipped[0]['reason']})" if skipped else ""))
+
+
+def find_download(root, intrinsics=None) -> tuple[list[Sequence], list, list[dict]]:
+    """The registered sequences and the screening withdrawals under a download's folder, and the folders skipped
+    with the reason.
 
     Parameters
     ----------
@@ -117,40 +147,54 @@ def find_sequences(root, intrinsics=None) -> tuple[list[Sequence], list[dict]]:
     intrinsics : path, optional
         The camera's ``camera_intrinsics.txt`` where the download holds none near its sequences.
 
+    Returns
+    -------
+    sequences : list of Sequence
+    screening : list of :class:`colonbench.video.c3vd_screening.Screening`
+    skipped : list of dict
+        ``folder`` (relative to ``root``) and ``reason``.
+
     Raises
     ------
     InputError
-        No such folder; a layout with no registered sequence (the message says what was found); a sequence
-        with depth frames missing in the middle, or with no camera intrinsics for its depth frames.
+        No such folder; neither a registered sequence nor a screening withdrawal (the message says what was
+        found); a sequence with depth frames missing in the middle, or with no camera intrinsics for its depth
+        frames; two sequences of one name; a screening withdrawal with several candidate meshes.
+    """
+    from colonbench.video.c3vd_screening import find_screening
+
+    root = Path(root)
+    sequences, bare = _walk(root, intrinsics)
+    screening, skipped = find_screening(root, bare, {s.folder for s in sequences})
+    names = [s.name for s in sequences] + [s.name for s in screening]
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise InputError(f"{root}: two sequences are named {twice[0]!r}; give a folder holding each sequence once")
+    if not sequences and not screening:
+        raise _no_sequence(root, skipped, "registered C3VD sequence or screening withdrawal")
+    return sequences, screening, skipped
+
+
+def find_sequences(root, intrinsics=None) -> tuple[list[Sequence], list[dict]]:
+    """The registered sequences under a download's folder, and the folders skipped with the reason (screening
+    withdrawals among them: :func:`find_download` finds those).
+
+    Raises
+    ------
+    InputError
+        As :func:`find_download`, and where the download holds no registered sequence.
     """
     root = Path(root)
-    if not root.is_dir():
-        raise InputError(f"{root}: no such folder (the C3VD download)")
-    sequences, skipped = [], []
-    for pose in sorted(root.rglob(POSE_NAME)):
-        folder = pose.parent
-        mesh = next((folder / n for n in MESH_NAMES if (folder / n).is_file()), None)
-        if mesh is None:
-            skipped.append({"folder": str(folder.relative_to(root)), "reason":
-                            "pose.txt without a coverage mesh (a C3VDv2 screening withdrawal over a whole colon): "
-                            "the whole-colon track is not built by this importer"})
-            continue
-        depth, layout = _depth_frames(folder)
-        intr = _intrinsics_for(folder, root, intrinsics)
-        if depth and intr is None:
-            raise InputError(f"{folder}: depth frames but no {INTRINSICS_NAME} in it or a folder above it up to "
-                             f"{root}; give the camera's intrinsics file with --intrinsics")
-        sequences.append(Sequence(folder.name, folder, mesh, pose, depth, intr, layout))
+    sequences, bare = _walk(root, intrinsics)
+    skipped = [{"folder": str(f.relative_to(root)), "reason": "pose.txt without a coverage mesh: not a registered "
+                "sequence (a screening withdrawal goes into the whole-colon suite: colonbench suites build c3vd)"}
+               for f in bare]
     names = [s.name for s in sequences]
     twice = sorted({n for n in names if names.count(n) > 1})
     if twice:
         raise InputError(f"{root}: two sequences are named {twice[0]!r}; give a folder holding each sequence once")
     if not sequences:
-        zips = sorted(p.name for p in root.rglob("*.zip"))
-        hint = (f"; it holds {len(zips)} .zip file(s) ({zips[0]}, ...): unzip them first" if zips else
-                f"; a registered sequence is a folder with {POSE_NAME} and {MESH_NAMES[0]}")
-        raise InputError(f"{root}: no registered C3VD sequence found" + hint
-                         + (f" ({len(skipped)} folder(s) skipped: {skipped[0]['reason']})" if skipped else ""))
+        raise _no_sequence(root, skipped, "registered C3VD sequence")
     return sequences, skipped
 
 

@@ -8,7 +8,9 @@ the first hit of some pixel of some frame (no distance or angle limit) and ``vt 
 ``pose.txt`` with each camera-to-world matrix written column by column; 16-bit TIFF depth, ``floor(65535 *
 clamp(z / 100 mm, 0, 1))``, 0 where a pixel meets nothing; ``camera_intrinsics.txt`` as lines ``name value``.
 Arguments write it wrong on purpose (a pose file as written row by row, in metres; depth on another scale), as the
-tests of the importer's checks need.
+tests of the importer's checks need. :func:`write_screening` writes a C3VDv2 screening withdrawal as
+:mod:`colonbench.video.c3vd_screening` reads one: ``pose.txt`` alone in its folder, the whole-colon mesh a plain
+OBJ beside it (``cN_full_model/cN_full.obj``) or in it.
 """
 
 from __future__ import annotations
@@ -192,3 +194,43 @@ def write_sequence(folder, mesh: trimesh.Trimesh, poses, fisheye: Fisheye, layou
     where = Path(intrinsics_dir) if intrinsics_dir is not None else folder.parent
     (where / "camera_intrinsics.txt").write_text(fisheye.text())
     return seen
+
+
+def write_mesh_obj(path, vertices, faces) -> Path:
+    """A plain OBJ mesh (``v`` and ``f`` lines, no texture): a phantom's model as its download gives it."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    f = np.asarray(faces, np.int64) + 1
+    with open(path, "w") as fh:
+        fh.write("".join(f"v {x:.6f} {y:.6f} {z:.6f}\n" for x, y, z in np.asarray(vertices, float)))
+        fh.write("".join(f"f {a} {b} {c}\n" for a, b, c in f))
+    return path
+
+
+def write_screening(root, name: str, mesh: trimesh.Trimesh, poses, mesh_path=None, as_written: bool = False,
+                    pose_scale: float = 1.0) -> tuple[Path, Path]:
+    """Write one C3VDv2 screening withdrawal as its download is assumed to hold it
+    (:mod:`colonbench.video.c3vd_screening`): ``root/<name>/pose.txt`` (no depth, no coverage mesh) and the
+    whole-colon mesh as a plain OBJ, by default ``root/<colon>_full_model/<colon>_full.obj`` (its colon from
+    the name's ``cN_full`` prefix).
+
+    Parameters
+    ----------
+    mesh_path : path, optional
+        Where the mesh goes instead (relative to ``root``), e.g. ``<name>/model.obj``; None with a mesh already
+        written for another sequence of the colon writes it again, unchanged.
+    as_written, pose_scale
+        As :func:`write_sequence`: the poses row by row, their translation times ``pose_scale`` (wrong on purpose).
+
+    Returns
+    -------
+    (folder, mesh file)
+    """
+    root = Path(root)
+    folder = root / name
+    folder.mkdir(parents=True, exist_ok=True)
+    colon = name.split("_")[0]
+    where = root / (mesh_path if mesh_path is not None else f"{colon}_full_model/{colon}_full.obj")
+    write_mesh_obj(where, np.round(np.asarray(mesh.vertices, float), 6), mesh.faces)
+    (folder / "pose.txt").write_text(pose_lines(poses, as_written, pose_scale))
+    return folder, where
