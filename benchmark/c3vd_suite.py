@@ -16,16 +16,14 @@ then writes the suite's lock, its per-sample signature and its registry entry
 (:mod:`colonbench.benchmark.local_suites`). The suite is built in a hidden sibling folder and renamed into place
 only when complete: on any error it is removed, and nothing half-built remains. Its id is the digest of the
 importer's version, the build's options and every file of the download it reads, so the same download gives the
-same id on any machine. C3VDv2's screening withdrawals (poses over a whole colon, no coverage map) are listed as
-skipped: the whole-colon track is not built.
+same id on any machine. C3VDv2's screening withdrawals (poses over a whole colon, no coverage map) make a second
+suite, a whole-colon one (:mod:`colonbench.benchmark.c3vd_colon`); :func:`build_all` builds both.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
-import os
-import shutil
 import time
 from pathlib import Path
 
@@ -62,13 +60,15 @@ def source_digests(sequences) -> dict:
     """Every file the importer reads, named ``<sequence>/<path in its folder>`` (the intrinsics
     ``<sequence>/camera_intrinsics.txt`` wherever they lie), so that where the download was unpacked does not matter:
     its sha256; and per sequence the count of its files and the digest of their digests."""
-    files, per = {}, {}
+    files, per, known = {}, {}, {}
     for seq in sequences:
         mine = {}
         for path in seq.files():
             path = Path(path)
             rel = path.relative_to(seq.folder).as_posix() if path.is_relative_to(seq.folder) else path.name
-            mine[f"{seq.name}/{rel}"] = sha256_of(path)
+            if path not in known:           # a whole-colon mesh several withdrawals share is read once
+                known[path] = sha256_of(path)
+            mine[f"{seq.name}/{rel}"] = known[path]
         files.update(mine)
         per[seq.name] = {"files": len(mine), "sha256": _digest(mine)}
     return {"files": files, "sequences": per, "digest": _digest(files)}
@@ -155,14 +155,45 @@ def _run_all(sequences, tmp: Path, settings, identity, frames_every, width_px, w
     return [build_sequence(*a, progress=progress) for a in args]
 
 
+def _check_options(frames_every: int, width_px: int, workers: int) -> None:
+    if frames_every < 1 or width_px < 16 or workers < 1:
+        raise InputError(f"--frames-every must be >= 1, the pinhole width >= 16 and --workers >= 1; got "
+                         f"{frames_every}, {width_px}, {workers}")
+
+
+def segment_job(sequences, skipped, frames_every: int, width_px: int, workers: int, progress: bool):
+    """The segment suite of a download's registered sequences: its id and its maker
+    (:func:`colonbench.benchmark.local_suites.publish`)."""
+    from colonbench.shards.c3vd_shards import ImportSettings
+
+    t0 = time.perf_counter()
+    settings = ImportSettings()
+    options = {"frames_every": int(frames_every), "pinhole_width_px": int(width_px), "settings": settings.to_dict(),
+               "noise_mm": list(NOISE_MM), "noise_seed": NOISE_SEED}
+    digests = source_digests(sequences)
+    digest_seconds = round(time.perf_counter() - t0, 1)
+    key = _digest({"importer": IMPORTER, "version": IMPORTER_VERSION, "options": options, "files": digests["files"]})
+    sid = f"{IMPORTER}-{key[:12]}"
+
+    def make(tmp: Path) -> dict:
+        identity = {"manifest_name": sid, "manifest_sha256": key, "config_sha256": _digest(options)}
+        results = _run_all(sequences, tmp, settings, identity, frames_every, width_px, workers, progress)
+        entry = _finish(tmp, sid, key, identity, sequences, skipped, results, options, digests, t0)
+        entry["digest_seconds"] = digest_seconds
+        return entry
+
+    return sid, make
+
+
 def build(source, root=None, frames_every: int = 5, width_px: int = 240, workers: int = 1, intrinsics=None,
           progress: bool = True) -> tuple[local_suites.LocalSuite, bool]:
-    """Build (or find already built) the suite of a C3VD download.
+    """Build (or find already built) the segment suite of a C3VD download's registered sequences
+    (:func:`build_all` also builds the whole-colon suite of its screening withdrawals).
 
     Parameters
     ----------
     source : path
-        The download's folder (registered sequences at any depth; :func:`colonbench.video.c3vd.find_sequences`).
+        The download's folder (registered sequences at any depth; :func:`colonbench.video.c3vd.find_download`).
     root : path, optional
         The suite data root (default :func:`colonbench.benchmark.suites.default_data_root`).
     frames_every : int
@@ -184,53 +215,61 @@ def build(source, root=None, frames_every: int = 5, width_px: int = 240, workers
     Raises
     ------
     InputError
-        A file that cannot be read (named), an unknown layout, a sequence whose conventions cannot be made to
-        agree (named); nothing is left in the data root.
+        A file that cannot be read (named), an unknown layout, no registered sequence, a sequence whose
+        conventions cannot be made to agree (named); nothing is left in the data root.
     """
-    from colonbench.benchmark import suites
-    from colonbench.shards.c3vd_shards import ImportSettings
-    from colonbench.video.c3vd import find_sequences
+    from colonbench.video.c3vd import find_download
 
-    if frames_every < 1 or width_px < 16 or workers < 1:
-        raise InputError(f"--frames-every must be >= 1, the pinhole width >= 16 and --workers >= 1; got "
-                         f"{frames_every}, {width_px}, {workers}")
-    t0 = time.perf_counter()
-    source = Path(source)
-    sequences, skipped = find_sequences(source, intrinsics)
-    settings = ImportSettings()
-    options = {"frames_every": int(frames_every), "pinhole_width_px": int(width_px), "settings": settings.to_dict(),
-               "noise_mm": list(NOISE_MM), "noise_seed": NOISE_SEED}
-    digests = source_digests(sequences)
-    digest_seconds = round(time.perf_counter() - t0, 1)
-    key = _digest({"importer": IMPORTER, "version": IMPORTER_VERSION, "options": options, "files": digests["files"]})
-    sid = f"{IMPORTER}-{key[:12]}"
-    root = Path(root) if root is not None else suites.default_data_root()
-    target = root / sid
-    if (target / local_suites.FILE).is_file():
-        return local_suites.load(target), False
-    if target.exists():
-        raise InputError(f"{target}: exists and is not a built suite; remove it and build again")
-    root.mkdir(parents=True, exist_ok=True)
-    tmp = root / f".{sid}.tmp-{os.getpid()}"
-    shutil.rmtree(tmp, ignore_errors=True)
-    tmp.mkdir()
-    try:
-        identity = {"manifest_name": sid, "manifest_sha256": key, "config_sha256": _digest(options)}
-        results = _run_all(sequences, tmp, settings, identity, frames_every, width_px, workers, progress)
-        entry = _finish(tmp, sid, key, identity, sequences, skipped, results, options, digests, t0)
-        entry["digest_seconds"] = digest_seconds
-        (tmp / local_suites.FILE).write_text(json.dumps(entry, indent=1) + "\n")
-        try:
-            os.replace(tmp, target)
-        except OSError:                        # another build of the same download finished first: keep its suite
-            if local_suites.load(target) is None:
-                raise InputError(f"{target}: cannot put the built suite in place (a folder is there that is not "
-                                 "a built suite; remove it)") from None
-            shutil.rmtree(tmp, ignore_errors=True)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-    return local_suites.load(target), True
+    _check_options(frames_every, width_px, workers)
+    sequences, screening, skipped = find_download(Path(source), intrinsics)
+    if not sequences:
+        raise InputError(f"{source}: no registered C3VD sequence found (a folder with pose.txt and "
+                         f"coverage_mesh.obj), only {len(screening)} screening withdrawal(s): colonbench suites build "
+                         "c3vd builds their whole-colon suite")
+    return local_suites.publish(_root(root), [segment_job(sequences, skipped, frames_every, width_px, workers,
+                                                          progress)])[0]
+
+
+def build_all(source, root=None, frames_every: int = 5, width_px: int = 240, workers: int = 1, intrinsics=None,
+              progress: bool = True) -> list[tuple[local_suites.LocalSuite, bool]]:
+    """Build (or find already built) every suite of a C3VD download: the segment suite of its registered
+    sequences (:func:`build`) and the whole-colon suite of its screening withdrawals
+    (:mod:`colonbench.benchmark.c3vd_colon`), whichever it holds, both or neither put in place.
+
+    Parameters
+    ----------
+    source, root, frames_every, width_px, workers, intrinsics, progress
+        As :func:`build`; ``frames_every`` is also the step between the frames whose views make a screening
+        withdrawal's visibility.
+
+    Returns
+    -------
+    list of (LocalSuite, bool)
+        The segment suite first where there is one; whether each was built (False: already built).
+
+    Raises
+    ------
+    InputError
+        As :func:`build`, and a screening withdrawal whose trajectory does not lie inside its phantom (named);
+        nothing is left in the data root.
+    """
+    from colonbench.benchmark import c3vd_colon
+    from colonbench.video.c3vd import find_download
+
+    _check_options(frames_every, width_px, workers)
+    sequences, screening, skipped = find_download(Path(source), intrinsics)
+    jobs = []
+    if sequences:
+        jobs.append(segment_job(sequences, skipped, frames_every, width_px, workers, progress))
+    if screening:
+        jobs.append(c3vd_colon.colon_job(screening, skipped, frames_every, progress))
+    return local_suites.publish(_root(root), jobs)
+
+
+def _root(root) -> Path:
+    from colonbench.benchmark import suites
+
+    return Path(root) if root is not None else suites.default_data_root()
 
 
 def _finish(tmp: Path, sid, key, identity, sequences, skipped, results, options, digests, t0):

@@ -27,7 +27,7 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
-from colonbench.benchmark.suites import SEGMENT_METRICS, Suite
+from colonbench.benchmark.suites import COLON_METRICS, SEGMENT_METRICS, Suite
 from colonbench.errors import InputError
 
 #: A locally built suite's registry entry and its signature, in its folder.
@@ -99,11 +99,14 @@ def load(folder) -> LocalSuite | None:
     if missing:
         raise InputError(f"{Path(folder) / FILE}: not a built suite's record (no {', '.join(missing)}); build it again "
                          "(colonbench suites build)")
-    return LocalSuite(entry["name"], int(entry["version"]), "", entry.get("task", "segments"), entry["tests"],
+    task = entry.get("task", "segments")
+    colon = {"contexts_mm": tuple(float(x) for x in entry.get("contexts_mm", ())),
+             "segment_mm": float(entry.get("segment_mm", 60.0))} if task == "colon" else {}
+    return LocalSuite(entry["name"], int(entry["version"]), "", task, entry["tests"],
                       int(entry["samples"]), entry["sha256"], float(entry.get("build_seconds", 0.0)),
                       noise_mm=tuple(float(x) for x in entry["noise_mm"]), noise_seed=int(entry["noise_seed"]),
-                      metrics=SEGMENT_METRICS, signature=entry["signature"], local_id=entry["id"],
-                      folder=str(Path(folder)))
+                      metrics=COLON_METRICS if task == "colon" else SEGMENT_METRICS, signature=entry["signature"],
+                      local_id=entry["id"], folder=str(Path(folder)), **colon)
 
 
 def found(root=None) -> list[LocalSuite]:
@@ -165,3 +168,61 @@ def signature(suite: LocalSuite) -> dict:
         raise InputError(f"{path}: its digest is {digest(published)}, {FILE} names {suite.signature}: the folder was "
                          "changed since it was built; build it again")
     return published
+
+
+def publish(root, jobs) -> list[tuple[LocalSuite, bool]]:
+    """Build suites into hidden folders beside their places and rename them into place only when every one is
+    complete: on any error every hidden folder is removed, and nothing half-built remains.
+
+    Parameters
+    ----------
+    root : path
+        The suite data root.
+    jobs : list of (str, callable)
+        Each suite's id and its maker: ``make(folder) -> entry`` writes the suite's data into ``folder`` and
+        returns its registry entry (written here as :data:`FILE`, last).
+
+    Returns
+    -------
+    list of (LocalSuite, bool)
+        Per job, the suite and whether it was built (False: it was already built, nothing was done).
+
+    Raises
+    ------
+    InputError
+        A suite's place holds something that is not a built suite; whatever a maker raises.
+    """
+    import os
+    import shutil
+
+    root = Path(root)
+    out, staged = [None] * len(jobs), []
+    try:
+        for k, (sid, make) in enumerate(jobs):
+            target = root / sid
+            if (target / FILE).is_file():
+                out[k] = (load(target), False)
+                continue
+            if target.exists():
+                raise InputError(f"{target}: exists and is not a built suite; remove it and build again")
+            root.mkdir(parents=True, exist_ok=True)
+            tmp = root / f".{sid}.tmp-{os.getpid()}"
+            shutil.rmtree(tmp, ignore_errors=True)
+            tmp.mkdir()
+            staged.append((k, tmp, target))
+            entry = make(tmp)
+            (tmp / FILE).write_text(json.dumps(entry, indent=1) + "\n")
+        for k, tmp, target in staged:
+            try:
+                os.replace(tmp, target)
+            except OSError:                    # another build of the same download finished first: keep its suite
+                if load(target) is None:
+                    raise InputError(f"{target}: cannot put the built suite in place (a folder is there that is "
+                                     "not a built suite; remove it)") from None
+                shutil.rmtree(tmp, ignore_errors=True)
+            out[k] = (load(target), True)
+    except BaseException:
+        for _, tmp, _ in staged:
+            shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return out

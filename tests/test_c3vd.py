@@ -309,7 +309,7 @@ def test_refusals_name_the_file_and_leave_nothing(tmp_path, tube, download):
     _refused(dl, tmp_path / "nointr" / "suites", r"no camera_intrinsics\.txt .* --intrinsics")
     (tmp_path / "zips").mkdir()
     (tmp_path / "zips" / "c1_cecum_t1_v1.zip").write_bytes(b"PK")
-    _refused(tmp_path / "zips", tmp_path / "zips" / "suites", r"no registered C3VD sequence found; .* unzip them")
+    _refused(tmp_path / "zips", tmp_path / "zips" / "suites", r"no registered C3VD sequence or screening withdrawal found; .* unzip them")
     assert good.is_dir()
 
 

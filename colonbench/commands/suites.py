@@ -49,7 +49,8 @@ def cmd_suites(args):
               + f"\n          cite as {s.citation}; content hash of the published data {s.sha256}"
               + (f"\n          archive {s.archive_url} (sha256 {s.archive_sha256})" if s.archive_url else "") + "\n")
     for s in built:
-        print(f"{s.id} {s.samples:4d} segments x noise {', '.join(f'{n:g}' for n in s.noise_mm)} mm; built here from a "
+        what = "whole-colon reconstructions" if s.task == "colon" else "segments"
+        print(f"{s.id} {s.samples:4d} {what} x noise {', '.join(f'{n:g}' for n in s.noise_mm)} mm; built here from a "
               f"download ({s.folder})\n          {s.tests}\n          cite as {s.citation}, importer {s.name} "
               f"{s.version}, with the dataset's own citation (docs/benchmark.md)\n")
     rows = tuple(rows) + tuple(built)
@@ -109,29 +110,37 @@ def _card(args):
 
 
 def _build(args):
+    from pathlib import Path
+
     from colonbench.benchmark import c3vd_suite
+    from colonbench.benchmark.local_suites import read_entry
 
-    suite, built = c3vd_suite.build(args.source_dir, args.data, frames_every=args.frames_every, width_px=args.width_px,
-                                    workers=args.workers, intrinsics=args.intrinsics, progress=not args.quiet)
-    if not built:
-        print(f"{suite.id} is already built from this download in {suite.folder}: nothing to do")
-    else:
-        from pathlib import Path
-
-        from colonbench.benchmark.local_suites import read_entry
-
+    built = c3vd_suite.build_all(args.source_dir, args.data, frames_every=args.frames_every, width_px=args.width_px,
+                                 workers=args.workers, intrinsics=args.intrinsics, progress=not args.quiet)
+    for k, (suite, new) in enumerate(built):
+        if not new:
+            print(f"{suite.id} is already built from this download in {suite.folder}: nothing to do")
+            continue
         entry = read_entry(Path(suite.folder))
         for name, seq in entry["source"]["sequences"].items():
             conv = seq.get("convention")
+            if suite.task == "colon":
+                print(f"{name}: a screening withdrawal of {seq['poses']} poses over {seq['colon']}, camera centres "
+                      f"{conv['inside_share']:.1%} inside its lumen with poses {conv['convention']}; "
+                      f"{seq['observed_share']:.1%} of the phantom seen from {seq['frames_seen_from']} frames")
+                continue
             check = (f"poses {conv['convention']}, depth on the mesh within {conv['median_mm']:.3f} mm (median)"
                      if conv else "no depth frames: no pose check, no fused partial")
             print(f"{name}: {seq['samples']} samples, {seq['observed_share']:.1%} of the phantom observed; {check}"
                   + (f"; {len(seq['skipped_segments'])} segment sample(s) left out" if seq["skipped_segments"] else ""))
-        for s in entry["source"]["skipped"]:
-            print(f"skipped {s['folder']}: {s['reason']}")
-        print(f"built {suite.id}: {suite.samples} samples in {suite.folder} ({entry['build_seconds']:.0f} s)")
-    print(f"score it: colonbench benchmark --suites {suite.id} --methods METHOD --out DIR"
-          + (f" --data {args.data}" if args.data else ""))
+        if k == 0:   # the download's skipped folders, once
+            for s in entry["source"]["skipped"]:
+                print(f"skipped {s['folder']}: {s['reason']}")
+        what = "whole-colon reconstructions" if suite.task == "colon" else "samples"
+        print(f"built {suite.id}: {suite.samples} {what} in {suite.folder} ({entry['build_seconds']:.0f} s)")
+    for suite, _ in built:
+        print(f"score it: colonbench benchmark --suites {suite.id} --methods METHOD --out DIR"
+              + (f" --data {args.data}" if args.data else ""))
     return 0
 
 
@@ -178,18 +187,23 @@ def add_parsers(sub) -> None:
     c.add_argument("suite", help="suite id or name (colonbench suites), comma-separated ones, or all")
     b = actions.add_parser("build", help="build a suite from your download of a dataset colonbench may not ship "
                                          "(C3VD / C3VDv2)",
-                           description="Build a suite from a C3VD or C3VDv2 download: every registered sequence "
+                           description="Build suites from a C3VD or C3VDv2 download: every registered sequence "
                                        "checked (its depth frames reprojected with its poses must land on its mesh), "
                                        "its phantom cut into 50-70 mm segments along its centerline, truth from "
                                        "C3VD's per-face coverage, partials on the observed faces and from the depth "
-                                       "frames fused by TSDF. The suite goes into the suite cache under an id made "
-                                       "from the download's file digests; a refused download leaves nothing behind "
-                                       "(docs/benchmark.md, 'Real trajectories: C3VD').")
+                                       "frames fused by TSDF (suite c3vd-...); every screening withdrawal over a "
+                                       "whole-colon mesh checked (its camera centres must lie inside the lumen), "
+                                       "what colonbench's camera sees along its real trajectory as a whole partial "
+                                       "colon, mapped and scored as colon-v1 (suite c3vd-colon-...). The suites go "
+                                       "into the suite cache under ids made from the download's file digests; a "
+                                       "refused download leaves nothing behind (docs/benchmark.md, 'Real "
+                                       "trajectories: C3VD').")
     b.add_argument("dataset", choices=["c3vd"], help="the dataset's layout (c3vd: C3VD and C3VDv2)")
     b.add_argument("--from", dest="source_dir", required=True, metavar="DIR", help="the download's folder")
     b.add_argument("--data", "--out", dest="data", default=argparse.SUPPRESS, help=DATA_HELP)
     b.add_argument("--frames-every", type=int, default=5, metavar="K",
-                   help="fuse every K-th depth frame (default 5)")
+                   help="fuse every K-th depth frame; a screening withdrawal's views: every K-th frame "
+                        "(default 5)")
     b.add_argument("--width-px", type=int, default=240, metavar="W",
                    help="width of the pinhole each fused fisheye frame is resampled into (default 240)")
     b.add_argument("--intrinsics", metavar="FILE",
