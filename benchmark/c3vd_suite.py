@@ -57,9 +57,10 @@ def sha256_of(path: Path) -> str:
 
 
 def source_digests(sequences) -> dict:
-    """Every file the importer reads, named ``<sequence>/<path in its folder>`` (the intrinsics
-    ``<sequence>/camera_intrinsics.txt`` wherever they lie), so that where the download was unpacked does not matter:
-    its sha256; and per sequence the count of its files and the digest of their digests."""
+    """Every file the importer reads, named ``<sequence>/<path in its folder>`` (a file outside it, the intrinsics
+    or a screening withdrawal's whole-colon mesh, ``<sequence>/<file name>``), so that where the download was
+    unpacked does not matter: its sha256; and per sequence the count of its files and the digest of their
+    digests."""
     files, per, known = {}, {}, {}
     for seq in sequences:
         mine = {}
