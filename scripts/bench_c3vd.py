@@ -53,7 +53,9 @@ def main() -> None:
     t = time.perf_counter()
     suite, _ = build(download, data, frames_every=args.frames_every, workers=args.workers, progress=False)
     wall = time.perf_counter() - t
-    entry = json.loads((Path(suite.folder) / "suite.json").read_text())
+    from colonbench.benchmark import local_suites
+
+    entry = json.loads((Path(suite.folder) / local_suites.FILE).read_text())
     (seq,) = entry["source"]["sequences"].values()
     stages = ", ".join(f"{k} {v:.1f} s" for k, v in seq["seconds"].items())
     print(f"{suite.id}: {suite.samples} samples from {seq['depth_frames']} frames of {seq['faces']} faces, "
