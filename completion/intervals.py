@@ -134,8 +134,8 @@ class Intervals:
     groups : dict
         Group key -> ``{"low", "high", "n"}`` (fractions, calibration estimates: segments times noise levels).
     review_width : float
-        An interval wider than this (fraction) flags the estimate for review; only then are its rims' notes reasons
-        too (decision record 0156).
+        An interval wider than this (fraction) flags the estimate for review; only then are its rims' notes, and a
+        known length's the cloud stops short of, reasons too (decision record 0156).
     source : dict
         What it was calibrated on: model, manifests and their hashes (``known_manifests``: those :attr:`known` was
         fitted on), noise levels, samples.
@@ -188,7 +188,8 @@ class Intervals:
         est.coverage_interval = self.interval(est.coverage, est.signals)
         est.interval_level = self.level
         width = est.coverage_interval[1] - est.coverage_interval[0]
-        if width <= self.review_width:      # sure enough: the rims' notes below are reasons only where it is not
+        if width <= self.review_width:      # sure enough: the notes (the rims', a known length's) are reasons only
+            est.review.clear()              # where it is not
             return
         est.review.append(f"interval {100 * width:.0f} points wide (more than {100 * self.review_width:.0f})")
         if int(est.signals.get("rims", 0)) == 0 and est.signals.get("extent") != "known":

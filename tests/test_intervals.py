@@ -77,6 +77,13 @@ def test_review_fires_on_a_wide_interval_and_then_names_a_doubtful_rim_unless_th
     assert reasons[(0, None, 0.5)] == ["interval 50 points wide (more than 40)"]
     assert len(reasons[(1, None, 0.5)]) == 2 and "seen from one side" in reasons[(1, None, 0.5)][1]
     assert reasons[(1, "known", 0.5)] == [] and reasons[(1, None, 0.3)] == []   # 20 and 30 points: sure enough
+    # a known length's note (intervals.known_length) is a reason only where the interval is wide, too
+    for width, kept in ((0.3, False), (0.5, True)):
+        cal.groups["length>=60"].update(low=-width / 2, high=width / 2)
+        est = Estimate(0.5, np.zeros((0, 3)), np.zeros((0, 3)), "m", review=["the cloud spans 40 of 60 mm"],
+                       signals={"length_mm": 70.0, "rims": 2})
+        cal.apply(est)
+        assert ("the cloud spans 40 of 60 mm" in est.review) == kept
 
 
 def test_intervals_in_the_contract_are_checked():
@@ -105,12 +112,17 @@ def test_estimate_writes_the_interval_and_takes_a_known_length(demo_data, tmp_pa
     assert a["signals"]["span_mm"] >= a["signals"]["length_mm"] - 0.5     # the line, run on to its planes
     assert main(["estimate", str(tmp_path / "seg.npy"), "--out-dir", str(tmp_path / "b"), "--length-mm", "500"]) == 0
     b = json.loads((tmp_path / "b" / "seg.json").read_text())
-    assert b["coverage"] < 0.2 and b["signals"]["extent"] == "known" and "counted unobserved" in b["review"][0]
+    assert b["coverage"] < 0.2 and b["signals"]["extent"] == "known"
     from colonbench.completion.method import CompletionMethod, model_path, steps_version
 
-    known = intervals.load(model_path(None), steps_version()).known     # the known-extent interval, not a length group
+    cal = intervals.load(model_path(None), steps_version())
+    assert b["coverage_interval"] == pytest.approx(cal.interval(b["coverage"], b["signals"]), abs=2e-6)
+    # the known-extent interval (its own quantiles), not the one of an estimate whose length is unknown
+    assert b["coverage_interval"] != pytest.approx(cal.interval(b["coverage"], {**b["signals"], "extent": None}))
     width = b["coverage_interval"][1] - b["coverage_interval"][0]
-    assert width == pytest.approx(min(b["coverage"] + known["high"], 1) - max(b["coverage"] + known["low"], 0), abs=2e-6)
+    # the note of a length the cloud stops short of is a reason to review where the interval is wide, as the rims'
+    assert bool(b["review"]) == (width > cal.review_width)
+    assert not b["review"] or "counted unobserved" in b["review"][0]
     assert CompletionMethod().intervals is not None
     capsys.readouterr()
     with pytest.raises(SystemExit):
