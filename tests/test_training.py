@@ -259,6 +259,6 @@ def test_the_hole_weighted_loss_weighs_only_the_missing_wall():
         net = Constant()
         loss = train_step(net, torch.optim.SGD(net.parameters(), lr=0.0), x, y, hole_weight=weight)
         expected = (48 * 0.1 ** 2 + 8 * 0.5 ** 2 + 8 * (1 + weight) * 0.5 ** 2) / 64
-        assert float(loss) == pytest.approx(expected, rel=1e-6)
+        assert float(loss.detach()) == pytest.approx(expected, rel=1e-6)
     with pytest.raises(InputError, match="hole_weight"):
         TrainConfig(hole_weight=-1.0).check()
