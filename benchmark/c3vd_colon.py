@@ -26,7 +26,6 @@ it is built beside the segment suite of the same download, atomically with it
 
 from __future__ import annotations
 
-import json
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -162,10 +161,8 @@ def build_colon(name: str, seqs: list, colon_id: int, out, settings: ScreeningSe
 def write_colon_lock(out_dir, identity: dict, shards: list[dict]) -> dict:
     """The dataset lock of the suite's folder, as :func:`colonbench.shards.dataset.write_lock` describes a
     generated whole-colon dataset."""
-    import os
-
-    from colonbench._version import __version__
     from colonbench.shards import schema, stats
+    from colonbench.shards.c3vd_shards import write_built_lock
     from colonbench.shards.schema import sha256_file
 
     out = Path(out_dir)
@@ -177,12 +174,7 @@ def write_colon_lock(out_dir, identity: dict, shards: list[dict]) -> dict:
     split = {"test": {"shards": len(entries), "samples": sum(e["samples"] for e in entries.values()), "segments": 0,
                       "colons": len(entries), "bytes": sum(e["bytes"] for e in entries.values()),
                       "statistics": {"coverage": stats.quantiles(np.concatenate([s["coverage"] for s in shards]))}}}
-    lock = {"format": "colonbench-dataset-lock", "format_version": 1, **identity, "generator_version": __version__,
-            "shard_format_version": schema.COLON_FORMAT_VERSION, "splits": split, "missing": [], "shards": entries}
-    tmp = out / (schema.LOCK_NAME + ".tmp")
-    tmp.write_text(json.dumps(lock, indent=1) + "\n")
-    os.replace(tmp, out / schema.LOCK_NAME)
-    return lock
+    return write_built_lock(out, identity, split, entries, schema.COLON_FORMAT_VERSION)
 
 
 def colon_job(screening, skipped, frames_every: int, progress: bool = False):

@@ -205,8 +205,6 @@ def write_lock(out_dir, identity: dict, shards: list[dict]) -> dict:
     """The dataset lock (:data:`schema.LOCK_NAME`) of an imported suite's folder: every shard's sha256, size and
     counts, and the test split's statistics, as :func:`colonbench.shards.dataset.write_lock` describes a
     generated dataset."""
-    import os
-
     from colonbench.shards import stats
     from colonbench.shards.schema import sha256_file
 
@@ -222,9 +220,17 @@ def write_lock(out_dir, identity: dict, shards: list[dict]) -> dict:
                       "segments": sum(e["segments"] for e in entries.values()),
                       "colons": len({e["colon_id"] for e in entries.values()}),
                       "bytes": sum(e["bytes"] for e in entries.values()), "statistics": stats.summarize(values)}}
+    return write_built_lock(out, identity, split, entries, schema.FORMAT_VERSION)
+
+
+def write_built_lock(out: Path, identity: dict, split: dict, entries: dict, shard_format: int) -> dict:
+    """Write a built suite's dataset lock (:data:`schema.LOCK_NAME`, as ``colonbench generate`` writes one) atomically,
+    and return it."""
+    import os
+
     lock = {"format": "colonbench-dataset-lock", "format_version": 1, **identity, "generator_version": __version__,
-            "shard_format_version": schema.FORMAT_VERSION, "splits": split, "missing": [], "shards": entries}
-    tmp = out / (schema.LOCK_NAME + ".tmp")
+            "shard_format_version": shard_format, "splits": split, "missing": [], "shards": entries}
+    tmp = Path(out) / (schema.LOCK_NAME + ".tmp")
     tmp.write_text(json.dumps(lock, indent=1) + "\n")
-    os.replace(tmp, out / schema.LOCK_NAME)
+    os.replace(tmp, Path(out) / schema.LOCK_NAME)
     return lock

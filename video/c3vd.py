@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from colonbench.errors import InputError
-from colonbench.video.fisheye import Fisheye, read_intrinsics
+from colonbench.video.fisheye import Fisheye
 
 #: Names of a sequence's coverage mesh, in order of preference.
 MESH_NAMES = ("coverage_mesh.obj", "outputMesh.obj")
