@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import shutil
 import tempfile
 import time
@@ -20,16 +21,15 @@ from pathlib import Path
 
 
 def write(folder: Path, frames: int) -> None:
-    from tqdm.auto import tqdm
-
+    from colonbench.progress import bar
     from colonbench.video.c3vd_synth import C3VD_CAMERA, phantom_tube, withdrawal_poses, write_sequence
 
     mesh, line = phantom_tube(length_mm=200.0, ring_mm=0.5, around=128)
     tmp = folder.with_name(folder.name + ".writing")
     shutil.rmtree(tmp, ignore_errors=True)
-    with tqdm(total=frames, unit="frame", desc="write") as bar:
+    with bar(total=frames, unit="frame", desc="write") as progress:    # a bar on a terminal, log lines in a log
         write_sequence(tmp / "c1_synthetic_t1_v1", mesh, withdrawal_poses(line, frames), C3VD_CAMERA,
-                       progress=bar.update)
+                       progress=progress.update)
     tmp.rename(folder)
 
 
@@ -41,6 +41,7 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--write-only", action="store_true", help="write the sequence (if missing), do not build")
     args = ap.parse_args()
+    logging.basicConfig(level=logging.INFO, format="%(message)s")   # the progress lines where stderr is no terminal
     from colonbench.benchmark.c3vd_suite import build
 
     download = Path(args.work) / f"download-{args.frames}"
