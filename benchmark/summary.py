@@ -43,7 +43,8 @@ def failed(g: pd.DataFrame) -> np.ndarray:
     """Which rows are failures: a non-empty ``error`` (all False without the column)."""
     if "error" not in g.columns:
         return np.zeros(len(g), bool)
-    return g["error"].fillna("").astype(str).ne("").to_numpy()
+    err = g["error"]
+    return (err.notna() & err.astype(str).ne("")).to_numpy()      # an all-empty column may read as float NaN
 
 
 def fallback_coverage(true_coverage) -> np.ndarray:

@@ -185,7 +185,8 @@ def failures(suite, run_dir) -> list[dict]:
     """What failed in a suite's finished run folder, per method and noise level.
 
     A segment suite's samples are its segments; a whole-colon suite's are the segments of its headline track's
-    maps, and each map that failed as a whole.
+    maps (one the map gives no method is no failure of the method's:
+    :func:`~colonbench.mapping.segments.skipped_by_map`), and each map that failed as a whole.
 
     Returns
     -------
@@ -197,10 +198,13 @@ def failures(suite, run_dir) -> list[dict]:
 
     if suite.task == "colon":
         from colonbench.benchmark.colon_evaluate import load_colon_results
+        from colonbench.mapping.segments import skipped_by_map
 
         _, segs, colons = load_colon_results(run_dir)
         maps = colons[(colons["track"] == suite.headline_track) & (colons["error"] != "")]
-        rows = pd.concat([maps, segs[segs["track"] == suite.headline_track]], ignore_index=True)
+        segs = segs[segs["track"] == suite.headline_track]
+        segs = segs.assign(error=segs["error"].where(~segs["error"].map(skipped_by_map), ""))   # not the method's
+        rows = pd.concat([maps, segs], ignore_index=True)
     else:
         from colonbench.benchmark.evaluate import load_results
 

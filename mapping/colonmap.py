@@ -22,7 +22,8 @@ import numpy as np
 from colonbench.errors import InputError
 from colonbench.mapping import SEGMENT_MM
 from colonbench.mapping.reach import beyond_reach, unreached_error
-from colonbench.mapping.segments import MIN_HOLE_MM2, Segment, add_unreconstructed, hole_regions
+from colonbench.mapping.segments import (MIN_HOLE_MM2, Segment, add_unreconstructed, few_points_error,
+                                         hole_regions)
 from colonbench.slab import point_at
 
 #: A segment with fewer points is reported without an estimate.
@@ -352,7 +353,7 @@ def map_colon(points: np.ndarray, method, segment_mm: float = SEGMENT_MM, positi
             out.append(seg)
             continue
         if seg.points < MIN_POINTS:
-            seg.error = f"{seg.points} points, fewer than {MIN_POINTS}: not estimated"
+            seg.error = few_points_error(seg.points, MIN_POINTS)
             out.append(seg)
             continue
         seg.error = unreached_error(far[mask], 1.0 - float(far.mean()), positions is not None)

@@ -71,6 +71,21 @@ class Segment:
                 "error": self.error}
 
 
+#: What the map says of a segment it does not give the method (the same for every method): too few points, or points
+#: mostly beyond its centerline's reach (:mod:`colonbench.mapping.reach`). Any other ``error`` is the method's.
+SKIPPED_BY_MAP = ("points, fewer than", "beyond the reach of the map's centerline")
+
+
+def few_points_error(points: int, minimum: int) -> str:
+    """The ``error`` of a segment with fewer than ``minimum`` reconstruction points: not given to the method."""
+    return f"{points} points, fewer than {minimum}: not estimated"
+
+
+def skipped_by_map(error: str) -> bool:
+    """Whether a segment's ``error`` says the map did not give it to the method (:data:`SKIPPED_BY_MAP`), as
+    opposed to the method failing on it."""
+    return any(phrase in str(error or "") for phrase in SKIPPED_BY_MAP)
+
 def round_or_none(x, nd):
     return None if x is None or not np.isfinite(x) else round(float(x), nd)
 

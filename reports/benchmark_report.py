@@ -54,7 +54,7 @@ def _rows(suite, folder: Path) -> tuple[list[dict], dict]:
         for _, r in tab.iterrows():
             rows.append({"noise_mm": r["noise_mm"], "method": r["method"], "mae": r["segment_mae"],
                          "mae_lo": r["segment_mae_lo"], "mae_hi": r["segment_mae_hi"], "segments": r["segments"],
-                         "failed": r["failed_maps"]})
+                         "failed": r["failed_maps"] + r.get("failed_segments", 0)})
     else:
         for _, r in tab.iterrows():
             rows.append({"noise_mm": r["noise_mm"], "method": r["method"], "mae": r["coverage_mae"],
@@ -162,8 +162,9 @@ def markdown(summary: pd.DataFrame, chosen, records: dict, skipped: list[str], t
              "Coverage MAE in percentage points with its 95 % bootstrap interval over segments, per suite; a "
              "whole-colon suite's cell is the segment MAE of its in-context track. A segment a method failed on is "
              "scored as the farther of coverage 0 and 1 (an error of max(true, 1 - true), never better than an "
-             "answer), and the cell says how many failed (for a whole-colon suite: maps). Rows marked * are references "
-             "given ground truth (or the constant guess); rows marked † come from the shipped reference results. "
+             "answer), and the cell says how many failed (for a whole-colon suite: its segments and whole maps). "
+             "Rows marked * are references given ground truth (or the constant guess); rows marked † come from the "
+             "shipped reference results. "
              "Each suite's own page (suites/<suite>/leaderboard.md) has medians, bias, q95, holes and centerline "
              "precision / recall, the paired difference against the best baseline and the breakdowns.", ""]
     for noise, g in summary.groupby("noise_mm", sort=True):

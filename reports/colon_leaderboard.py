@@ -27,8 +27,9 @@ from pathlib import Path
 import pandas as pd
 
 from colonbench.benchmark.colon_evaluate import load_colon_results
-from colonbench.benchmark.summary import error_stats, interval_stats
+from colonbench.benchmark.summary import error_stats, failed, interval_stats, scored_errors
 from colonbench.errors import InputError
+from colonbench.mapping.segments import skipped_by_map
 from colonbench.reports.leaderboard import add_run, data_line, interval
 
 #: Settings two whole-colon runs must share to be compared.
@@ -60,11 +61,13 @@ def colon_table(segments: pd.DataFrame, colons: pd.DataFrame) -> pd.DataFrame:
     """One row per noise level, method and track: segment and whole-colon errors, centerline, speed.
 
     Columns: ``noise_mm``, ``method``, ``track``, ``maps``, ``failed_maps``,
-    ``segments``, ``estimated``, ``segment_mae`` (with its 95 % bootstrap interval over segments,
-    ``segment_mae_lo``, ``segment_mae_hi``), ``segment_median``,
-    ``segment_bias``, ``segment_q95`` (points, over estimated segments),
+    ``segments``, ``estimated``, ``failed_segments`` (the method's failures in finished maps; a segment the map
+    gave no method, :func:`~colonbench.mapping.segments.skipped_by_map`, is left out), ``segment_mae`` (with its
+    95 % bootstrap interval over segments, ``segment_mae_lo``, ``segment_mae_hi``), ``segment_median``,
+    ``segment_bias``, ``segment_q95`` (points; a failed segment scored as the farther of coverage 0 and 1),
     ``end_unobserved``, ``end_unobserved_mae``, ``whole_mae``, ``whole_bias``
-    (points), ``interval_covered`` (% of the segments' truths inside the method's
+    (points; a failed map's whole coverage scored as a failed segment's),
+    ``interval_covered`` (% of the segments' truths inside the method's
     interval), ``interval_width`` (its mean width, points; both NaN for a method
     without intervals), ``interval_segments`` (the segments with an interval and a
     truth they are over), ``centerline_precision``, ``centerline_recall`` (means),
@@ -76,16 +79,20 @@ def colon_table(segments: pd.DataFrame, colons: pd.DataFrame) -> pd.DataFrame:
     keys = ["noise_mm", "method", "track"]
     for key, c in colons.groupby(keys, sort=True):
         s = segments[(segments[keys] == pd.Series(key, index=keys)).all(axis=1)]
-        ends = s["end_unobserved"].astype(bool)
+        ends = s["end_unobserved"].astype(bool).to_numpy()
         ok = c[c["error"] == ""]
-        whole = error_stats(ok["coverage_error"] / 100)  # stored in points
+        # a segment the method failed on: the farther of coverage 0 and 1; one the map gave no method: left out
+        s = s.assign(error=s["error"].where(~s["error"].map(skipped_by_map), ""))
+        seg_err = scored_errors(s)
+        # a failed map: its whole-colon coverage scored so too (stored in points); its segments were never cut
+        whole = error_stats(scored_errors(c.assign(coverage_error=c["coverage_error"] / 100)))
         rows.append({**dict(zip(keys, key)), "maps": len(c), "failed_maps": int((c["error"] != "").sum()),
                      "segments": len(s), "estimated": int(s["coverage_error"].notna().sum()),
-                     **{f"segment_{k}": v for k, v in error_stats(s["coverage_error"]).items()},
-                     **{f"segment_{k}": v for k, v in stats.mae_interval(
-                         s["coverage_error"], seed=0).items() if k != "mae"},
+                     "failed_segments": int(failed(s).sum()),
+                     **{f"segment_{k}": v for k, v in error_stats(seg_err).items()},
+                     **{f"segment_{k}": v for k, v in stats.mae_interval(seg_err, seed=0).items() if k != "mae"},
                      "end_unobserved": int(ends.sum()),
-                     "end_unobserved_mae": error_stats(s[ends]["coverage_error"])["mae"],
+                     "end_unobserved_mae": error_stats(seg_err[ends])["mae"],
                      "whole_mae": whole["mae"], "whole_bias": whole["bias"],
                      **interval_stats(s),
                      "centerline_precision": float(ok["centerline_precision"].mean()) if len(ok) else math.nan,
@@ -146,7 +153,8 @@ def colon_markdown(meta: dict, tab: pd.DataFrame, ctx: pd.DataFrame) -> str:
              data_line(meta, "whole-colon reconstructions") + f" Mapped at {meta['segment_mm']:g} mm segments; "
              "segment MAE with its 95 % bootstrap interval over segments. Input noise: Gaussian, sigma in mm, seed "
              f"{meta['noise_seed']}. Coverage errors in percentage points (estimated - true): each segment against "
-             "the true coverage of the same stretch of the true surface, and the whole colon's; truth in interval: the "
+             "the true coverage of the same stretch of the true surface, and the whole colon's; a failed segment (and "
+             "a failed map's whole colon) is scored as the farther of coverage 0 and 1; truth in interval: the "
              "share of the segments whose true coverage lies inside the method's interval (n/a for a method without), "
              "its mean width in points; centerline precision / recall at 2 mm (docs/mapping.md). Tracks: segment-only "
              "(each segment on its own points, the paper's protocol) and context-M mm (the neighbours' points up to M "

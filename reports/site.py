@@ -46,8 +46,8 @@ SITE_FILE = "site.json"
 #: Precision / recall statistics, shown in their own table rather than the main one.
 PR_COLUMN = re.compile(r"^(holes|centerline)_(precision|recall)_(.+)_(mean|median|q25|q75|undefined)$")
 #: Columns that lead the main table where present, in this order; the others follow in the frame's order.
-FIRST = ("track", "segments", "maps", "failed", "failed_maps", "coverage_undefined", "coverage_mae",
-         "segment_mae", "vs_baseline")
+FIRST = ("track", "segments", "maps", "failed", "failed_maps", "failed_segments", "coverage_undefined",
+         "coverage_mae", "segment_mae", "vs_baseline")
 #: Columns the main table leaves out: the noise level is the section, the others are in other cells.
 HIDDEN = {"noise_mm", "method", "version", "reference", "baseline", "vs_baseline_pairs"}
 LABELS = {"coverage_undefined": "undefined", "coverage_mae": "MAE [95 % CI]", "segment_mae": "segment MAE [95 % CI]",

@@ -18,8 +18,8 @@ import pandas as pd
 from colonbench._version import __version__
 
 #: Columns holding counts (shown as integers even where a missing value made them floats).
-COUNTS = {"segments", "maps", "failed", "failed_maps", "estimated", "coverage_undefined", "interval_segments",
-          "end_unobserved"}
+COUNTS = {"segments", "maps", "failed", "failed_maps", "failed_segments", "estimated", "coverage_undefined",
+          "interval_segments", "end_unobserved"}
 #: Every page's style, inline.
 STYLE = """body{font:15px/1.45 system-ui,sans-serif;margin:0 auto;max-width:1600px;padding:1em 2em;color:#222}
 table{border-collapse:collapse;margin:.6em 0 1.2em;font-size:13px}th,td{border:1px solid #ccc;padding:3px 7px}

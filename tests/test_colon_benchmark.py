@@ -206,8 +206,10 @@ def test_a_program_maps_whole_colons_through_exec(colon_dataset, tmp_path):
 
     suite = dataclasses.replace(suites.get("colon-v1"), contexts_mm=(0.0, 15.0))
     rows = {r["method"]: r for r in failures(suite, run)}
+    from colonbench.mapping.segments import skipped_by_map
+
     head = a.xs("context-15mm")
-    errors = head.loc[head["error"] != "", "error"]
+    errors = head.loc[(head["error"] != "") & ~head["error"].map(skipped_by_map), "error"]
     for name in ("point_eight", "constant"):
         assert rows[name]["samples"] == len(head) and rows[name]["failed"] == len(errors)
         assert rows[name]["first_error"] == (errors.iloc[0] if len(errors) else "")
@@ -238,3 +240,39 @@ def test_the_colon_task_scores_the_segments_intervals(colon_dataset, tmp_path):
     assert rows["constant"]["interval_covered"] is None or np.isnan(rows["constant"]["interval_covered"])
     md = (tmp_path / "board" / "leaderboard.md").read_text()
     assert f"| {inside:.1f} % of {sure['true_coverage'].notna().sum()}, 20.0 |" in md and "| n/a |" in md
+
+
+def test_a_failed_map_segment_is_scored_as_the_worst_answer(colon_dataset, tmp_path):
+    """A segment the method fails on counts as the farther of coverage 0 and 1 in the segment MAE and is counted;
+    one the map gives no method (too few points) is left out for every method alike."""
+    from colonbench.benchmark.colon_evaluate import evaluate_colons
+    from colonbench.errors import ColonbenchError
+    from colonbench.mapping.reach import unreached_error
+    from colonbench.mapping.segments import few_points_error, skipped_by_map
+    from colonbench.reports.colon_leaderboard import write_colon_leaderboard
+
+    assert skipped_by_map(few_points_error(12, 200)) and skipped_by_map(unreached_error(np.ones(9, bool), 0.4, True))
+    assert not skipped_by_map("the method returned no coverage (its completed surface is empty): not estimated")
+
+    class Flaky:
+        name, version = "flaky", "1"
+
+        def estimate(self, points):
+            if len(points) % 2:
+                raise ColonbenchError("odd")
+            return {"coverage": 0.8}
+
+    data, _ = colon_dataset
+    run = evaluate_colons(data, [Flaky()], tmp_path / "run", noise=[0], contexts=[0], progress=False)
+    from colonbench.benchmark.runfolder import read_rows
+
+    seg = read_rows(run / "results" / "segments.csv")
+    skipped = seg["error"].map(skipped_by_map)
+    bad = seg["error"].eq("odd")
+    assert bad.sum() >= 2 and (~bad & ~skipped).sum() >= 2        # both kinds of segment are there
+    t = seg["true_coverage"]
+    expected = np.where(bad, np.maximum(t, 1 - t), (0.8 - t).abs())[~skipped.to_numpy()].mean() * 100
+    write_colon_leaderboard([run], tmp_path / "board", figures=False)
+    row = json.loads((tmp_path / "board" / "leaderboard.json").read_text())["rows"][0]
+    assert row["segment_mae"] == pytest.approx(expected)
+    assert row["failed_segments"] == bad.sum() and row["estimated"] == (~bad & ~skipped).sum()
