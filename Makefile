@@ -15,7 +15,8 @@ $(STAMP): pyproject.toml scripts/system-deps.sh $(CONSTRAINTS)
 	./scripts/system-deps.sh
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
-	# PyTorch's CPU build first (a plain `torch` requirement would pull the multi-GB CUDA build)
+	# PyTorch first, as TORCH says (it may carry pip options: PyPI's Linux wheel brings the CUDA libraries, the
+	# CPU-only index's does not; README.md, Set up)
 	$(BIN)/python -m pip install -q $(TORCH)
 	$(BIN)/python -m pip install -q $(if $(CONSTRAINTS),-c $(CONSTRAINTS)) -e '.[test]'
 	touch $(STAMP)

@@ -204,7 +204,7 @@ def build(source, root=None, frames_every: int = 5, width_px: int = 240, workers
     workers : int
         Sequences built at a time (processes).
     intrinsics : path, optional
-        ``camera_intrinsics.txt`` where the download holds none near its sequences.
+        ``camera_intrinsics.txt`` for every sequence, in place of the download's own (needed where it holds none).
     progress : bool
 
     Returns

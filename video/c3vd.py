@@ -145,7 +145,8 @@ def find_download(root, intrinsics=None) -> tuple[list[Sequence], list, list[dic
     root : path
         The download (``--from``); searched at any depth.
     intrinsics : path, optional
-        The camera's ``camera_intrinsics.txt`` where the download holds none near its sequences.
+        The camera's ``camera_intrinsics.txt`` for every sequence, in place of the download's own (needed where it
+        holds none near its sequences).
 
     Returns
     -------

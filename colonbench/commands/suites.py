@@ -207,7 +207,8 @@ def add_parsers(sub) -> None:
     b.add_argument("--width-px", type=int, default=240, metavar="W",
                    help="width of the pinhole each fused fisheye frame is resampled into (default 240)")
     b.add_argument("--intrinsics", metavar="FILE",
-                   help="the camera's camera_intrinsics.txt, where the download holds none beside its sequences")
+                   help="the camera's camera_intrinsics.txt for every sequence, in place of the download's own "
+                        "(needed where it holds none beside its sequences)")
     b.add_argument("--workers", type=int, default=1, help="sequences built at a time (default 1)")
     b.add_argument("--quiet", action="store_true", help="no progress bars")
     c.add_argument("--out", default=".", metavar="DIR", help="folder to write them into (default: the current folder)")
