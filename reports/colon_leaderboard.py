@@ -66,7 +66,8 @@ def colon_table(segments: pd.DataFrame, colons: pd.DataFrame) -> pd.DataFrame:
     95 % bootstrap interval over segments, ``segment_mae_lo``, ``segment_mae_hi``), ``segment_median``,
     ``segment_bias``, ``segment_q95`` (points; a failed segment scored as the farther of coverage 0 and 1),
     ``end_unobserved``, ``end_unobserved_mae``, ``whole_mae``, ``whole_bias``
-    (points; a failed map's whole coverage scored as a failed segment's),
+    (points; the whole coverage of a failed map, or of one with no segment estimated, scored as a failed
+    segment's),
     ``interval_covered`` (% of the segments' truths inside the method's
     interval), ``interval_width`` (its mean width, points; both NaN for a method
     without intervals), ``interval_segments`` (the segments with an interval and a
@@ -84,8 +85,11 @@ def colon_table(segments: pd.DataFrame, colons: pd.DataFrame) -> pd.DataFrame:
         # a segment the method failed on: the farther of coverage 0 and 1; one the map gave no method: left out
         s = s.assign(error=s["error"].where(~s["error"].map(skipped_by_map), ""))
         seg_err = scored_errors(s)
-        # a failed map: its whole-colon coverage scored so too (stored in points); its segments were never cut
-        whole = error_stats(scored_errors(c.assign(coverage_error=c["coverage_error"] / 100)))
+        # a failed map, or one with no segment estimated (no whole-colon coverage): its whole-colon coverage scored
+        # so too (stored in points); a failed map's segments were never cut
+        none = c["error"].eq("") & c["coverage"].isna()
+        whole = error_stats(scored_errors(c.assign(coverage_error=c["coverage_error"] / 100,
+                                                   error=c["error"].where(~none, "no segment estimated"))))
         rows.append({**dict(zip(keys, key)), "maps": len(c), "failed_maps": int((c["error"] != "").sum()),
                      "segments": len(s), "estimated": int(s["coverage_error"].notna().sum()),
                      "failed_segments": int(failed(s).sum()),

@@ -262,17 +262,31 @@ def test_a_failed_map_segment_is_scored_as_the_worst_answer(colon_dataset, tmp_p
                 raise ColonbenchError("odd")
             return {"coverage": 0.8}
 
+    class Broken:
+        name, version = "broken", "1"
+
+        def estimate(self, points):
+            raise ColonbenchError("never")
+
     data, _ = colon_dataset
-    run = evaluate_colons(data, [Flaky()], tmp_path / "run", noise=[0], contexts=[0], progress=False)
+    run = evaluate_colons(data, [Flaky(), Broken()], tmp_path / "run", noise=[0], contexts=[0], progress=False)
     from colonbench.benchmark.runfolder import read_rows
 
     seg = read_rows(run / "results" / "segments.csv")
+    colons = read_rows(run / "results" / "colons.csv")
+    seg = seg[seg["method"] == "flaky"]
     skipped = seg["error"].map(skipped_by_map)
     bad = seg["error"].eq("odd")
     assert bad.sum() >= 2 and (~bad & ~skipped).sum() >= 2        # both kinds of segment are there
     t = seg["true_coverage"]
     expected = np.where(bad, np.maximum(t, 1 - t), (0.8 - t).abs())[~skipped.to_numpy()].mean() * 100
     write_colon_leaderboard([run], tmp_path / "board", figures=False)
-    row = json.loads((tmp_path / "board" / "leaderboard.json").read_text())["rows"][0]
-    assert row["segment_mae"] == pytest.approx(expected)
-    assert row["failed_segments"] == bad.sum() and row["estimated"] == (~bad & ~skipped).sum()
+    rows = {r["method"]: r for r in json.loads((tmp_path / "board" / "leaderboard.json").read_text())["rows"]}
+    assert rows["flaky"]["segment_mae"] == pytest.approx(expected)
+    assert rows["flaky"]["failed_segments"] == bad.sum() and rows["flaky"]["estimated"] == (~bad & ~skipped).sum()
+    # a map whose every segment failed has no whole-colon coverage: scored as the farther of 0 and 1 too
+    whole = colons[colons["method"] == "broken"]
+    assert whole["coverage"].isna().all() and whole["error"].eq("").all()
+    t = whole["true_coverage"].to_numpy()
+    assert rows["broken"]["whole_mae"] == pytest.approx(100 * np.maximum(t, 1 - t).mean())
+    assert rows["broken"]["estimated"] == 0 and rows["broken"]["failed_segments"] == (~skipped).sum()
