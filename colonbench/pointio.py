@@ -49,6 +49,8 @@ def read_surface(path, seed: int = 0) -> tuple[np.ndarray, int]:
         raise InputError(f"{path}: unknown file type {suffix!r}; use one of {', '.join(SURFACE_SUFFIXES)}")
     if not path.is_file():
         raise InputError(f"{path}: no such file")
+    if path.stat().st_size == 0:
+        raise InputError(f"{path}: the file is empty (0 bytes): no points to read")
     try:
         if suffix == ".npy":
             pts = np.load(path, allow_pickle=False)

@@ -84,6 +84,10 @@ def test_a_ply_without_a_coordinate_is_refused_by_name(tmp_path):
     (tmp_path / "x_only.ply").write_text("ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nend_header\n1\n2\n")
     with pytest.raises(InputError, match="x_only.ply: could not read points: no vertex property 'y'"):
         read_surface(tmp_path / "x_only.ply")
+    for name in ("empty.ply", "empty.npy", "empty.xyz"):       # not the reader's "Not a ply file!" or EOFError
+        (tmp_path / name).write_bytes(b"")
+        with pytest.raises(InputError, match=f"{name}: the file is empty"):
+            read_surface(tmp_path / name)
 
 
 def test_picture(tmp_path):
