@@ -9,9 +9,13 @@ the low tail ``a = (1 - level) / 2`` and ``ceil((n + 1) (1 - a))`` for the high 
 method over-estimates where most of the wall is missing, so the interval reaches further down.
 
 A group is a key of the method's own signals (:func:`group_key`): how many of the segment's ends were found at a
-cut rim (an end without one is where the segment may go on unseen) and the estimate's band. The calibration
-(groups, quantiles, the data it came from) is a JSON file beside the model (``<model>.intervals.json``), made by
-``scripts/calibrate_intervals.py``; decision record 0144 says how the scheme and the review width were chosen.
+cut rim (an end without one is where the segment may go on unseen) and the estimate's band. In a *scaled* scheme
+(the shipped ``scaled``, decision record 0156) the residuals are divided by a scale ``exp(w . f)`` of the estimate's
+features (:func:`features`) before their quantiles are taken, and an estimate's quantiles are multiplied by its
+own scale; each feature is first clipped into the range the calibration saw (decision record 0160). The calibration
+(groups, quantiles, weights, ranges, the data it came from) is a JSON file beside the model
+(``<model>.intervals.json``), made by ``scripts/calibrate_intervals.py``, which also chooses the scheme and the
+review width.
 """
 
 from __future__ import annotations
@@ -41,6 +45,9 @@ SHORT_SHARE = 0.9
 #: segment's: on the calibration set the span reaches 1.83 times the true length (planes pushed out past a cloud
 #: without rims); a length typed in cm for mm is a tenth of the true one.
 LONGEST_SHARE = 3.0
+#: A line between the planes longer than this many times the longest the intervals were calibrated on is named in
+#: ``review`` whatever the interval's width: a cloud longer than a segment (decision record 0160).
+LONG_SHARE = 1.5
 #: Suffix of a model's calibration file.
 SUFFIX = ".intervals.json"
 #: The features of an estimate its interval is scaled by, per scaled scheme (:func:`features`; decision records 0156
@@ -188,15 +195,33 @@ class Intervals:
         est.coverage_interval = self.interval(est.coverage, est.signals)
         est.interval_level = self.level
         width = est.coverage_interval[1] - est.coverage_interval[0]
+        longest = self.longest_mm()
+        line = float(est.signals.get("length_mm", 0.0) or 0.0)
+        long = (f"the cloud's line runs {line:.0f} mm between its planes, more than {LONG_SHARE:g} times the longest "
+                f"the intervals were calibrated on ({longest:.0f} mm): longer than one segment, outside what the "
+                "method was tested on (cut the reconstruction into segments: colonbench map does)"
+                if longest and line > LONG_SHARE * longest else "")
         if width <= self.review_width:      # sure enough: the notes (the rims', a known length's) are reasons only
             est.review.clear()              # where it is not
+            est.review.extend([long] if long else [])
             return
         est.review.append(f"interval {100 * width:.0f} points wide (more than {100 * self.review_width:.0f})")
+        est.review.extend([long] if long else [])
         if int(est.signals.get("rims", 0)) == 0 and est.signals.get("extent") != "known":
             est.review.append("no cut rim at either end: the segment's ends are the line's own, it may go on unseen")
         if int(est.signals.get("rims_doubtful", 0)) and est.signals.get("extent") != "known":
             est.review.append("a cut rim crosses the line well inside the cloud: a cloud seen from one side may have "
                               "had its unseen side clipped off (over-estimated)")
+
+    def longest_mm(self) -> float:
+        """The longest line between the planes (mm) the scaled groups were calibrated on (their ``length``
+        feature's range), 0 where none records it."""
+        out = 0.0
+        for g in [*self.groups.values(), self.known]:
+            names = list(g.get("features", ()))
+            if "ranges" in g and "length" in names:
+                out = max(out, 60.0 * float(g["ranges"][names.index("length")][1]))
+        return out
 
     def to_json(self) -> dict:
         out = asdict(self)
@@ -211,7 +236,11 @@ def _scale_of(group: dict, coverage: float, signals: dict, side: str = "") -> fl
     w = group.get(f"weights_{side}", group.get("weights"))
     if w is None:
         return 1.0
-    return float(np.exp(np.clip(features(coverage, signals, group["features"]) @ np.asarray(w), -20, 5)))
+    f = features(coverage, signals, group["features"])
+    if "ranges" in group:                # within the range calibrated on, never extrapolated (decision record 0160)
+        lo, hi = np.asarray(group["ranges"], float).T
+        f = np.clip(f, lo, hi)
+    return float(np.exp(np.clip(f @ np.asarray(w), -20, 5)))
 
 
 def _scale(group: dict, coverage: float, signals: dict) -> tuple[float, float]:
@@ -232,7 +261,8 @@ def _fit_group(residual: np.ndarray, x: np.ndarray | None, names, level: float, 
     if x is None:
         low, high = conformal_quantiles(residual, level)
         return {"low": low, "high": high, "n": int(len(residual))}
-    out = {"n": int(len(residual)), "features": list(names)}
+    out = {"n": int(len(residual)), "features": list(names),
+           "ranges": [[float(v) for v in r] for r in np.stack([x.min(axis=0), x.max(axis=0)], axis=1)]}
     if not two_sided:
         out["weights"], s = _log_fit(x, np.abs(residual))
         out["low"], out["high"] = conformal_quantiles(residual / s, level)

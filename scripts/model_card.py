@@ -79,6 +79,8 @@ def intervals_rows(model: Path) -> list[str]:
     scaled = any("features" in g for g in cal.groups.values())
     how = (f"scaled by `exp(w . f)` of the estimate's signals ({', '.join(next(iter(cal.groups.values()))['features'])})"
            if scaled else f"grouped by {cal.scheme}")
+    if any("ranges" in g for g in cal.groups.values()):
+        how += f", each clipped into the range calibrated on (the line up to {cal.longest_mm():.0f} mm)"
     held = src.get("held_out")
     out = ["", "## Coverage intervals", "",
            f"`{intervals.path_for(model).name}` (id `{src.get('id')}`): {cal.level:.0%} split-conformal intervals "

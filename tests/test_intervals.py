@@ -283,6 +283,30 @@ def test_a_scaled_interval_follows_the_scale_its_signals_give():
     assert ((ends[:, 0] - 1e-12 <= 0.5 + skew) & (0.5 + skew <= ends[:, 1] + 1e-12)).all()
 
 
+
+def test_a_scale_is_never_extrapolated_past_the_calibrated_range_and_a_long_cloud_is_named():
+    """Calibrated on lines of 30 and 90 mm (wider on the short): a 300 mm line gets the 90 mm line's interval, not
+    a narrower one, and its review names a cloud longer than 1.5 times the longest calibrated line; a 120 mm one is
+    not named. A calibration file without the ranges (calibrated before them) extrapolates as it did."""
+    n = 400
+    short = np.arange(n) % 4 < 2
+    sign = np.where(np.arange(n) % 2 == 0, 1.0, -1.0)
+    sig = [{"length_mm": 30.0 if s else 90.0, "span_mm": 30.0 if s else 90.0, "rims": 2} for s in short]
+    cal = intervals.fit(0.5 + sign * np.where(short, 0.2, 0.02), np.full(n, 0.5), sig, "scaled", 0.4)
+    assert cal.longest_mm() == pytest.approx(90.0)
+    at = {mm: cal.interval(0.5, {"length_mm": mm, "span_mm": mm, "rims": 2}) for mm in (90.0, 120.0, 300.0)}
+    assert at[300.0] == at[120.0] == at[90.0] and at[90.0][1] - at[90.0][0] > 0.03
+    for mm, named in ((120.0, False), (300.0, True)):
+        est = Estimate(0.5, np.zeros((0, 3)), np.zeros((0, 3)), "m", signals={"length_mm": mm, "span_mm": mm, "rims": 2})
+        cal.apply(est)
+        assert any("longer than one segment" in r for r in est.review) is named
+        assert not [r for r in est.review if "interval" in r and "wide" in r]     # narrow: no other reason
+    old = intervals.Intervals(**json.loads(json.dumps(cal.to_json())))
+    for g in old.groups.values():
+        del g["ranges"]
+    lo, hi = old.interval(0.5, {"length_mm": 300.0, "span_mm": 300.0, "rims": 2})
+    assert hi - lo < 0.2 * (at[90.0][1] - at[90.0][0])
+
 def test_a_calibration_with_a_map_part_gives_each_map_track_its_own_interval():
     cal = intervals.fit([0.8] * 40, [0.8] * 40, [{"length_mm": 70.0}] * 40, "length", 0.4)
     cal.known = {"low": -0.08, "high": 0.1, "n": 40}
