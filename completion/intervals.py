@@ -189,7 +189,8 @@ class Intervals:
 
     def apply(self, est) -> None:
         """Set an :class:`~colonbench.estimate.Estimate`'s ``coverage_interval``, ``interval_level`` and ``review``
-        from its coverage and its signals."""
+        from its coverage and its signals: an interval wider than :attr:`review_width` is a reason, and then so are
+        the rims' notes and a known length's; a line over :data:`LONG_SHARE` times :meth:`longest_mm` always is."""
         if not np.isfinite(est.coverage):
             return
         est.coverage_interval = self.interval(est.coverage, est.signals)
@@ -199,7 +200,7 @@ class Intervals:
         line = float(est.signals.get("length_mm", 0.0) or 0.0)
         long = (f"the cloud's line runs {line:.0f} mm between its planes, more than {LONG_SHARE:g} times the longest "
                 f"the intervals were calibrated on ({longest:.0f} mm): longer than one segment, outside what the "
-                "method was tested on (cut the reconstruction into segments: colonbench map does)"
+                "method and its interval were tested on (cut the reconstruction into segments: colonbench map does)"
                 if longest and line > LONG_SHARE * longest else "")
         if width <= self.review_width:      # sure enough: the notes (the rims', a known length's) are reasons only
             est.review.clear()              # where it is not
