@@ -17,8 +17,11 @@ RED_AT = 0.5
 
 
 def write_map(result: dict, out, method_name: str, model: str | None, threshold: float = RED_AT,
-              figure: bool = True) -> tuple[list[Path], dict]:
+              figure: bool = True, version: str = "") -> tuple[list[Path], dict]:
     """Write ``segments.json``/``.csv``, ``centerline.npy``, ``summary.json``, ``map.ply``/``.glb``, ``map.png``.
+
+    ``version``: the method's version (a model's with its steps and its intervals' calibration id), recorded beside
+    ``method`` and ``model``.
 
     Returns
     -------
@@ -32,7 +35,7 @@ def write_map(result: dict, out, method_name: str, model: str | None, threshold:
     out.mkdir(parents=True, exist_ok=True)
     rows = [s.row() for s in result["segments"]]
     written = []
-    doc = {"segments": rows, "method": method_name, "model": model}
+    doc = {"segments": rows, "method": method_name, "model": model, "version": version}
     (out / "segments.json").write_text(json.dumps(doc, indent=1) + "\n")
     flat = []
     for r in rows:
@@ -76,7 +79,7 @@ def write_map(result: dict, out, method_name: str, model: str | None, threshold:
         "unreconstructed": result.get("unreconstructed", []),
         "orientation": result["orientation"],
         "context_mm": result.get("context_mm", 0.0),
-        "method": method_name, "model": model,
+        "method": method_name, "model": model, "version": version,
         "seconds": seconds,
     }
     (out / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")

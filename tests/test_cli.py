@@ -135,6 +135,9 @@ def test_estimate_reads_a_mesh_on_its_faces_and_leaves_out_points_that_are_not_f
     assert json.loads((tmp_path / "o" / "tube.json").read_text())["coverage"] > 0.9
     (tmp_path / "empty.xyz").write_text("")
     r = run("estimate", tmp_path / "empty.xyz", "--out-dir", tmp_path / "o")
+    assert r.returncode == 2 and "the file is empty" in r.stderr and "Warning" not in r.stderr
+    (tmp_path / "header.xyz").write_text("# x y z\n")     # a file with no rows: no numpy warning either
+    r = run("estimate", tmp_path / "header.xyz", "--out-dir", tmp_path / "o")
     assert r.returncode == 2 and "0 point(s)" in r.stderr and "Warning" not in r.stderr
 
 

@@ -87,6 +87,9 @@ def test_straight_tube_segments_get_their_known_coverage(tmp_path, capsys):
     whole = 1 - (30 * RADIUS * np.pi / 2 + 40 * RADIUS * np.pi) / (2 * np.pi * RADIUS * 300)
     assert summary["coverage"] == pytest.approx(whole, abs=0.05)
     assert summary["interruptions"] == [] and summary["orientation"].startswith("from the rectum")
+    from colonbench.completion.method import CompletionMethod     # the calibration the intervals came from
+
+    assert summary["version"] == CompletionMethod().version and ",intervals=scaled-" in summary["version"]
     for name in ("segments.csv", "centerline.npy", "map.ply", "map.glb", "map.png"):
         assert (tmp_path / "map" / name).stat().st_size > 0
     # with the neighbours' points as context, coverage counted between the planes only

@@ -64,9 +64,9 @@ def demo_map(out: Path, model=None, progress: bool = True) -> None:
     out.mkdir(parents=True, exist_ok=True)
     np.save(out / "reconstruction.npy", partial.points.astype(np.float32))
     np.save(out / "trajectory.npy", partial.positions)
-    result = map_colon(partial.points, load_method("completion", model=model), positions=partial.positions,
-                       progress=progress, context_mm=CONTEXT_MM)
-    _, summary = write_map(result, out, "completion", str(model or DEFAULT_MODEL))
+    method = load_method("completion", model=model)
+    result = map_colon(partial.points, method, positions=partial.positions, progress=progress, context_mm=CONTEXT_MM)
+    _, summary = write_map(result, out, "completion", str(model or DEFAULT_MODEL), version=method.version)
     score = map_metrics([s.row() for s in result["segments"]], summary["coverage"], result["centerline"],
                         colon.mesh.vertices, colon.mesh.faces, partial.observed, colon.centerline)
     print(f"map: a {colon.centerline.length:.0f} mm colon with {len(partial.spheres)} sphere holes "

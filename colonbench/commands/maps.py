@@ -37,7 +37,8 @@ def cmd_map(args):
     result["seconds"] = {"read": t1 - t0, **result["seconds"]}
     # the methods built on the network share a predictor: they record the model they ran
     model = str(args.model or DEFAULT_MODEL) if hasattr(method, "predictor") else None
-    paths, summary = write_map(result, args.out, method.name, model, figure=not args.no_figure)
+    paths, summary = write_map(result, args.out, method.name, model, figure=not args.no_figure,
+                               version=str(getattr(method, "version", "")))
     segs = result["segments"]
     done = [s for s in segs if s.coverage is not None]
     print(f"{len(segs)} segments of {args.segment_length:g} mm over {summary['centerline_mm']:.0f} mm of centerline "
