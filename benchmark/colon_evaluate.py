@@ -59,7 +59,7 @@ ALL_METHODS = ("completion", "thresholding", "unwrap", "poisson", "constant")
 SEGMENT_COLUMNS = ["method", "track", "context_mm", "shard", "colon", "index", "hole_model", "noise_mm", "segment",
                    "piece", "start_mm", "end_mm", "true_start_mm", "true_end_mm", "points", "true_coverage",
                    "coverage", "coverage_error", "interval_low", "interval_high", "area_mm2", "true_area_mm2",
-                   "end_seen", "end_unobserved", "seconds", "error"]
+                   "end_seen", "end_unobserved", "seconds", "error", "skipped"]
 #: Per-map columns of ``results/colons.csv``.
 COLON_COLUMNS = ["method", "track", "context_mm", "shard", "colon", "index", "hole_model", "noise_mm",
                  "colon_length_mm", "segments", "estimated", "interruptions", "true_coverage", "coverage",
@@ -146,7 +146,7 @@ def run_colon_unit(data: str, shard_name: str, index: int, sigma: float, noise_s
                                  "interval_high": high, "area_mm2": r["area_mm2"],
                                  "true_area_mm2": score["true_area_mm2"][k], "end_seen": seen,
                                  "end_unobserved": bool(np.isfinite(seen) and seen < END_SEEN),
-                                 "seconds": s.seconds, "error": s.error or ""})
+                                 "seconds": s.seconds, "error": s.error or "", "skipped": bool(s.skipped)})
             colon_rows.append({**track, **ids, "colon_length_mm": float(shard.attrs["colon_length_mm"]),
                                "segments": len(segs), "estimated": sum(s.coverage is not None for s in segs),
                                "interruptions": len(result["interruptions"]), "true_coverage": score["whole_truth"],
@@ -347,6 +347,30 @@ def is_colon_run(run_dir) -> bool:
     except (OSError, ValueError):
         return False
 
+
+
+def skipped_rows(segments: pd.DataFrame) -> np.ndarray:
+    """(n,) bool: the segment rows the map gave no method (too few points, points beyond its centerline's reach):
+    the ``skipped`` column, or where a row has none (written before it was recorded) what its ``error`` says
+    (:func:`colonbench.mapping.segments.skipped_by_map`). Such a segment is no method's failure and is scored for
+    none."""
+    from colonbench.mapping.segments import skipped_by_map
+
+    text = segments["error"].map(skipped_by_map).to_numpy(bool)
+    if "skipped" not in segments.columns:
+        return text
+    flag = segments["skipped"]
+    known = flag.notna() & flag.astype(str).str.strip().ne("")
+    return np.where(known.to_numpy(), flag.astype(str).str.strip().str.lower().isin(["true", "1", "1.0"]).to_numpy(),
+                    text)
+
+
+def scoreable(segments: pd.DataFrame) -> pd.DataFrame:
+    """Segment rows as every statistic scores them: a row the map gave no method (:func:`skipped_rows`) is no
+    failure (its ``error`` blanked; its NaN error is left out), every other failed row is one
+    (:func:`colonbench.benchmark.summary.scored_errors`)."""
+    error = segments["error"].where(segments["error"].notna(), "").astype(str)
+    return segments.assign(error=np.where(skipped_rows(segments), "", error))
 
 def load_colon_results(run_dir) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
     """A finished whole-colon run: its record, its per-segment rows and its per-map rows.

@@ -185,8 +185,8 @@ def failures(suite, run_dir) -> list[dict]:
     """What failed in a suite's finished run folder, per method and noise level.
 
     A segment suite's samples are its segments; a whole-colon suite's are the segments of its headline track's
-    maps (one the map gives no method is no failure of the method's:
-    :func:`~colonbench.mapping.segments.skipped_by_map`), and each map that failed as a whole.
+    maps that the map gave the method (:func:`~colonbench.benchmark.colon_evaluate.skipped_rows`), and each map
+    that failed as a whole.
 
     Returns
     -------
@@ -197,13 +197,12 @@ def failures(suite, run_dir) -> list[dict]:
     import pandas as pd
 
     if suite.task == "colon":
-        from colonbench.benchmark.colon_evaluate import load_colon_results
-        from colonbench.mapping.segments import skipped_by_map
+        from colonbench.benchmark.colon_evaluate import load_colon_results, skipped_rows
 
         _, segs, colons = load_colon_results(run_dir)
         maps = colons[(colons["track"] == suite.headline_track) & (colons["error"] != "")]
         segs = segs[segs["track"] == suite.headline_track]
-        segs = segs.assign(error=segs["error"].where(~segs["error"].map(skipped_by_map), ""))   # not the method's
+        segs = segs[~skipped_rows(segs)]          # given to no method: neither a sample nor a failure of one
         rows = pd.concat([maps, segs], ignore_index=True)
     else:
         from colonbench.benchmark.evaluate import load_results

@@ -353,11 +353,12 @@ def map_colon(points: np.ndarray, method, segment_mm: float = SEGMENT_MM, positi
             out.append(seg)
             continue
         if seg.points < MIN_POINTS:
-            seg.error = few_points_error(seg.points, MIN_POINTS)
+            seg.error, seg.skipped = few_points_error(seg.points, MIN_POINTS), True
             out.append(seg)
             continue
         seg.error = unreached_error(far[mask], 1.0 - float(far.mean()), positions is not None)
         if seg.error:  # mostly points the centerline does not reach: not one segment's cloud
+            seg.skipped = True
             out.append(seg)
             continue
         t = time.perf_counter()

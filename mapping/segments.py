@@ -51,6 +51,9 @@ class Segment:
     area_mm2: float | None = None
     seconds: float = 0.0
     error: str = ""
+    #: The map gave the segment to no method (too few points, or points beyond its centerline's reach): ``error``
+    #: says why; no method's failure.
+    skipped: bool = False
     mesh: tuple = field(default=(), repr=False)
     #: Arc length of the segment that the trajectory passes with no reconstruction, mm (counted unobserved).
     unreconstructed_mm: float = 0.0
@@ -72,7 +75,8 @@ class Segment:
 
 
 #: What the map says of a segment it does not give the method (the same for every method): too few points, or points
-#: mostly beyond its centerline's reach (:mod:`colonbench.mapping.reach`). Any other ``error`` is the method's.
+#: mostly beyond its centerline's reach (:mod:`colonbench.mapping.reach`). Read only from results written before
+#: :attr:`Segment.skipped` was recorded; a method's own error may say anything.
 SKIPPED_BY_MAP = ("points, fewer than", "beyond the reach of the map's centerline")
 
 
@@ -83,7 +87,7 @@ def few_points_error(points: int, minimum: int) -> str:
 
 def skipped_by_map(error: str) -> bool:
     """Whether a segment's ``error`` says the map did not give it to the method (:data:`SKIPPED_BY_MAP`), as
-    opposed to the method failing on it."""
+    opposed to the method failing on it: for rows written before :attr:`Segment.skipped` was recorded."""
     return any(phrase in str(error or "") for phrase in SKIPPED_BY_MAP)
 
 def round_or_none(x, nd):

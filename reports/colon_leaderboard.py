@@ -26,10 +26,9 @@ from pathlib import Path
 
 import pandas as pd
 
-from colonbench.benchmark.colon_evaluate import load_colon_results
+from colonbench.benchmark.colon_evaluate import load_colon_results, scoreable
 from colonbench.benchmark.summary import error_stats, failed, interval_stats, scored_errors
 from colonbench.errors import InputError
-from colonbench.mapping.segments import skipped_by_map
 from colonbench.reports.leaderboard import add_run, data_line, interval
 
 #: Settings two whole-colon runs must share to be compared.
@@ -62,7 +61,7 @@ def colon_table(segments: pd.DataFrame, colons: pd.DataFrame) -> pd.DataFrame:
 
     Columns: ``noise_mm``, ``method``, ``track``, ``maps``, ``failed_maps``,
     ``segments``, ``estimated``, ``failed_segments`` (the method's failures in finished maps; a segment the map
-    gave no method, :func:`~colonbench.mapping.segments.skipped_by_map`, is left out), ``segment_mae`` (with its
+    gave no method, :func:`~colonbench.benchmark.colon_evaluate.skipped_rows`, is left out), ``segment_mae`` (with its
     95 % bootstrap interval over segments, ``segment_mae_lo``, ``segment_mae_hi``), ``segment_median``,
     ``segment_bias``, ``segment_q95`` (points; a failed segment scored as the farther of coverage 0 and 1),
     ``end_unobserved``, ``end_unobserved_mae``, ``whole_mae``, ``whole_bias``
@@ -83,7 +82,7 @@ def colon_table(segments: pd.DataFrame, colons: pd.DataFrame) -> pd.DataFrame:
         ends = s["end_unobserved"].astype(bool).to_numpy()
         ok = c[c["error"] == ""]
         # a segment the method failed on: the farther of coverage 0 and 1; one the map gave no method: left out
-        s = s.assign(error=s["error"].where(~s["error"].map(skipped_by_map), ""))
+        s = scoreable(s)
         seg_err = scored_errors(s)
         # a failed map, or one with no segment estimated (no whole-colon coverage): its whole-colon coverage scored
         # so too (stored in points); a failed map's segments were never cut
@@ -98,7 +97,7 @@ def colon_table(segments: pd.DataFrame, colons: pd.DataFrame) -> pd.DataFrame:
                      "end_unobserved": int(ends.sum()),
                      "end_unobserved_mae": error_stats(seg_err[ends])["mae"],
                      "whole_mae": whole["mae"], "whole_bias": whole["bias"],
-                     **interval_stats(s),
+                     **interval_stats(s, failures=True),     # a failed segment: a truth outside
                      "centerline_precision": float(ok["centerline_precision"].mean()) if len(ok) else math.nan,
                      "centerline_recall": float(ok["centerline_recall"].mean()) if len(ok) else math.nan,
                      "seconds_per_map": float(ok["seconds"].mean()) if len(ok) else math.nan})
@@ -165,14 +164,14 @@ def colon_markdown(meta: dict, tab: pd.DataFrame, ctx: pd.DataFrame) -> str:
              "mm beyond each plane too).", ""]
     for noise, g in tab.groupby("noise_mm", sort=True):
         lines += [f"## Noise sigma = {noise:g} mm", "",
-                  "| method | version | track | maps (failed) | segments (estimated) | segment MAE [95 % CI] | median "
-                  "| bias | q95 | unobserved-end segments: n, MAE | whole colon: MAE, bias | truth in interval (of "
-                  "segments), width | centerline P / R | s/map |",
+                  "| method | version | track | maps (failed) | segments (estimated, failed) | segment MAE [95 % CI] "
+                  "| median | bias | q95 | unobserved-end segments: n, MAE | whole colon: MAE, bias | truth in "
+                  "interval (of segments), width | centerline P / R | s/map |",
                   "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
         for _, r in g.iterrows():
             version = meta["methods"].get(r["method"], {}).get("version", "")
             lines.append(f"| {r['method']} | {version} | {r['track']} | {r['maps']} ({r['failed_maps']}) | "
-                         f"{r['segments']} ({r['estimated']}) | {_f(r['segment_mae'])} "
+                         f"{r['segments']} ({r['estimated']}, {r['failed_segments']}) | {_f(r['segment_mae'])} "
                          f"{interval(r['segment_mae_lo'], r['segment_mae_hi'])} | {_f(r['segment_median'])} | "
                          f"{_f(r['segment_bias'])} | {_f(r['segment_q95'])} | {r['end_unobserved']}, "
                          f"{_f(r['end_unobserved_mae'])} | {_f(r['whole_mae'])}, {_f(r['whole_bias'])} | "
