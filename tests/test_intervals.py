@@ -296,6 +296,9 @@ def test_a_scale_is_never_extrapolated_past_the_calibrated_range_and_a_long_clou
     assert cal.longest_mm() == pytest.approx(90.0)
     at = {mm: cal.interval(0.5, {"length_mm": mm, "span_mm": mm, "rims": 2}) for mm in (90.0, 120.0, 300.0)}
     assert at[300.0] == at[120.0] == at[90.0] and at[90.0][1] - at[90.0][0] > 0.03
+    intervals.fit_known(cal, 0.5 + sign * np.where(short, 0.2, 0.02), np.full(n, 0.5), sig)   # the known group too
+    known = {mm: cal.interval(0.5, {"length_mm": mm, "span_mm": mm, "rims": 2, "extent": "known"}) for mm in (90, 300)}
+    assert "ranges" in cal.known and known[300] == known[90]
     for mm, named in ((120.0, False), (300.0, True)):
         est = Estimate(0.5, np.zeros((0, 3)), np.zeros((0, 3)), "m", signals={"length_mm": mm, "span_mm": mm, "rims": 2})
         cal.apply(est)

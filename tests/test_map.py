@@ -90,6 +90,7 @@ def test_straight_tube_segments_get_their_known_coverage(tmp_path, capsys):
     from colonbench.completion.method import CompletionMethod     # the calibration the intervals came from
 
     assert summary["version"] == CompletionMethod().version and ",intervals=scaled-" in summary["version"]
+    assert json.loads((tmp_path / "map" / "segments.json").read_text())["version"] == summary["version"]
     for name in ("segments.csv", "centerline.npy", "map.ply", "map.glb", "map.png"):
         assert (tmp_path / "map" / name).stat().st_size > 0
     # with the neighbours' points as context, coverage counted between the planes only
