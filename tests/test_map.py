@@ -7,8 +7,12 @@ import pytest
 from scipy.spatial import cKDTree
 from shapes import helix, straight
 
+from colonbench.benchmark.colon_metrics import map_metrics
+from colonbench.benchmark.registry import load_method
 from colonbench.cli import main
+from colonbench.completion.method import CompletionMethod
 from colonbench.datagen.colon import tube_colon
+from colonbench.mapping.colonmap import map_colon
 from colonbench.mapping.reconstruction_centerline import colon_centerline
 from colonbench.meshes import sample_surface
 
@@ -87,16 +91,11 @@ def test_straight_tube_segments_get_their_known_coverage(tmp_path, capsys):
     whole = 1 - (30 * RADIUS * np.pi / 2 + 40 * RADIUS * np.pi) / (2 * np.pi * RADIUS * 300)
     assert summary["coverage"] == pytest.approx(whole, abs=0.05)
     assert summary["interruptions"] == [] and summary["orientation"].startswith("from the rectum")
-    from colonbench.completion.method import CompletionMethod     # the calibration the intervals came from
-
-    assert summary["version"] == CompletionMethod().version and ",intervals=scaled-" in summary["version"]
-    assert json.loads((tmp_path / "map" / "segments.json").read_text())["version"] == summary["version"]
+    version = json.loads((tmp_path / "map" / "segments.json").read_text())["version"]    # the calibration used
+    assert summary["version"] == version == CompletionMethod().version and ",intervals=scaled-" in version
     for name in ("segments.csv", "centerline.npy", "map.ply", "map.glb", "map.png"):
         assert (tmp_path / "map" / name).stat().st_size > 0
     # with the neighbours' points as context, coverage counted between the planes only
-    from colonbench.benchmark.registry import load_method
-    from colonbench.mapping.colonmap import map_colon
-
     traj_xyz = np.loadtxt(tmp_path / "traj.txt")[:, 1:4]
     ctx = map_colon(pts[~cut], load_method("completion"), positions=traj_xyz, progress=False, context_mm=15.0)
     for seg, t in zip(ctx["segments"][1:4], truth[1:4]):
@@ -104,8 +103,6 @@ def test_straight_tube_segments_get_their_known_coverage(tmp_path, capsys):
         z = seg.mesh[0][:, 2]  # the completed surface, clipped at the segment's planes
         assert z.min() > seg.plane_start["point"][2] - 2 and z.max() < seg.plane_end["point"][2] + 2
     # the whole-colon score: each segment's region of the true surface has its known coverage
-    from colonbench.benchmark.colon_metrics import map_metrics
-
     tube = tube_colon(line, RADIUS, ring_spacing_mm=0.5, n_around=256)
     c = tube.mesh.vertices[tube.mesh.faces].mean(axis=1)
     ang = np.arctan2(c[:, 1], c[:, 0])
@@ -134,8 +131,6 @@ def test_interrupted_colon_is_split_and_reported(tmp_path):
         def estimate(self, points):
             return {"coverage": 0.5, "holes": np.zeros((0, 3)), "centerline": np.zeros((0, 3))}
 
-    from colonbench.mapping.colonmap import map_colon
-
     result = map_colon(pts[keep], Constant(), segment_mm=60.0, progress=False)
     (gap,) = result["interruptions"]
     assert gap["gap_mm"] == pytest.approx(60, abs=6)
@@ -160,7 +155,6 @@ def test_a_trajectory_bridges_a_stretch_with_no_reconstruction():
         def estimate(self, points):
             return {"coverage": 1.0, "holes": np.zeros((0, 3)), "centerline": np.zeros((0, 3))}
 
-    from colonbench.mapping.colonmap import map_colon
     from colonbench.mapping.segments import whole_coverage
 
     result = map_colon(pts[keep], Full(), segment_mm=60.0, positions=traj, progress=False)
@@ -335,7 +329,6 @@ def test_a_segment_without_an_estimate_is_reported_and_left_out_of_the_whole_col
             cov = float("nan") if np.mean(points[:, 2]) < 60 else 0.8
             return {"coverage": cov, "holes": np.zeros((0, 3)), "centerline": np.zeros((0, 3))}
 
-    from colonbench.mapping.colonmap import map_colon
     from colonbench.mapping.segments import whole_coverage
 
     result = map_colon(pts, NoSurfaceNearZero(), segment_mm=60.0, positions=line.points[::-20], progress=False)
@@ -435,8 +428,6 @@ def test_the_map_clips_at_its_own_planes_not_at_cut_rims():
     # the map splits a reconstruction by arc length, not by planes, so its segments' clouds end in no
     # planar rim: the completion method runs with its rim search off (a copy), the caller's own left as it is
     from colonbench.completion.heatmap_centerline import END_LEVEL
-    from colonbench.completion.method import CompletionMethod
-    from colonbench.mapping.colonmap import map_colon
 
     class Spy(CompletionMethod):
         seen: list = []
