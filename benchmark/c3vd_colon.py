@@ -180,20 +180,17 @@ def write_colon_lock(out_dir, identity: dict, shards: list[dict]) -> dict:
 def colon_job(screening, skipped, frames_every: int, progress: bool = False):
     """The whole-colon suite of a download's screening withdrawals: its id and its maker
     (:func:`colonbench.benchmark.local_suites.publish`)."""
-    from colonbench.benchmark.c3vd_suite import CITE, LICENCE, _digest, source_digests
+    from colonbench.benchmark.c3vd_suite import CITE, LICENCE, suite_identity
 
     t0 = time.perf_counter()
     settings = ScreeningSettings()
     base = protocol()
     options = {"frames_every": int(frames_every), "settings": settings.to_dict(), "noise_mm": list(base.noise_mm),
                "noise_seed": base.noise_seed, "contexts_mm": list(base.contexts_mm), "segment_mm": base.segment_mm}
-    digests = source_digests(screening)
-    digest_seconds = round(time.perf_counter() - t0, 1)
-    key = _digest({"importer": IMPORTER, "version": IMPORTER_VERSION, "options": options, "files": digests["files"]})
-    sid = f"{IMPORTER}-{key[:12]}"
+    sid, identity, digests, digest_seconds = suite_identity(IMPORTER, IMPORTER_VERSION, options, screening)
+    key = identity["manifest_sha256"]
 
     def make(tmp: Path) -> dict:
-        identity = {"manifest_name": sid, "manifest_sha256": key, "config_sha256": _digest(options)}
         shards, reports = [], {}
         for k, (name, seqs) in enumerate(groups(screening)):
             info, found = build_colon(name, seqs, k, tmp, settings, identity, frames_every, progress)

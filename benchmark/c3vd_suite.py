@@ -79,6 +79,18 @@ def _digest(obj) -> str:
     return hashlib.sha256(json.dumps(obj, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
 
 
+def suite_identity(importer: str, version: int, options: dict, sequences) -> tuple[str, dict, dict, float]:
+    """A built suite's id (``<importer>-<12 hex>``) from the importer, its version, its options and the digest of
+    every file it reads: the same download and options give the same id. Also the identity its shards record,
+    the files' digests (:func:`source_digests`) and the seconds hashing them took."""
+    t0 = time.perf_counter()
+    digests = source_digests(sequences)
+    seconds = round(time.perf_counter() - t0, 1)
+    key = _digest({"importer": importer, "version": version, "options": options, "files": digests["files"]})
+    sid = f"{importer}-{key[:12]}"
+    return sid, {"manifest_name": sid, "manifest_sha256": key, "config_sha256": _digest(options)}, digests, seconds
+
+
 def build_sequence(seq, colon_id: int, out: str, settings, identity: dict, frames_every: int, width_px: int,
                    progress: bool = False) -> tuple[list, list, dict]:
     """Check, fuse and cut one sequence into ``out`` (see the module's description); its shards, the segments left
@@ -171,13 +183,10 @@ def segment_job(sequences, skipped, frames_every: int, width_px: int, workers: i
     settings = ImportSettings()
     options = {"frames_every": int(frames_every), "pinhole_width_px": int(width_px), "settings": settings.to_dict(),
                "noise_mm": list(NOISE_MM), "noise_seed": NOISE_SEED}
-    digests = source_digests(sequences)
-    digest_seconds = round(time.perf_counter() - t0, 1)
-    key = _digest({"importer": IMPORTER, "version": IMPORTER_VERSION, "options": options, "files": digests["files"]})
-    sid = f"{IMPORTER}-{key[:12]}"
+    sid, identity, digests, digest_seconds = suite_identity(IMPORTER, IMPORTER_VERSION, options, sequences)
+    key = identity["manifest_sha256"]
 
     def make(tmp: Path) -> dict:
-        identity = {"manifest_name": sid, "manifest_sha256": key, "config_sha256": _digest(options)}
         results = _run_all(sequences, tmp, settings, identity, frames_every, width_px, workers, progress)
         entry = _finish(tmp, sid, key, identity, sequences, skipped, results, options, digests, t0)
         entry["digest_seconds"] = digest_seconds
