@@ -13,9 +13,11 @@ folder may be submitted (``colonbench results check``), :func:`add` copies a che
 them, the submitted ones of the same suite and track, each checked again, never another track's; a method of the
 user's runs keeps its name and the submitted one of that name is left out, with a note saying so.
 
-The registry lives in the repository, not in the installed package: :func:`registry` finds it
-(``$COLONBENCH_RESULTS``, else the ``results/`` folder beside the source when colonbench runs from a clone); an
-installed colonbench has none, and its tables then hold the shipped results alone.
+The registry lives in the repository, not in the installed package: :func:`registry` finds the one the tables
+read (``$COLONBENCH_RESULTS``, else the ``results/`` folder beside the source when colonbench runs from a clone); an
+installed colonbench has none, and its tables then hold the shipped results alone. :func:`add` writes where
+:func:`target` says: ``--into``, else ``$COLONBENCH_RESULTS``, else the ``results/`` of the colonbench checkout the
+current folder is in (:func:`checkout_results`), never that of a checkout colonbench was installed from elsewhere.
 """
 
 from __future__ import annotations
@@ -61,6 +63,46 @@ def registry(path=None) -> Path | None:
     if os.environ.get(ENV):
         return Path(os.environ[ENV]).expanduser()
     return REPOSITORY_RESULTS if (REPOSITORY_RESULTS / "README.md").is_file() else None
+
+
+def checkout_results(start=None) -> Path | None:
+    """The ``results/`` folder of the colonbench checkout that ``start`` (default the current folder) is in: the
+    git repository holding it (the nearest folder above with a ``.git``), where its ``pyproject.toml`` names the
+    project colonbench and it has ``results/README.md``; None where it is in no such checkout."""
+    import tomllib
+
+    here = Path.cwd() if start is None else Path(start)
+    here = here.resolve()
+    root = next((d for d in (here, *here.parents) if (d / ".git").exists()), None)
+    if root is None or not (root / "results" / "README.md").is_file():
+        return None
+    try:
+        project = tomllib.loads((root / "pyproject.toml").read_text()).get("project", {})
+    except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError):
+        return None
+    return root / "results" if isinstance(project, dict) and project.get("name") == "colonbench" else None
+
+
+def target(into=None) -> tuple[Path, str]:
+    """Where :func:`add` writes, and how that was chosen, in words: ``into`` (``--into``), else
+    ``$COLONBENCH_RESULTS``, else the ``results/`` of the colonbench checkout the current folder is in
+    (:func:`checkout_results`).
+
+    Raises
+    ------
+    InputError
+        None of them: the current folder is in no colonbench checkout.
+    """
+    if into is not None:
+        return Path(into).expanduser(), "--into"
+    if os.environ.get(ENV):
+        return Path(os.environ[ENV]).expanduser(), f"${ENV}"
+    found = checkout_results()
+    if found is None:
+        raise InputError(f"the current folder {Path.cwd()} is in no colonbench checkout (a git clone of the "
+                         "repository, with results/README.md), whose results/ would take the run: run colonbench "
+                         f"results add inside your clone, or give --into DIR (or set ${ENV})")
+    return found, f"the results/ of the checkout {found.parent} (the current folder's)"
 
 
 def folder_name(suite_id: str, track: str = tracks.DEFAULT) -> str:
@@ -363,21 +405,19 @@ def check(run_dir, method: str | None = None) -> Checked:
 
 
 def add(run_dir, method: str, root=None) -> Path:
-    """Copy a checked run's method into the registry (:func:`registry`):
-    ``<root>/<suite id>[@<track>]/<method>/``, replacing what that folder held.
+    """Copy a checked run's method into the registry :func:`target` names (``root``, else ``$COLONBENCH_RESULTS``,
+    else the current folder's checkout's ``results/``): ``<registry>/<suite id>[@<track>]/<method>/``, replacing
+    what that folder held.
 
     Raises
     ------
     NotSubmittable
         The run does not pass :func:`check`; nothing is written.
     InputError
-        No registry: an installed colonbench without ``$COLONBENCH_RESULTS`` and no ``root``.
+        No registry: no ``root``, no ``$COLONBENCH_RESULTS``, and the current folder is in no colonbench checkout.
     """
     checked = check(run_dir, method)
-    where = registry(root)
-    if where is None:
-        raise InputError(f"no results/ registry here (colonbench is installed, not run from a clone): clone the "
-                         f"repository and add it there, or give --into DIR (or set ${ENV})")
+    where, _ = target(root)
     run = read_run(run_dir)
     rec = run["methods"][method]
     one = {**run, "methods": {method: {**rec, "versions": rec.get("versions") or run.get("versions"),

@@ -3,6 +3,7 @@ the results/ registry (colonbench results add), and shown on the leaderboards, m
 
 import json
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -11,6 +12,9 @@ import pytest
 from colonbench.benchmark import submitted, suites
 from colonbench.benchmark.evaluate import evaluate, load_results
 from colonbench.cli import main
+
+#: The checkout these tests are in.
+REPOSITORY = Path(__file__).resolve().parents[1]
 
 
 class Halfway:
@@ -190,12 +194,53 @@ def test_an_installed_colonbench_has_no_registry_and_its_tables_hold_the_shipped
                                                                                          capsys):
     monkeypatch.delenv(submitted.ENV)
     monkeypatch.setattr(submitted, "REPOSITORY_RESULTS", tmp_path / "site-packages" / "results")
+    monkeypatch.chdir(tmp_path)                                                   # in no checkout
     assert submitted.registry() is None
     items, notes = submitted.leaderboard_items(suites.get("demo-v1"))
     assert [item[2] for item in items] == ["shipped demo-v1"] and notes == []
     assert main(["results", "add", str(run), "--method", "halfway"]) == 2
-    assert "no results/ registry here" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert f"{tmp_path} is in no colonbench checkout" in err and "--into DIR" in err and "Traceback" not in err
     assert main(["results", "check", str(run)]) == 0                              # checking needs none
+
+
+def _checkout(root):
+    """A colonbench checkout as git leaves one: .git, pyproject.toml naming colonbench, results/README.md."""
+    (root / ".git").mkdir(parents=True)
+    (root / "pyproject.toml").write_text('[project]\nname = "colonbench"\n')
+    (root / "results").mkdir()
+    (root / "results" / "README.md").write_text("# Submitted results\n")
+    return root
+
+
+def test_add_writes_into_the_checkout_it_runs_in_not_the_one_colonbench_came_from(run, tmp_path, monkeypatch,
+                                                                                  capsys):
+    """A clone with colonbench installed (editable) from another checkout: add writes into the clone it runs in,
+    and says where."""
+    monkeypatch.delenv(submitted.ENV)
+    installed = _checkout(tmp_path / "installed")
+    monkeypatch.setattr(submitted, "REPOSITORY_RESULTS", installed / "results")
+    clone = _checkout(tmp_path / "clone")
+    (clone / "docs").mkdir()
+    monkeypatch.chdir(clone / "docs")                                             # anywhere inside the clone
+    assert main(["results", "add", str(run), "--method", "halfway"]) == 0
+    out = capsys.readouterr().out
+    dest = clone / "results" / "demo-v1" / "halfway"
+    assert (dest / "run.json").is_file() and not (installed / "results" / "demo-v1").exists()
+    assert f"to {dest}" in out and f"the results/ of the checkout {clone} (the current folder's)" in out
+    # --into names another folder, wherever the command runs
+    monkeypatch.chdir(tmp_path)
+    assert main(["results", "add", str(run), "--method", "halfway", "--into", str(tmp_path / "mine")]) == 0
+    out = capsys.readouterr().out
+    assert f"to {tmp_path / 'mine' / 'demo-v1' / 'halfway'} (--into)" in out
+    # a git repository that is not colonbench's is no checkout of it
+    other = tmp_path / "other"
+    (other / ".git").mkdir(parents=True)
+    (other / "results").mkdir()
+    monkeypatch.chdir(other)
+    assert main(["results", "add", str(run), "--method", "halfway"]) == 2
+    assert f"{other} is in no colonbench checkout" in capsys.readouterr().err
+    assert not (other / "results" / "demo-v1").exists()
 
 
 def test_a_submitted_result_joins_the_leaderboards_marked_and_the_users_method_wins(run, tmp_path, monkeypatch,
@@ -261,7 +306,7 @@ def test_submitted_results_are_never_merged_across_tracks(run, tmp_path, monkeyp
 
 def test_every_submitted_result_in_the_repository_checks():
     """What a pull request adds to results/ must check, in the folder its suite and track name."""
-    root = submitted.REPOSITORY_RESULTS
+    root = REPOSITORY / "results"          # this checkout's, not the one colonbench may be installed from
     assert (root / "README.md").is_file()
     for d in sorted(p for p in root.glob("*/*") if p.is_dir()):
         checked = submitted.check(d, d.name)

@@ -16,10 +16,11 @@ def cmd_results(args):
     if args.action == "check":
         print("\n".join(checked.lines()))
         return
+    _, how = submitted.target(args.into)    # refused before anything is written where there is none
     out = submitted.add(args.run, args.method, args.into)
     print(f"added {args.method} on {checked.suite.id}"
-          + ("" if checked.track == "points" else f", {checked.track} track") + f" to {out}: commit that folder and "
-          "open a pull request (docs/benchmark.md, Submitting results)")
+          + ("" if checked.track == "points" else f", {checked.track} track") + f" to {out} ({how}): commit that "
+          "folder and open a pull request (docs/benchmark.md, Submitting results)")
 
 
 def add_parsers(sub) -> None:
@@ -49,4 +50,5 @@ def add_parsers(sub) -> None:
     a.add_argument("run", metavar="RUN", help="the run folder (as for check)")
     a.add_argument("--method", required=True, help="the method to add")
     a.add_argument("--into", metavar="DIR", help="the registry folder (default $COLONBENCH_RESULTS, else the "
-                                                 "repository's results/ where colonbench runs from a clone)")
+                                                 "results/ of the colonbench checkout the current folder is in; "
+                                                 "refused in none)")
