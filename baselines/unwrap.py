@@ -33,8 +33,10 @@ CELL_MM = 1.0
 MORPH_CELLS = 1
 #: The raster's settings in the methods' versions (``rows=sample``: rows from the nearest line sample's index,
 #: since colonbench 1.1; before, from its arc length in floats, which put points on either side of a row's edge
-#: under another machine's float noise).
-RASTER = f"cell={CELL_MM:g}mm,rows=sample"
+#: under another machine's float noise. ``holes=sample``: a hole cell's line sample from its row in integers, since
+#: colonbench 1.2; before, by comparing floats that are equal in exact arithmetic, which another CPU's BLAS kernel
+#: decided the other way for whole rows of hole points).
+RASTER = f"cell={CELL_MM:g}mm,rows=sample,holes=sample"
 
 
 def pca_axis(points: np.ndarray, spacing: float = 0.5) -> np.ndarray:
@@ -74,6 +76,33 @@ def unwrap(points: np.ndarray, centerline: np.ndarray, index: bool = False):
     x, y = np.einsum("ij,ij->i", rel, nrm[idx]), np.einsum("ij,ij->i", rel, bin_[idx])
     out = line.arclength[idx], np.mod(np.arctan2(y, x), 2 * np.pi), np.hypot(x, y), line, (t, nrm, bin_)
     return (*out, idx) if index else out
+
+
+def row_centre_sample(rows: np.ndarray, n_rows: int, intervals: int) -> np.ndarray:
+    """The first sample of an evenly resampled line at or past the centre of each raster row, in integers.
+
+    Sample ``j`` lies at arc length ``j * length / intervals`` and row ``r``'s centre at ``(r + 0.5) / n_rows *
+    length``, so the sample is ``ceil((2 r + 1) intervals / (2 n_rows))``. Where ``(2 r + 1) intervals`` is a
+    multiple of ``2 n_rows`` (for every row when ``intervals == 2 n_rows``: half of all lengths at a 0.5 mm line
+    and 1 mm cells) the centre is a sample exactly, and comparing the two in floats went either way with the last
+    bit of the line's length, which another CPU's BLAS kernel moves.
+
+    Parameters
+    ----------
+    rows : (k,) int
+        Raster rows, in ``[0, n_rows)``.
+    n_rows : int
+        Rows of the raster along the segment.
+    intervals : int
+        Intervals of the resampled line (its samples less one).
+
+    Returns
+    -------
+    (k,) int
+        Sample indices, in ``[0, intervals]``.
+    """
+    rows = np.asarray(rows, dtype=np.int64)
+    return np.minimum(-(-(2 * rows + 1) * intervals // (2 * n_rows)), intervals)
 
 
 def _disk(radius: int) -> np.ndarray:
@@ -126,9 +155,8 @@ def unwrap_coverage(points, centerline, method: str = "unwrap", cell_mm: float =
     for r_i in np.unique(row):
         row_radius[r_i] = np.median(radius[row == r_i])
     hr, hc = np.nonzero(holes)
-    s_c = (hr + 0.5) / n_rows * line.length
     th = (hc + 0.5) / n_cols * 2 * np.pi
-    k = np.clip(np.searchsorted(line.arclength, s_c), 0, len(line.points) - 1)
+    k = row_centre_sample(hr, n_rows, len(line.points) - 1)
     hole_pts = (line.points[k] + row_radius[hr, None] * (np.cos(th)[:, None] * nrm[k] + np.sin(th)[:, None] * bin_[k]))
     return Estimate(coverage, hole_pts, line.points, method)
 
