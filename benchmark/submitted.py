@@ -36,6 +36,7 @@ import pandas as pd
 from colonbench.benchmark import tracks
 from colonbench.benchmark.exchange import sample_id, with_sample_ids
 from colonbench.benchmark.runfolder import RUN_FILE, read_rows, read_run
+from colonbench.benchmark.summary import failed_every
 from colonbench.errors import InputError
 
 #: The repository's registry, where colonbench runs from a clone (a ``results/`` folder with its README.md).
@@ -279,7 +280,8 @@ def _first(ids) -> str:
 
 def _rows(run_dir: Path, name: str, expected: dict, tie: float, problems: list) -> dict:
     """Check ``results/<name>.csv`` holds the results columns and one answered or failed row per expected segment,
-    with the suite's truth; its counts (``rows`` present of the expected, ``failed``)."""
+    with the suite's truth, not all of them failed (:func:`~colonbench.benchmark.summary.failed_every`); its counts
+    (``rows`` present of the expected, ``failed``)."""
     from colonbench.benchmark.evaluate import result_columns
 
     path = run_dir / "results" / f"{name}.csv"
@@ -342,6 +344,10 @@ def _segments(rows: pd.DataFrame, name: str, where: str, expected: dict, tie: fl
     if wrong.any():
         problems.append(f"{where}: {int(wrong.sum())} rows' coverage_error is not coverage - true_coverage (first: "
                         f"{ids[int(np.flatnonzero(wrong)[0])]})")
+    if failed_every(len(rows), int(failed.sum())):
+        problems.append(f"method {name} failed on every one of its {len(rows)} segment evaluations "
+                        f"({int(failed.sum())} failed; first: {rows.loc[failed, 'error'].iloc[0]}): colonbench "
+                        "benchmark calls such a method failed and writes no leaderboard of it; fix it and run again")
     return {"rows": int(len(present & set(expected))), "failed": int(failed.sum())}
 
 

@@ -47,6 +47,19 @@ def failed(g: pd.DataFrame) -> np.ndarray:
     return (err.notna() & err.astype(str).ne("")).to_numpy()      # an all-empty column may read as float NaN
 
 
+def failed_every(samples, failures) -> bool:
+    """Whether a method failed on every sample it was given, group by group (a noise level of a suite): what
+    ``colonbench benchmark`` calls a failed method (it writes no tables) and ``colonbench results check`` refuses.
+
+    Parameters
+    ----------
+    samples, failures : int or sequence of int
+        Each group's samples, and how many of them failed.
+    """
+    samples, failures = np.atleast_1d(samples), np.atleast_1d(failures)
+    return bool(samples.size) and bool((failures >= samples).all())
+
+
 def fallback_coverage(true_coverage) -> np.ndarray:
     """The coverage a failed segment is scored as: the farther of 0 and 1 from the truth (0 at a truth of 0.5),
     so that its error, ``max(true, 1 - true)``, is at least that of any estimate in [0, 1]."""

@@ -225,7 +225,9 @@ def _dead(failed, methods, runs: dict) -> list[str]:
     objects = {getattr(m, "name", None) for m in methods if not isinstance(m, str)}
     mine = {name for run_dir in runs.values() for name, rec in read_run(run_dir)["methods"].items()
             if rec.get("spec") in specs or (rec.get("spec") is None and name in objects)}
-    return sorted(m for m, g in failed.groupby("method") if m in mine and (g["failed"] >= g["samples"]).all())
+    from colonbench.benchmark.summary import failed_every
+
+    return sorted(m for m, g in failed.groupby("method") if m in mine and failed_every(g["samples"], g["failed"]))
 
 
 def _remove_tables(out: Path, chosen) -> None:

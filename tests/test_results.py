@@ -152,6 +152,31 @@ def test_a_broken_copy_is_refused_with_its_reason(run, tmp_path, capsys, what, b
     assert reason in err, err
 
 
+class Dead:
+    """Fails on every segment: a failed method, to colonbench benchmark."""
+
+    name, version = "dead", "1"
+
+    def estimate(self, points):
+        raise ValueError("nothing here")
+
+
+def test_a_run_whose_method_failed_on_every_segment_is_refused_as_benchmark_calls_it_failed(demo_data, tmp_path,
+                                                                                             capsys):
+    from colonbench.pipeline import RunFailed, run_benchmark
+
+    out = tmp_path / "bench"
+    with pytest.raises(RunFailed, match="dead failed on every sample"):
+        run_benchmark([Dead()], "demo-v1", out, data=demo_data, figures=False, progress=False)
+    run_dir = out / "runs" / "demo-v1"
+    assert main(["results", "check", str(run_dir)]) == 2
+    err = capsys.readouterr().err
+    assert "method dead failed on every one of its 48 segment evaluations (48 failed; first: ValueError: nothing here)" in err
+    assert "colonbench benchmark calls such a method failed" in err and "Traceback" not in err
+    assert main(["results", "add", str(run_dir), "--method", "dead", "--into", str(tmp_path / "results")]) == 2
+    assert not (tmp_path / "results").exists()
+
+
 def test_what_is_not_a_run_of_a_segment_suite_is_named(run, tmp_path, capsys):
     assert main(["results", "check", str(run.parent)]) == 2                        # no run.json
     assert "not a colonbench run" in capsys.readouterr().err
