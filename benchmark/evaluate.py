@@ -19,9 +19,9 @@ A method that raises on a segment gets a row with the error and NaN metrics;
 the leaderboard counts these rows and scores them as failures
 (:func:`colonbench.benchmark.summary.scored_errors`), it never drops them.
 
-A rerun with the same data, noise and methods finishes what is missing; with
-``retry_failed`` it also evaluates again the segments whose rows hold an
-error. A rerun with more methods adds them to the run; a method whose version
+A rerun with the same data, noise and methods finishes what is missing (a
+warning counts the failures it keeps); with ``retry_failed`` it also
+evaluates again the segments whose rows hold an error. A rerun with more methods adds them to the run; a method whose version
 changed is refused (start a new run folder).
 """
 
@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import logging
 import resource
 import time
 from pathlib import Path
@@ -401,6 +402,17 @@ def _retry_units(out: Path, picks, sigmas, loaded) -> list:
     return units
 
 
+def _warn_kept_failures(out: Path, keys, loaded) -> None:
+    """Warn, per method, how many failed rows of its parts an earlier run stored that this one keeps as they are."""
+    for name in loaded:
+        parts = [out / "parts" / name / f"{key}.csv" for key in keys]
+        kept = sum(int((read_rows(p)["error"] != "").sum()) for p in parts if p.exists())
+        if kept:
+            logging.getLogger(__name__).warning("colonbench: warning: %s: %d stored failure(s) of an earlier run in "
+                                                "%s kept, not evaluated again (--retry-failed evaluates them again)",
+                                                name, kept, out)
+
+
 def _run(out, run, data, picks, sigmas, loaded, options, workers, examples, noise_seed, progress, t0,
          scheduler=None, retry_failed: bool = False, track: str = tracks.DEFAULT) -> Path:
     flat = [(n, i) for n, idx in picks for i in idx]
@@ -416,6 +428,8 @@ def _run(out, run, data, picks, sigmas, loaded, options, workers, examples, nois
                 units.append((shard_name, idx, s, todo, ex, key))
     if retry_failed:
         units += _retry_units(out, picks, sigmas, loaded)
+    else:
+        _warn_kept_failures(out, keys, loaded)
     _run_programs(out, data, units, loaded, noise_seed, workers, progress, track)
     from colonbench.progress import bar as progress_bar
 

@@ -154,8 +154,11 @@ def open_run(out: Path, settings: dict, methods: dict[str, dict]) -> dict:
         for name, rec in methods.items():
             old = run["methods"].get(name)
             if old is not None and old["version"] != rec["version"]:
+                why = ("; an exec: method's version is a hash of its command line and of the files it names (its "
+                       "script), so one of them changed" if str(rec["version"]).startswith("command:") else "")
                 raise RunMismatch(f"{out}: method {name!r} was evaluated as version {old['version']!r}, it is now "
-                                  f"{rec['version']!r}; evaluate into a new run folder")
+                                  f"{rec['version']!r}{why}; a run never mixes two versions of a method: evaluate "
+                                  "into a new run folder (colonbench benchmark: another --out), or undo the change")
             run["methods"].setdefault(name, rec)
     else:
         run = {"format": RUN_FORMAT, "format_version": RUN_FORMAT_VERSION, **settings, "methods": dict(methods),

@@ -260,3 +260,37 @@ def test_two_evaluations_never_share_a_run_folder(smoke_dataset, tmp_path):
     evaluate(data, ["constant"], out, progress=False)  # released with its holder
     assert (out / "results" / "constant.csv").exists()
     assert not (out / ".evaluate.lock").exists()  # a finished run leaves no lock file behind
+
+
+def test_a_rerun_says_how_many_stored_failures_it_kept_and_how_to_retry_them(smoke_dataset, tmp_path, capsys):
+    data, _ = smoke_dataset
+    args = ["evaluate", str(data), "--methods", "constant,plugin_methods:Broken", "--out", str(tmp_path / "run"),
+            "--noise", "0", "--quiet"]
+    assert main(args) == 0
+    failed = int((read_rows(tmp_path / "run" / "results" / "broken.csv")["error"] != "").sum())
+    assert failed > 0 and "stored failure" not in capsys.readouterr().err    # nothing stored the first time
+    assert main(args) == 0
+    lines = [x for x in capsys.readouterr().err.splitlines() if "stored failure" in x]
+    assert lines == [f"colonbench: warning: broken: {failed} stored failure(s) of an earlier run in "
+                     f"{tmp_path / 'run'} kept, not evaluated again (--retry-failed evaluates them again)"]
+
+
+def test_a_changed_exec_method_is_refused_saying_its_version_is_the_hash_of_its_command(smoke_dataset, tmp_path,
+                                                                                          capsys):
+    import sys
+    from pathlib import Path
+
+    data, _ = smoke_dataset
+    script = tmp_path / "mine.py"
+    example = Path(__file__).resolve().parents[1] / "examples" / "constant_method.py"
+    script.write_text(example.read_text())
+    args = ["evaluate", str(data), "--methods", f"exec:{sys.executable} {script}", "--out", str(tmp_path / "run"),
+            "--noise", "0", "--limit", "1", "--quiet"]
+    assert main(args) == 0
+    script.write_text(example.read_text().replace('"coverage": 0.8', '"coverage": 0.7'))
+    capsys.readouterr()
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert "method 'mine' was evaluated as version 'command:" in err and "Traceback" not in err
+    assert "an exec: method's version is a hash of its command line and of the files it names (its script)" in err
+    assert "evaluate into a new run folder (colonbench benchmark: another --out), or undo the change" in err
