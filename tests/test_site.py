@@ -168,3 +168,47 @@ def test_submitted_results_show_on_the_pages_marked(bench, tmp_path, monkeypatch
     assert "Left out of this page: submitted constant_method: a method of the runs given has its name." in page
     assert main(["leaderboard", str(alone), "--out", str(out), "--html", "--no-figures", "--no-submitted"]) == 0
     assert "constant_method" not in (out / "demo-v1" / "points" / "index.html").read_text()
+
+
+def test_the_chart_draws_each_mae_with_its_interval_and_marks_failures():
+    """Done when: the headline chart is an SVG (well-formed, so every name is escaped) with a title, an aria-label
+    and the axis 'MAE, percentage points'; each method and noise level is a dot inside its interval's bar, placed by
+    its MAE; a method with failed samples is marked with the count; a missing MAE says n/a."""
+    from xml.etree import ElementTree
+
+    from colonbench.reports.chart import mae_chart
+
+    name = '<b>x</b> & "y"'
+    frame = pd.DataFrame({"noise_mm": [0, 0, 0, 0.5, 0.5, 0.5], "method": [name, "plain", "gone"] * 2,
+                          "mae": [2.0, 10.0, 5.0, 3.0, 12.0, float("nan")],
+                          "mae_lo": [1.0, 8.0, 4.0, 2.0, 9.0, float("nan")],
+                          "mae_hi": [3.0, 12.0, 6.0, 4.5, 15.0, float("nan")], "failed": [0, 0, 0, 3, 0, 24]})
+    svg = mae_chart(frame, "demo-v1 · points", "chart-demo")
+    ns = ""                                     # inline in HTML: the parser gives it the SVG namespace
+    root = ElementTree.fromstring(svg)
+    assert root.tag == f"{ns}svg" and root.get("role") == "img" and "demo-v1 · points" in root.get("aria-label")
+    assert "demo-v1 · points" in root.find(f"{ns}title").text
+    texts = ["".join(t.itertext()) for t in root.iter(f"{ns}text")]
+    assert "MAE, percentage points" in texts and name in texts and "<b>" not in svg
+    assert {"noise sigma = 0 mm", "noise sigma = 0.5 mm"} <= set(texts)
+    marks = {(g.get("data-method"), float(g.get("data-noise"))): g for g in root.iter(f"{ns}g")
+             if g.get("class", "").startswith("mark")}
+    assert set(marks) == set(zip(frame["method"], frame["noise_mm"]))
+    for noise, h in frame[frame["mae"].notna()].groupby("noise_mm"):
+        xs = []
+        for _, r in h.iterrows():
+            g = marks[r["method"], noise]
+            bar, dot = g.find(f"{ns}line"), g.find(f"{ns}circle")
+            x1, x2, cx = float(bar.get("x1")), float(bar.get("x2")), float(dot.get("cx"))
+            assert x1 < cx < x2
+            xs.append((cx, x1, x2))
+        (a, a1, a2), (b, b1, b2) = xs[:2]
+        scale = (b - a) / (h["mae"].iloc[1] - h["mae"].iloc[0])           # one linear scale per panel
+        hi = (b2 - a2) / (h["mae_hi"].iloc[1] - h["mae_hi"].iloc[0])
+        assert scale > 0 and hi == pytest.approx(scale, rel=1e-3)
+    failed = marks[name, 0.5]
+    assert "failed" in failed.get("class") and "3 failed" in "".join(failed.itertext())
+    assert "failed" not in "".join(marks[name, 0.0].itertext()) and "failed" not in marks[name, 0.0].get("class")
+    gone = marks["gone", 0.5]
+    assert gone.find(f"{ns}circle") is None and "n/a" in "".join(gone.itertext()) and "24 failed" in \
+        "".join(gone.itertext())
