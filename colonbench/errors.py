@@ -12,3 +12,20 @@ class ColonbenchError(Exception):
 
 class InputError(ColonbenchError, ValueError):
     """Bad user input: a file, a config value or an argument that cannot be used."""
+
+
+def listing(names, most: int = 4) -> str:
+    """Names for a message, comma-separated: all of them where there are at most ``most``, else the first
+    ``most`` and how many more (never a bare "...", which reads as more where there is none).
+
+    Examples
+    --------
+    >>> listing(["a.zip"])
+    'a.zip'
+    >>> listing(["a", "b", "c", "d", "e", "f"])
+    'a, b, c, d and 2 more'
+    """
+    names = [str(n) for n in names]
+    if len(names) <= most:
+        return ", ".join(names)
+    return f"{', '.join(names[:most])} and {len(names) - most} more"

@@ -19,7 +19,8 @@ folder holding (checked against the dataset's renderer, ``rendergt`` in github.c
 
 A folder with ``pose.txt`` but no coverage mesh is a C3VDv2 screening withdrawal over a whole colon where its name
 and its whole-colon mesh say so (:mod:`colonbench.video.c3vd_screening`, read by :func:`find_download`), and is
-listed as skipped, with the reason, otherwise.
+listed as skipped, with the reason, otherwise; so is every other folder of the download the importer reads nothing
+from (one holding a coverage mesh or depth frames but no ``pose.txt``, say).
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from colonbench.errors import InputError
+from colonbench.errors import InputError, listing
 from colonbench.video.fisheye import Fisheye
 
 #: Names of a sequence's coverage mesh, in order of preference.
@@ -53,6 +54,8 @@ CONVENTIONS = (("transposed (C3VD's: row vectors, translation in the last row), 
                ("transposed, translation in metres", True, 1000.0),
                ("as written, translation in metres", False, 1000.0))
 _DEPTH = re.compile(r"^(\d+)_depth\.tiff?$")
+#: Names of a packed download given in place of its folder.
+ARCHIVES = (".zip", ".tar", ".tar.gz", ".tgz", ".7z", ".rar")
 
 
 @dataclass
@@ -110,6 +113,11 @@ def _intrinsics_for(folder: Path, root: Path, given) -> Path | None:
 
 def _walk(root: Path, intrinsics) -> tuple[list[Sequence], list[Path]]:
     """The registered sequences under a download, and the folders holding ``pose.txt`` but no coverage mesh."""
+    if root.is_file():
+        packed = root.name.lower().endswith(ARCHIVES)
+        raise InputError(f"{root}: a file, not a folder; "
+                         + ("unzip it first (C3VD ships each sequence as a .zip) and give --from the folder it "
+                            "unpacks into" if packed else "--from takes the folder the download was unpacked into"))
     if not root.is_dir():
         raise InputError(f"{root}: no such folder (the C3VD download)")
     sequences, bare = [], []
@@ -130,10 +138,50 @@ def _walk(root: Path, intrinsics) -> tuple[list[Sequence], list[Path]]:
 
 def _no_sequence(root: Path, skipped: list, what: str) -> InputError:
     zips = sorted(p.name for p in root.rglob("*.zip"))
-    hint = (f"; it holds {len(zips)} .zip file(s) ({zips[0]}, ...): unzip them first" if zips else
+    hint = (f"; it holds {len(zips)} .zip file(s) ({listing(zips)}): unzip them first" if zips else
             f"; a registered sequence is a folder with {POSE_NAME} and {MESH_NAMES[0]}")
+    named = listing([f"{s['folder']} ({s['reason']})" for s in skipped], most=3)
     return InputError(f"{root}: no {what} found" + hint
-                      + (f" ({len(skipped)} folder(s) skipped: {skipped[0]['reason']})" if skipped else ""))
+                      + (f" ({len(skipped)} folder(s) skipped: {named})" if skipped else ""))
+
+
+def _holds(root: Path, folder: Path) -> str:
+    """Why a folder the importer reads nothing from is skipped: what in it looks like a sequence's, if anything."""
+    import os
+
+    for here, dirs, files in os.walk(folder):
+        dirs[:] = sorted(d for d in dirs if not d.startswith("."))
+        rel = Path(here).relative_to(root).as_posix()
+        mesh = next((n for n in MESH_NAMES if n in files), None)
+        if mesh is not None:
+            return (f"{rel}/{mesh}, but no {POSE_NAME} beside it: not a registered sequence (is its {POSE_NAME} "
+                    "missing from the download?)")
+        if any(_DEPTH.match(n) for n in files):
+            return f"depth frames ({rel}), but no {POSE_NAME}: not a sequence"
+    return f"no {POSE_NAME} in it or below: not a C3VD sequence, nothing in it is read"
+
+
+def _unread(root: Path, sequences: list, bare: list, screening: list) -> list[dict]:
+    """The download's folders the importer reads nothing from, each the topmost such (hidden ones aside), with the
+    reason: neither a sequence (nor in one) nor holding one, nor holding a screening withdrawal's mesh."""
+    inside = {s.folder for s in sequences} | set(bare)
+    keep = set()
+    for folder in inside | {Path(s.mesh).parent for s in screening}:
+        keep.update(p for p in (folder, *folder.parents) if p.is_relative_to(root))
+    out = []
+
+    def visit(folder: Path) -> None:
+        for child in sorted(p for p in folder.iterdir() if p.is_dir() and not p.name.startswith(".")):
+            if child in inside:
+                continue
+            if child in keep:
+                visit(child)
+            else:
+                out.append({"folder": child.relative_to(root).as_posix(), "reason": _holds(root, child)})
+
+    if root not in inside:
+        visit(root)
+    return out
 
 
 def find_download(root, intrinsics=None) -> tuple[list[Sequence], list, list[dict]]:
@@ -153,20 +201,24 @@ def find_download(root, intrinsics=None) -> tuple[list[Sequence], list, list[dic
     sequences : list of Sequence
     screening : list of :class:`colonbench.video.c3vd_screening.Screening`
     skipped : list of dict
-        ``folder`` (relative to ``root``) and ``reason``.
+        ``folder`` (relative to ``root``) and ``reason``: folders with ``pose.txt`` that are neither a registered
+        sequence nor a screening withdrawal, then every other folder the importer reads nothing from (the topmost
+        of each branch; a sequence's own folders, such as ``rgb/``, and hidden ones are not listed).
 
     Raises
     ------
     InputError
-        No such folder; neither a registered sequence nor a screening withdrawal (the message says what was
-        found); a sequence with depth frames missing in the middle, or with no camera intrinsics for its depth
-        frames; two sequences of one name; a screening withdrawal with several candidate meshes.
+        A file, not a folder (a zip: unzip it first); no such folder; neither a registered sequence nor a
+        screening withdrawal (the message says what was found, and names the folders skipped); a sequence with
+        depth frames missing in the middle, or with no camera intrinsics for its depth frames; two sequences of one
+        name; a screening withdrawal with several candidate meshes.
     """
     from colonbench.video.c3vd_screening import find_screening
 
     root = Path(root)
     sequences, bare = _walk(root, intrinsics)
     screening, skipped = find_screening(root, bare, {s.folder for s in sequences})
+    skipped += _unread(root, sequences, bare, screening)
     names = [s.name for s in sequences] + [s.name for s in screening]
     twice = sorted({n for n in names if names.count(n) > 1})
     if twice:
@@ -366,8 +418,8 @@ def check_conventions(name: str, raw: np.ndarray, depth: list, intrinsics: Fishe
         pts, _ = intrinsics.points(read_depth(depth[k], intrinsics), step)
         cam.append(pts)
     if sum(len(p) for p in cam) == 0:
-        raise InputError(f"sequence {name}: its checked depth frames ({', '.join(depth[k].name for k in picks[:3])}, "
-                         "...) hold no valid pixel; nothing to check the poses against")
+        raise InputError(f"sequence {name}: its checked depth frames ({listing([depth[k].name for k in picks], 3)}) "
+                         "hold no valid pixel; nothing to check the poses against")
     medians, best = {}, None
     for label, transposed, scale in CONVENTIONS:
         poses = camera_to_world(raw[picks], transposed, scale)

@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from colonbench.errors import InputError
+from colonbench.errors import InputError, listing
 from colonbench.video.c3vd import CONVENTIONS, _rigid, camera_to_world
 
 #: A screening sequence's folder name: ``cN_full...`` (its colon ``cN``) or C3VD v1's ``screening...`` (``c0``).
@@ -131,7 +131,7 @@ def find_screening(root: Path, folders: list[Path], taken: set) -> tuple[list[Sc
                                             for part in p.relative_to(root).with_suffix("").parts)]
         if len(own) > 1:
             raise InputError(f"{folder}: a screening withdrawal with {len(own)} candidate whole-colon meshes "
-                             f"({', '.join(str(p.relative_to(root)) for p in own[:4])}); keep one")
+                             f"({listing(p.relative_to(root) for p in own)}); keep one")
         if not own:
             skipped.append({"folder": rel, "reason": f"a screening withdrawal (pose.txt, no coverage mesh) without its "
                             f"whole-colon mesh: put the colon's full model ({colon}_full_model/..., or one mesh file "

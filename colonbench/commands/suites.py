@@ -6,6 +6,8 @@ from __future__ import annotations
 import argparse
 import time
 
+#: The datasets ``colonbench suites build`` reads (their layouts).
+BUILDERS = ("c3vd",)
 DATA_HELP = ("suite data folder (default $COLONBENCH_DATA, else $XDG_CACHE_HOME/colonbench/suites, else "
              "~/.cache/colonbench/suites)")
 
@@ -117,11 +119,14 @@ def _build(args):
 
     built = c3vd_suite.build_all(args.source_dir, args.data, frames_every=args.frames_every, width_px=args.width_px,
                                  workers=args.workers, intrinsics=args.intrinsics, progress=not args.quiet)
+    skipped = []
     for k, (suite, new) in enumerate(built):
+        entry = read_entry(Path(suite.folder))
+        if k == 0:   # the download's skipped folders, named once
+            skipped = entry["source"]["skipped"]
         if not new:
             print(f"{suite.id} is already built from this download in {suite.folder}: nothing to do")
             continue
-        entry = read_entry(Path(suite.folder))
         for name, seq in entry["source"]["sequences"].items():
             conv = seq.get("convention")
             if suite.task == "colon":
@@ -133,15 +138,26 @@ def _build(args):
                      if conv else "no depth frames: no pose check, no fused partial")
             print(f"{name}: {seq['samples']} samples, {seq['observed_share']:.1%} of the phantom observed; {check}"
                   + (f"; {len(seq['skipped_segments'])} segment sample(s) left out" if seq["skipped_segments"] else ""))
-        if k == 0:   # the download's skipped folders, once
-            for s in entry["source"]["skipped"]:
-                print(f"skipped {s['folder']}: {s['reason']}")
         what = "whole-colon reconstructions" if suite.task == "colon" else "samples"
         print(f"built {suite.id}: {suite.samples} {what} in {suite.folder} ({entry['build_seconds']:.0f} s)")
+    for s in skipped:
+        print(f"skipped {s['folder']}: {s['reason']}")
     for suite, _ in built:
         print(f"score it: colonbench benchmark --suites {suite.id} --methods METHOD --out DIR"
               + (f" --data {args.data}" if args.data else ""))
     return 0
+
+
+def _dataset(value: str) -> str:
+    """The ``suites build`` dataset argument: a layout colonbench builds from, or an error saying what goes where
+    (a folder given here is the download, which goes after --from)."""
+    from pathlib import Path
+
+    if value in BUILDERS:
+        return value
+    hint = f": the download's folder goes after --from, as in 'colonbench suites build c3vd --from {value}'"
+    raise argparse.ArgumentTypeError(f"{value!r} is not a dataset colonbench builds suites from ({', '.join(BUILDERS)})"
+                                     + (hint if Path(value).exists() else ""))
 
 
 def add_parsers(sub) -> None:
@@ -198,7 +214,8 @@ def add_parsers(sub) -> None:
                                        "into the suite cache under ids made from the download's file digests; a "
                                        "refused download leaves nothing behind (docs/benchmark.md, 'Real "
                                        "trajectories: C3VD').")
-    b.add_argument("dataset", choices=["c3vd"], help="the dataset's layout (c3vd: C3VD and C3VDv2)")
+    b.add_argument("dataset", type=_dataset, metavar="DATASET",
+                   help=f"the dataset's layout: {', '.join(BUILDERS)} (C3VD and C3VDv2)")
     b.add_argument("--from", dest="source_dir", required=True, metavar="DIR", help="the download's folder")
     b.add_argument("--data", "--out", dest="data", default=argparse.SUPPRESS, help=DATA_HELP)
     b.add_argument("--frames-every", type=int, default=5, metavar="K",
