@@ -122,6 +122,7 @@ def facts(suite) -> dict:
     inputs = np.array([s["points"]["input@0"]["n"] for s in samples])
     return {
         "suite": suite, "manifest": manifest, "manifest_file": manifest_file, "split": split,
+        "noiseless": set(map(float, split["noise_mm"])) == {0.0},
         "procedural": list(range(first, first + count)), "meshes": meshes,
         "attribution": mesh_attribution(meshes) if meshes else None,
         "published": published, "signature_file": verification.SIGNATURE_DIR / f"{suite.id}.json.gz",
@@ -146,9 +147,15 @@ def _shape(f) -> str:
     return "(" + ", ".join(dims) + ("," if len(dims) == 1 else "") + ")"
 
 
-def _field_text(f) -> str:
-    """A field's meaning, unit and storage, from its schema entry."""
+def _field_text(f, noiseless: bool) -> str:
+    """A field's meaning, unit and storage, from its schema entry; where the suite's data are stored noiseless
+    (its manifest's noise 0: the benchmark adds each noise level when it scores), its points and their noise say
+    so, as the card's metrics sentence does."""
     doc = "; ".join(x for x in f.doc.split("; ") if "train and validation" not in x)   # suites are test splits
+    if noiseless and f.name == "noise_mm":
+        doc += "; 0 in this suite's data: its noise levels are added when it is scored, not stored"
+    elif noiseless:
+        doc = doc.replace("noise included", "stored noiseless (the benchmark adds each noise level when it scores)")
     unit = "" if f.unit == "-" else f"; unit {f.unit}"
     frame = "" if f.frame in ("-", "") else f", frame: {f.frame}"
     where = f"stored at `{f.path}` {_shape(f)} {f.dtype}"
@@ -204,7 +211,7 @@ def card(suite) -> str:
            "## What it tests", "", s.tests[0].upper() + s.tests[1:] + ".", "",
            "Metrics: " + "; ".join(s.metrics) + f". Each sample is scored at Gaussian input noise {noise} mm "
            f"(noise seed {s.noise_seed}), added by the benchmark to the stored "
-           + ("noiseless points." if set(map(float, split["noise_mm"])) == {0.0} else "points.")
+           + ("noiseless points." if f["noiseless"] else "points.")
            + (f" Tracks: context margins {', '.join(f'{c:g}' for c in s.contexts_mm)} mm, {s.segment_mm:g} mm "
               "segments." if colon else ""), "",
            "## How it is made", "", " ".join(man["description"].split()), ""]
@@ -249,7 +256,7 @@ def card(suite) -> str:
                 "(mm, noise added at the suite's levels); the truth is the coverage (observed share of the "
                 "complete segment surface, a fraction in [0, 1]), points on the unobserved surface and the "
                 "centerline.", ""]
-    out += ["| field | meaning |", "|---|---|"] + [f"| `{x.name}` | {_field_text(x)} |" for x in _fields(s)]
+    out += ["| field | meaning |", "|---|---|"] + [f"| `{x.name}` | {_field_text(x, f['noiseless'])} |" for x in _fields(s)]
     cov, pts = f["coverage"], f["points"]
     out += ["", "Contracts: [docs/formats.md](../formats.md) (estimate JSON, export folder); every stored field: "
             "[docs/shards.md](../shards.md#shard-format-version-2). All geometry is in millimetres.", "",
@@ -316,7 +323,7 @@ def croissant(suite) -> dict:
         shards["containedIn"] = {"@id": "archive"}
     dist.append(shards)
     record = "reconstructions" if s.task == "colon" else "samples"
-    fields = [{"@type": "cr:Field", "@id": f"{record}/{x.name}", "name": x.name, "description": _field_text(x),
+    fields = [{"@type": "cr:Field", "@id": f"{record}/{x.name}", "name": x.name, "description": _field_text(x, f["noiseless"]),
                "dataType": "sc:Float" if x.dtype.startswith("float") else "sc:Integer",
                "source": {"fileSet": {"@id": "shards"}, "extract": {"column": x.path}}} for x in _fields(s)]
     what = ("one whole partial reconstruction of a colon, scored on exact per-face truth" if s.task == "colon"

@@ -106,3 +106,24 @@ def test_an_attribution_the_readme_no_longer_gives_fails_loudly(tmp_path, monkey
     (tmp_path / "meshes" / "README.md").write_text(readme.replace("`gca00060_large", "`gca00061_large"))
     with pytest.raises(ValueError, match="no row of gca00060"):
         cards.mesh_attribution(["gca00060"])
+
+
+def test_each_card_says_one_thing_of_the_stored_points_and_their_noise(demo_data):
+    """The stored points are noiseless (every suite's manifest stores noise 0) and the benchmark adds each noise
+    level when it scores: the metrics sentence and the field table say so alike."""
+    from colonbench.shards.reader import Shard
+
+    for s in suites.SUITES:
+        text = cards.card(s)
+        assert "added by the benchmark to the stored noiseless points" in text, s.id
+        points = "points" if s.task == "colon" else "partial_points"
+        rows = {r.split("|")[1].strip(" `"): r for r in text.splitlines() if r.startswith("| `")}
+        assert "noise included" not in rows[points] and "stored noiseless" in rows[points], (s.id, rows[points])
+        assert "0 in this suite's data" in rows["noise_mm"], (s.id, rows["noise_mm"])
+        fields = {f["name"]: f["description"] for r in cards.croissant(s)["recordSet"] for f in r["field"]}
+        assert "noise included" not in fields[points] and "stored noiseless" in fields[points], s.id
+    # what the demo suite's data hold: noise 0 stored with every sample, as the cards say
+    shard = sorted((demo_data / "demo-v1" / "test").glob("*.h5"))[0]
+    with Shard(shard) as sh:
+        assert all(float(sh.geometry(i)["noise_mm"]) == 0.0 for i in range(len(sh)))
+
