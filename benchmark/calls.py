@@ -12,8 +12,10 @@ says what became of each input of the call (docs/formats.md, "A program as a met
 * neither: unanswered. colonbench writes ``<sample_id>.unanswered``, saying why in one line: the call exited
   with status 0 without answering it; or it crashed, and then the crash is put on the input it was on when the
   call's output (standard error and output) names exactly one of the unanswered inputs, and otherwise the line
-  says that the call crashed before answering it and which input it failed on could not be told; or it was
-  stopped at its time limit, or could not start. Each names the call's kept standard error.
+  says that the call crashed before answering it and which input it failed on could not be told; where the
+  output names several unanswered inputs (a program that went on past them), each quotes its own lines (from
+  one naming it to the next naming another input);
+  or it was stopped at its time limit, or could not start. Each names the call's kept standard error.
 """
 
 from __future__ import annotations
@@ -35,6 +37,8 @@ POLL_S = 0.5
 ANSWERS = (".json", ".error")
 #: colonbench's own note on an input its call left without an answer.
 UNANSWERED = ".unanswered"
+#: The most characters of a call's output a note quotes.
+QUOTE = 200
 
 
 @dataclass
@@ -172,32 +176,66 @@ def _answer(folder: Path, sid: str) -> tuple[str, float | None]:
     return "answered", (sum(seconds.values()) if seconds else None)
 
 
-def _named(call: Call, sids: list[str]) -> list[str]:
-    """The inputs among ``sids`` that the call's standard error or output names (its id, not a longer one's)."""
-    text = ""
+def _owned(call: Call) -> dict[str, list[str]]:
+    """Each input's lines of the call's standard error and output (each stream on its own): from a line that names
+    it (:func:`_names`) to the next that names another of the call's inputs; only inputs named have an entry."""
+    owned: dict[str, list[str]] = {}
     for path in (call.stderr, call.stdout):
         try:
-            text += path.read_text(errors="replace") + "\n"
+            lines = [x for x in path.read_text(errors="replace").splitlines() if x.strip()]
         except OSError:
-            pass
-    return [s for s in sids if re.search(rf"(?<![\w-]){re.escape(s)}(?!\.?\d)", text)]
+            continue
+        owners: list[str] = []
+        for line in lines:
+            owners = [s for s in call.sids if _names(s, line)] or owners
+            for sid in owners:
+                owned.setdefault(sid, []).append(line)
+    return owned
+
+
+def _names(sid: str, line: str) -> bool:
+    """Whether a line names input ``sid``: its id, or its file's name, and not a longer id (``..._noise0`` is not
+    ``..._noise0.5``)."""
+    return re.search(rf"(?<![\w-]){re.escape(sid)}(?!\.?\d)", line) is not None
+
+
+def _quote(lines: list[str], limit: int = QUOTE) -> str:
+    """The end of ``lines`` as one line of at most ``limit`` characters, each line's spaces collapsed: whole lines,
+    from the last back; where the one before does not fit whole, its end from a word's start after ``...``, never
+    from inside a word (a file's name)."""
+    out: list[str] = []
+    for line in reversed([" ".join(x.split()) for x in lines]):
+        room = limit - len(" ".join(out)) - (1 if out else 0)
+        if len(line) <= room:
+            out.insert(0, line)
+            continue
+        words: list[str] = []
+        for word in reversed(line.split(" ")):
+            if len(" ".join(["...", word, *words])) > room:
+                break
+            words.insert(0, word)
+        if words:
+            out.insert(0, " ".join(["...", *words]))
+        break
+    return " ".join(out)
 
 
 def _tail(call: Call) -> str:
-    """The last two non-empty lines of the call's standard error, as one line of at most 200 characters."""
+    """The last two non-empty lines of the call's standard error, as one line (:func:`_quote`)."""
     try:
         lines = [x for x in call.stderr.read_text(errors="replace").splitlines() if x.strip()]
     except OSError:
         return ""
-    text = " ".join(" ".join(lines[-2:]).split())
-    return text if len(text) <= 200 else "..." + text[-197:]
+    return _quote(lines[-2:])
 
 
-def unanswered_message(call: Call, sid: str, answered: int, named: list[str], first: str) -> str:
+def unanswered_message(call: Call, sid: str, answered: int, named: dict, first: str) -> str:
     """Why input ``sid`` of ``call`` has no answer, in one line naming the call's kept standard error.
 
     The end of the call's standard error is quoted once: on the input the call crashed on, or, where its output
-    does not tell which, on the first unanswered input (``first``); the others name that input.
+    does not tell which, on the first unanswered input (``first``); the others name that input. Where its output
+    names several of the unanswered inputs (a program that went on past them), each of them quotes the end of its
+    own lines instead (:func:`_owned`), and the others say that it names them not.
 
     Parameters
     ----------
@@ -205,8 +243,8 @@ def unanswered_message(call: Call, sid: str, answered: int, named: list[str], fi
     sid : str
     answered : int
         How many of the call's inputs it answered (its own failures included).
-    named : list of str
-        The unanswered inputs its output names (:func:`_named`).
+    named : dict
+        The unanswered inputs its output names, each with its lines (:func:`_owned`).
     first : str
         The first unanswered input of the call.
     """
@@ -220,12 +258,20 @@ def unanswered_message(call: Call, sid: str, answered: int, named: list[str], fi
         return f"{call.why} ({call.name}, {answered} answered) before it answered {sid}; {where}"
     if call.status == 0:
         return f"{what} exited with status 0 without writing {sid}.json or {sid}.error; {where}"
-    if named == [sid]:
+    if list(named) == [sid]:
         return (f"{what} exited with status {call.status} on this input (the only unanswered input its output "
                 f"names) before answering it; {where}{ends}")
     if len(named) == 1:
-        return (f"{what} exited with status {call.status} on {named[0]} (the only unanswered input its output "
-                f"names) before it answered this one; {where}")
+        return (f"{what} exited with status {call.status} on {next(iter(named))} (the only unanswered input its "
+                f"output names) before it answered this one; {where}")
+    if sid in named:
+        own = _quote(named[sid])
+        return (f"{what} exited with status {call.status} before answering this input, one of {len(named)} "
+                f"unanswered inputs its output names; its output names it: {own}; {where}")
+    if named:
+        return (f"{what} exited with status {call.status} after {call.seconds:.1f} s before answering this input; "
+                f"its output names {len(named)} other unanswered inputs (each quotes its lines), not this one; "
+                f"{where}")
     quoted = ends if sid == first else f" (its end is quoted on {first})"
     return (f"{what} exited with status {call.status} after {call.seconds:.1f} s before answering this input; "
             f"which input it failed on, its output does not say; {where}{quoted}")
@@ -243,7 +289,8 @@ def settle(call: Call) -> dict[str, tuple[float, str]]:
     """
     answers = {s: _answer(call.folder, s) for s in call.sids}
     missing = [s for s, (kind, _) in answers.items() if kind == "none"]
-    named = _named(call, missing) if missing and call.status not in (0, None) else []
+    owned = _owned(call) if missing and call.status not in (0, None) else {}
+    named = {s: owned[s] for s in missing if s in owned}
     for sid in missing:
         note = unanswered_message(call, sid, len(call.sids) - len(missing), named, missing[0])
         (call.folder / f"{sid}{UNANSWERED}").write_text(one_line(note, 1000) + "\n")

@@ -215,3 +215,56 @@ def test_a_long_call_reports_each_input_as_it_answers_it(tmp_path):
     assert sum(n for _, n in done) == 3 and len(done) >= 2     # not all at once at the call's end
     assert done[0][0] < seen[-1][0] - 0.5
     assert (tmp_path / "run" / "logs" / "oracle" / "call-0001.stdout.txt").is_file()
+
+
+#: A program that goes on past the inputs it cannot do, saying on its standard error which and why, then exits 1;
+#: on lost-* it says nothing; on crash-* it says what it read and crashes, naming none of its inputs.
+PARTWAY = r'''
+import json, sys
+from pathlib import Path
+args = sys.argv[1:]
+out = Path(args[args.index("--out-dir") + 1])
+failed = 0
+for f in (Path(a) for a in args if a.endswith(".ply")):
+    if f.stem.startswith("bad"):
+        print(f"reading {f}", file=sys.stderr)
+        print(f"error: no lumen found after {len(f.stem)} tries", file=sys.stderr)
+        failed += 1
+    elif f.stem.startswith("crash"):
+        print(f"reading /data/inputs/{'a-rather-long-name-' * 3}.ply", file=sys.stderr)
+        print(f"error: no lumen found in /data/inputs/{'a-rather-long-name-' * 3}.ply after trying every seed it "
+              "was given, and then both of its fallbacks, the sphere fit and the plain cylinder", file=sys.stderr)
+        print("Segmentation fault", file=sys.stderr)
+        sys.exit(139)
+    elif not f.stem.startswith("lost"):     # lost-*: no answer, and nothing said
+        (out / f"{f.stem}.json").write_text(json.dumps({"coverage": 0.5}))
+sys.exit(1 if failed else 0)
+'''
+
+
+def test_a_call_that_fails_partway_puts_each_named_input_on_its_own_lines(tmp_path):
+    from colonbench.benchmark.external import ExecMethod
+
+    (tmp_path / "partway.py").write_text(PARTWAY)
+    long = "a-rather-long-segment-name-as-a-whole-colon-map-cuts-them"
+    sids = ["good-1", f"bad-{long}-0001", "good-2", f"bad-{long}-0002", "bad-3", "lost-4"]
+    method = ExecMethod(f"{sys.executable} {tmp_path / 'partway.py'}", predictions=tmp_path / "run" / "predictions")
+    cloud = np.random.default_rng(0).normal(size=(20, 3))
+    method.run([(s, cloud) for s in sids])
+    notes = {s: (method.folder / f"{s}.unanswered").read_text().strip() for s in sids[1:] if s.startswith("bad")}
+    assert not (method.folder / "good-1.unanswered").exists()
+    for sid, note in notes.items():
+        assert "its output does not say" not in note, note
+        own = note.split("its output names it: ", 1)[1]
+        assert own.startswith("reading ") and f"/{sid}.ply error: no lumen found after {len(sid)} tries;" in own
+        assert all(other not in own for other in notes if other != sid), note              # no other's lines
+    lost = (method.folder / "lost-4.unanswered").read_text()
+    assert "its output names 3 other unanswered inputs (each quotes its lines), not this one" in lost
+    # a crash naming no input, its last lines longer than the quote: from a line's start or a word's, not mid-name
+    method = ExecMethod(f"{sys.executable} {tmp_path / 'partway.py'}", predictions=tmp_path / "run2" / "predictions")
+    method.run([("crash-1", cloud), ("good-3", cloud)])
+    note = (method.folder / "crash-1.unanswered").read_text().strip()
+    tail = note.split("; it ends: ", 1)[1]
+    assert tail.startswith("... ") and tail.endswith("the plain cylinder Segmentation fault") and len(tail) <= 200
+    assert tail[4:].split()[0] in ("after trying every seed it was given, and then both of its fallbacks, the sphere "
+                                   "fit and the plain cylinder").split(), tail                # a whole word
