@@ -256,10 +256,16 @@ def card(suite) -> str:
                 "(mm, noise added at the suite's levels); the truth is the coverage (observed share of the "
                 "complete segment surface, a fraction in [0, 1]), points on the unobserved surface and the "
                 "centerline.", ""]
-    out += ["| field | meaning |", "|---|---|"] + [f"| `{x.name}` | {_field_text(x, f['noiseless'])} |" for x in _fields(s)]
+    out += ["| field | meaning |", "|---|---|"]
+    out += [f"| `{x.name}` | {_field_text(x, f['noiseless'])} |" for x in _fields(s)]
     cov, pts = f["coverage"], f["points"]
     out += ["", "Contracts: [docs/formats.md](../formats.md) (estimate JSON, export folder); every stored field: "
             "[docs/shards.md](../shards.md#shard-format-version-2). All geometry is in millimetres.", "",
+            f"Its Croissant metadata, [{s.id}.croissant.json]({s.id}.croissant.json), holds one record per sample "
+            "(record set `samples`: its shard and row, hole model, " + ("" if colon else "length, ")
+            + "true coverage and input points, from the published signature), which Croissant tools read from it "
+            "alone; the arrays above are in the HDF5 shards (record set `arrays`), which they do not read: "
+            f"`{_reader(s)}` does.", "",
             "From the published signature: " + ", ".join(f"{n} `{k}`" for k, n in sorted(f["hole_models"].items()))
             + (" samples; by length " + ", ".join(f"{n} of {k:g} mm" for k, n in sorted(f["lengths"].items()))
                if f["lengths"] else " samples")
@@ -292,6 +298,11 @@ def _file_object(id_, path: Path, fmt: str, description: str, sha256: str | None
 def croissant(suite) -> dict:
     """A suite's Croissant 1.0 metadata, a JSON-LD dict.
 
+    Its record set ``samples`` lists every sample of the suite (shard and row, hole model, length, true coverage,
+    input points, from the published signature) in the JSON-LD itself, so that Croissant tools
+    (``mlcroissant.Dataset(jsonld).records("samples")``) yield one record per sample without the data; ``arrays``
+    describes the fields of the HDF5 shards, which those tools do not read.
+
     Parameters
     ----------
     suite : str or Suite
@@ -322,12 +333,13 @@ def croissant(suite) -> dict:
                      "description": "a frozen archive of the suite's scored data (colonbench suites fetch)"})
         shards["containedIn"] = {"@id": "archive"}
     dist.append(shards)
-    record = "reconstructions" if s.task == "colon" else "samples"
-    fields = [{"@type": "cr:Field", "@id": f"{record}/{x.name}", "name": x.name, "description": _field_text(x, f["noiseless"]),
+    fields = [{"@type": "cr:Field", "@id": f"arrays/{x.name}", "name": x.name,
+               "description": _field_text(x, f["noiseless"]),
                "dataType": "sc:Float" if x.dtype.startswith("float") else "sc:Integer",
                "source": {"fileSet": {"@id": "shards"}, "extract": {"column": x.path}}} for x in _fields(s)]
     what = ("one whole partial reconstruction of a colon, scored on exact per-face truth" if s.task == "colon"
             else "one partial colon segment and its exact truth")
+    columns, rows = _sample_records(f)
     licenses = [LICENSES["MIT"]] + ([LICENSES[f["attribution"]["license"]]] if f["meshes"] else [])
     cite = f"{s.citation}; colonbench, generator {man['generator_version']}"
     if f["meshes"]:
@@ -339,14 +351,61 @@ def croissant(suite) -> dict:
                        f"{'whole-colon reconstructions' if s.task == 'colon' else 'segments'} of the {s.split} split "
                        f"of {_rel(f['manifest_file'])}, scored at input noise "
                        f"{', '.join(f'{n:g}' for n in s.noise_mm)} mm. Cite as {s.citation}. File paths are those "
-                       "of the colonbench repository. Card: docs/suites/" + f"{s.id}.md.",
+                       "of the colonbench repository. The record set samples lists every sample; arrays describes "
+                       "what its shards hold. Card: docs/suites/" + f"{s.id}.md.",
         "license": licenses if len(licenses) > 1 else licenses[0],
         "citeAs": cite, "version": f"{s.version}.0.0", "isLiveDataset": False,
         "keywords": ["colonoscopy", "coverage estimation", "point clouds", "3D reconstruction", "benchmark"],
         "distribution": dist,
-        "recordSet": [{"@type": "cr:RecordSet", "@id": record, "name": record, "description": what,
-                       "field": fields}],
+        "recordSet": [
+            {"@type": "cr:RecordSet", "@id": "samples", "name": "samples",
+             "description": f"one record per sample of the suite ({what}), from its published signature: where it "
+                            "lies in the suite's data and its truth", "field": columns, "data": rows},
+            {"@type": "cr:RecordSet", "@id": "arrays", "name": "arrays",
+             "description": f"what the HDF5 shards hold per sample ({what}), at row `index` of shard `shard` of its "
+                            "record in samples; Croissant tools such as mlcroissant read no HDF5 (this record set "
+                            f"yields nothing there): read them with {_reader(s)}", "field": fields}],
     }
+
+
+def _reader(suite) -> str:
+    return ("colonbench.shards.colonshard.ColonShard(path).sample(index)" if suite.task == "colon"
+            else "colonbench.shards.reader.Shard(path).geometry(index)")
+
+
+def _located(sample: str) -> tuple[str, int]:
+    """The shard (its path in the suite's data folder) and row of a signature's sample id: the benchmark's id of
+    it at noise 0, ``<split>_<shard stem>_<index>_noise0`` (:func:`colonbench.benchmark.exchange.sample_id`)."""
+    m = re.fullmatch(r"([^_/]+)_(.+)_(\d+)_noise0", sample)
+    if m is None:
+        raise ValueError(f"the signature's sample id {sample!r} is not <split>_<shard stem>_<index>_noise0")
+    return f"{m.group(1)}/{m.group(2)}.h5", int(m.group(3))
+
+
+def _sample_records(f: dict) -> tuple[list, list]:
+    """The Croissant record set ``samples``: its fields and its data, one record per sample of the published
+    signature (the suite's samples, in its order), which Croissant tools read from the JSON-LD itself."""
+    colon = f["suite"].task == "colon"
+    spec = [("shard", "sc:Text", "the HDF5 shard holding the sample: a path in the suite's data folder (<suite id>/ "
+             "under the suite cache)"),
+            ("index", "sc:Integer", "the sample's row in that shard; the benchmark names it <split>_<shard stem>_"
+             "<index, 3 digits>_noise<sigma> at each noise level"),
+            ("hole_model", "sc:Text", "how its holes were made (the hole model's name)")]
+    if not colon:
+        spec.append(("length_mm", "sc:Float", "the segment's length along the colon's centerline, mm"))
+    spec += [("coverage", "sc:Float", "true coverage: observed area / complete area of the "
+              + ("whole colon" if colon else "segment") + ", a fraction in [0, 1]"),
+             ("input_points", "sc:Integer", "points of its stored partial cloud, the method's input (before the "
+              "noise the benchmark adds)")]
+    fields = [{"@type": "cr:Field", "@id": f"samples/{name}", "name": name, "description": doc, "dataType": kind}
+              for name, kind, doc in spec]
+    rows = []
+    for x in f["published"]["samples"]:
+        shard, index = _located(x["sample"])
+        value = {"shard": shard, "index": index, "hole_model": x["hole_model"], "length_mm": x["length_mm"],
+                 "coverage": x["coverage"], "input_points": x["points"]["input@0"]["n"]}
+        rows.append({f"samples/{name}": value[name] for name, _, _ in spec})
+    return fields, rows
 
 
 def write(suite, out) -> tuple[Path, Path]:

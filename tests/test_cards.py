@@ -56,13 +56,16 @@ def test_croissant_metadata_has_the_required_keys_and_the_files_hashes():
         for d in files.values():
             if d["@type"] == "cr:FileObject":
                 assert cards._sha256(ROOT / d["contentUrl"]) == d["sha256"], (s.id, d["contentUrl"])
-        (record,) = meta["recordSet"]
-        names = {f["name"]: f for f in record["field"]}
+        sets = {r["@id"]: r for r in meta["recordSet"]}
+        assert set(sets) == {"samples", "arrays"}, s.id
+        names = {f["name"]: f for f in sets["arrays"]["field"]}
         want = ({"points", "coverage", "observed_faces", "positions"} if s.task == "colon"
                 else {"partial_points", "coverage", "hole_points", "centerline"})
         assert want <= set(names), s.id
         assert names["coverage"]["dataType"] == "sc:Float" and "fraction" in names["coverage"]["description"]
-        assert all(f["source"]["fileSet"]["@id"] == "shards" for f in record["field"])
+        assert all(f["source"]["fileSet"]["@id"] == "shards" for f in sets["arrays"]["field"])
+        rows = sets["samples"]["data"]          # the samples, listed in the JSON-LD itself
+        assert len(rows) == s.samples and {"samples/shard", "samples/index", "samples/coverage"} <= set(rows[0])
     real, demo = cards.croissant("real-v1"), cards.croissant("demo-v1")
     assert real["license"] == [cards.LICENSES["MIT"], cards.LICENSES["CC-BY-4.0"]] and "Burger et al." in real["citeAs"]
     assert demo["license"] == cards.LICENSES["MIT"] and "Burger" not in demo["citeAs"]
@@ -127,3 +130,30 @@ def test_each_card_says_one_thing_of_the_stored_points_and_their_noise(demo_data
     with Shard(shard) as sh:
         assert all(float(sh.geometry(i)["noise_mm"]) == 0.0 for i in range(len(sh)))
 
+
+@pytest.mark.filterwarnings("ignore::DeprecationWarning")   # rdflib's, inside mlcroissant
+def test_mlcroissant_reads_one_record_per_sample_of_each_suite(demo_data):
+    """records("samples") of a committed card yields the suite's samples, each naming where its arrays are; on
+    demo-v1 built here, each record is the sample its shard holds at its row."""
+    mlc = pytest.importorskip("mlcroissant", reason="mlcroissant is not installed (pip install 'colonbench[test]')")
+    from colonbench.shards.reader import Shard
+
+    for s in suites.SUITES:
+        records = list(mlc.Dataset(jsonld=str(CARDS / f"{s.id}.croissant.json")).records("samples"))
+        assert len(records) == s.samples, s.id
+        truth = [x["coverage"] for x in suites.published_signature(s)["samples"]]
+        assert [r["samples/coverage"] for r in records] == pytest.approx(truth), s.id
+    records = list(mlc.Dataset(jsonld=str(CARDS / "demo-v1.croissant.json")).records("samples"))
+    folder = demo_data / "demo-v1"
+    assert len(records) == sum(len(Shard(p)) for p in (folder / "test").glob("*.h5")) == 24
+    for r in records:
+        with Shard(folder / _text(r["samples/shard"])) as sh:
+            geo = sh.geometry(int(r["samples/index"]))
+        assert geo["coverage"] == pytest.approx(r["samples/coverage"], abs=1e-12)
+        assert str(geo["hole_model"]) == _text(r["samples/hole_model"])
+        assert len(geo["partial_points"]) == r["samples/input_points"]
+
+
+def _text(value) -> str:
+    """A text field of an mlcroissant record (bytes from files, str from data in the JSON-LD)."""
+    return value.decode() if isinstance(value, bytes) else str(value)
