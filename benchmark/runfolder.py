@@ -13,6 +13,7 @@ from __future__ import annotations
 import json
 import os
 import platform
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -109,6 +110,36 @@ def environment() -> dict:
         blas = np.show_config(mode="dicts").get("Build Dependencies", {}).get("blas", {})
         out["blas"] = f"{blas.get('name', '?')} {blas.get('version', '')}".strip()
     except (TypeError, AttributeError):
+        pass
+    out.update(kernels())
+    return out
+
+
+def kernels() -> dict:
+    """The compute kernels this process runs, which move the last bits of a result: the BLAS's core type
+    (OpenBLAS picks one per CPU; ``OPENBLAS_CORETYPE`` overrides it) and PyTorch's CPU capability
+    (``ATEN_CPU_CAPABILITY``).
+
+    Returns
+    -------
+    dict
+        ``blas_core`` (e.g. ``"Haswell"``; one entry per distinct BLAS library loaded, joined by ``,``) and
+        ``torch_cpu_capability`` (e.g. ``"AVX512"``), each where it can be told.
+    """
+    out = {}
+    try:
+        import scipy.linalg  # noqa: F401  (scipy's BLAS loaded, as numpy's is, for threadpoolctl to see)
+        from threadpoolctl import threadpool_info
+
+        cores = sorted({i.get("architecture") or "?" for i in threadpool_info() if i.get("user_api") == "blas"})
+        if cores:
+            out["blas_core"] = ",".join(cores)
+    except ImportError:
+        pass
+    try:
+        if "torch" in sys.modules:   # never imported for this: a method without the network runs without it
+            out["torch_cpu_capability"] = sys.modules["torch"].backends.cpu.get_cpu_capability()
+    except (AttributeError, RuntimeError):
         pass
     return out
 

@@ -225,6 +225,36 @@ def differences(ours: pd.DataFrame, reference: pd.DataFrame, flips: int = FLIPS,
     return pd.DataFrame(out, columns=[*key, "column", "ours", "reference", "allowed"])
 
 
+def reproduction(run_dir, suite, methods, track: str = tracks.DEFAULT) -> dict:
+    """How a run of a segment suite compares with the shipped rows of the same methods, as another machine may
+    differ (:func:`differences`; :data:`EXACT` methods with no flipped row).
+
+    Parameters
+    ----------
+    run_dir : path
+        A finished run of ``suite`` on ``track`` holding ``results/<method>.csv`` for every method.
+    methods : list of str
+        Methods to compare; each must have shipped rows.
+
+    Returns
+    -------
+    dict
+        ``{method: DataFrame}``, the differing cells of each method (empty where it reproduces).
+    """
+    item = load(suite, track=track)
+    if item is None or item[0].get("task") == "colon":
+        raise InputError(f"{suite.id}: no shipped rows of a segment suite on the {tracks.label(track)} to compare with")
+    rows = item[1]
+    out = {}
+    for m in methods:
+        ref = rows[rows["method"] == m]
+        if ref.empty:
+            raise InputError(f"{suite.id}: no shipped rows of {m}")
+        ours = read_rows(Path(run_dir) / "results" / f"{m}.csv")
+        out[m] = differences(ours, ref, counted=m not in EXACT)
+    return out
+
+
 def shipped_items(suite, exclude=(), track: str = tracks.DEFAULT) -> list:
     """The shipped results of ``suite`` on ``track`` as extra runs for a leaderboard (an empty list when there are
     none)."""
