@@ -8,12 +8,16 @@ repository's ``results/`` (marked ‡; :mod:`colonbench.benchmark.submitted`) as
 ``colonbench benchmark`` does, and writes, with no server needed (``file://``
 or a project page):
 
-* ``SITE/index.html``: the pages, what each suite tests and how to cite it, and
-  the coverage MAE of every method on every page, per noise level;
-* ``SITE/<suite>/<track>/index.html``: the tables and figures that
+* ``SITE/index.html``: per page a chart of every method's coverage MAE with its
+  95 % interval per noise level, failures marked (:mod:`colonbench.reports.chart`,
+  inline SVG), then the pages, what each suite tests and how to cite it, and the
+  same MAE of every method on every page in tables, per noise level;
+* ``SITE/<suite>/<track>/index.html``: the page's chart and the figures that
   :func:`colonbench.reports.leaderboard.write_leaderboard` writes into that
-  folder: per noise level every column of the leaderboard table (MAE with its
-  interval, failures, interval scores, ...), precision and recall, breakdowns;
+  folder, then the tables (:mod:`colonbench.reports.site_tables`), sized for a
+  1280 px window: per noise level the leaderboard table (MAE with its interval,
+  failures, ...), the interval and review scores, precision and recall;
+  breakdowns; every statistic;
 * ``SITE/methods/<method>.html``: a method's version, how it was run, its model
   card where one ships, and the package versions and machine its run recorded.
 
@@ -25,7 +29,6 @@ lines) is escaped.
 from __future__ import annotations
 
 import json
-import re
 import shutil
 from pathlib import Path
 
@@ -34,27 +37,17 @@ import pandas as pd
 from colonbench._version import __version__
 from colonbench.benchmark import tracks
 from colonbench.benchmark.runfolder import RUN_FILE, read_run, write_json
-from colonbench.benchmark.submitted import is_submitted
 from colonbench.errors import InputError
+from colonbench.reports.chart import mae_chart
 from colonbench.reports.leaderboard import data_line, suite_state
-from colonbench.reports.webpage import esc, fmt, inline, kv_table, page, slug, table, with_interval
+from colonbench.reports.site_tables import (
+    breakdown_tables, chart_rows, every_tables, interval_table, main_table, method_cell, pr_table, row_attrs, source)
+from colonbench.reports.webpage import esc, fmt, inline, interval_cell, kv_table, page, slug, table, with_interval
 
 #: The track of a run whose run.json names none.
 DEFAULT_TRACK = tracks.DEFAULT
 #: Marks a site folder (which a rebuild may replace) and lists its pages.
 SITE_FILE = "site.json"
-#: Precision / recall statistics, shown in their own table rather than the main one.
-PR_COLUMN = re.compile(r"^(holes|centerline)_(precision|recall)_(.+)_(mean|median|q25|q75|undefined)$")
-#: Columns that lead the main table where present, in this order; the others follow in the frame's order.
-FIRST = ("track", "segments", "maps", "failed", "failed_maps", "failed_segments", "coverage_undefined",
-         "coverage_mae", "segment_mae", "vs_baseline")
-#: Columns the main table leaves out: the noise level is the section, the others are in other cells.
-HIDDEN = {"noise_mm", "method", "version", "reference", "baseline", "vs_baseline_pairs"}
-LABELS = {"coverage_undefined": "undefined", "coverage_mae": "MAE [95 % CI]", "segment_mae": "segment MAE [95 % CI]",
-          "vs_baseline": "Δ vs best baseline [95 % CI]", "coverage_median": "median", "coverage_bias": "bias",
-          "coverage_q95": "q95", "interval_covered": "truth in interval, %", "interval_width": "interval width",
-          "interval_segments": "segments with an interval", "seconds": "s/segment", "seconds_per_map": "s/map",
-          "takes_length": "takes the length"}
 #: Model cards that ship, by the model named at the head of a method's version (``small@avg9,...``).
 CARDS = {"small": "models/MODEL_CARD.md"}
 #: What each figure of a page shows (a triplet figure is named by its file).
@@ -62,6 +55,11 @@ CAPTIONS = {"boxplots": "Box plots per noise level (the paper's Fig. 4): hole an
                         "at 2 mm and the absolute coverage error, by method.",
             "scatter": "Estimated against true coverage, one panel per method.",
             "colon-maps": "One colon's map, truth and error side by side."}
+#: What the headline chart shows, under it.
+CHART_CAPTION = ("Coverage MAE in percentage points: a dot at the MAE, a bar over its 95 % bootstrap interval over "
+                 "segments; orange: the runs given, grey: references (*); † shipped, ‡ submitted results. ✕ n failed: "
+                 "the method failed on n samples, each scored as the farther of coverage 0 and 1 (so counted in the "
+                 "MAE). A name links to the method's page.")
 
 # ---------------------------------------------------------------------------------------------------- the runs
 
@@ -142,89 +140,28 @@ def groups(paths, shipped: bool = True, submitted: bool = True) -> dict:
 
 
 def headline(tab: pd.DataFrame, suite) -> pd.DataFrame:
-    """Rows ``noise_mm``, ``method``, ``mae``, ``mae_lo``, ``mae_hi`` of a leaderboard table (a whole-colon
-    table: the segment MAE of its headline track, as the cross-suite table of ``colonbench benchmark``)."""
+    """Rows ``noise_mm``, ``method``, ``mae``, ``mae_lo``, ``mae_hi``, ``failed`` of a leaderboard table (a
+    whole-colon table: the segment MAE of its headline track, as the cross-suite table of ``colonbench benchmark``,
+    and its failed segments and maps)."""
     col = "coverage_mae" if "coverage_mae" in tab.columns else "segment_mae"
     if col == "segment_mae":
         tab = tab[tab["track"] == (getattr(suite, "headline_track", None) or tab["track"].iloc[0])]
-    return tab.rename(columns={col: "mae", f"{col}_lo": "mae_lo", f"{col}_hi": "mae_hi"})[
-        ["noise_mm", "method", "mae", "mae_lo", "mae_hi"]]
+    failed = sum(tab[c].fillna(0) for c in ("failed", "failed_segments", "failed_maps") if c in tab.columns)
+    return tab.assign(failed=failed if len(tab) else 0).rename(
+        columns={col: "mae", f"{col}_lo": "mae_lo", f"{col}_hi": "mae_hi"})[
+        ["noise_mm", "method", "mae", "mae_lo", "mae_hi", "failed"]]
 
 
-def _is_shipped(rec: dict) -> bool:
-    return str(rec.get("run", "")).startswith("shipped")
+def chart_figure(mae: pd.DataFrame, methods: dict, root: str, title: str, cid: str) -> str:
+    """The headline chart of one page (:func:`colonbench.reports.chart.mae_chart`) as a figure with its caption."""
+    return (f'<figure class="chart">{mae_chart(chart_rows(mae, methods, root), title, cid)}'
+            f"<figcaption>{esc(CHART_CAPTION)}</figcaption></figure>")
 
 
-def _source(rec: dict) -> str:
-    """``shipped``, ``submitted`` or ``mine``: where a method's rows came from."""
-    return "shipped" if _is_shipped(rec) else "submitted" if is_submitted(rec) else "mine"
-
-
-def _method_cell(m: str, methods: dict, root: str) -> tuple[str, str]:
-    rec = methods.get(m, {})
-    mark = (" *" if rec.get("reference") else "") + {"shipped": " †", "submitted": " ‡"}.get(_source(rec), "")
-    return f'<a href="{root}methods/{esc(slug(m))}.html">{esc(m)}</a>{mark}', m
-
-
-def _row(m: str, methods: dict) -> dict:
-    return {"data-method": m, "class": _source(methods.get(m, {}))}
-
-
-def main_table(tid: str, g: pd.DataFrame, methods: dict, root: str) -> str:
-    """Every column of the leaderboard frame ``g`` (one noise level) but precision / recall, intervals merged."""
-    cols = [c for c in g.columns if c not in HIDDEN and not PR_COLUMN.match(c)
-            and not (c.endswith(("_lo", "_hi")) and c[:-3] in g.columns)]
-    cols = [c for c in FIRST if c in cols] + [c for c in cols if c not in FIRST]
-    heads = [("method", False), ("source", False), ("version", False)] + [
-        (LABELS.get(c, c.replace("_", " ")), g[c].dtype.kind in "ifb" or f"{c}_lo" in g.columns) for c in cols]
-    rows = []
-    for _, r in g.iterrows():
-        rec = methods.get(r["method"], {})
-        run = str(rec.get("run", ""))
-        src = _source(rec) if _source(rec) != "mine" else "/".join(Path(run).parts[-2:])
-        cells = [_method_cell(r["method"], methods, root), (f'<span title="{esc(run)}">{esc(src)}</span>', src),
-                 (esc(rec.get("version", r.get("version", ""))), None)]
-        for c in cols:
-            text, v = with_interval(r, c) if f"{c}_lo" in g.columns else fmt(r[c], c)
-            cells.append((esc(text), v))
-        rows.append((_row(r["method"], methods), cells))
-    return table(tid, heads, rows)
-
-
-def pr_table(tid: str, g: pd.DataFrame, methods: dict, root: str) -> str:
-    """Precision and recall, mean (median), per threshold; empty where the frame has none."""
-    cols = [c for c in g.columns if PR_COLUMN.match(c) and c.endswith("_mean")]
-    if not cols:
-        return ""
-    heads = [("method", False)] + [(re.sub(r"^(\w+?)_(precision|recall)_(.+)_mean$",
-                                           lambda m: f"{m[1]} {m[2][0].upper()} @{m[3]}", c), True) for c in cols]
-    rows = [(_row(r["method"], methods), [_method_cell(r["method"], methods, root)] + [
-        (esc(f"{fmt(r[c])[0]} ({fmt(r[c[:-5] + '_median'])[0]})"), fmt(r[c])[1]) for c in cols])
-        for _, r in g.iterrows()]
-    return "<h3>Holes and centerline: precision (P) and recall (R), mean (median)</h3>" + table(tid, heads, rows)
-
-
-def breakdown_tables(bd: pd.DataFrame, methods: dict, root: str) -> str:
-    """Per grouping and noise level, methods x groups: MAE [95 % CI] (segments), as breakdowns.md."""
-    parts = []
-    for by, g in bd.groupby("by", sort=False):
-        for noise in [None] if by == "noise_mm" else sorted(g["noise_mm"].unique()):
-            h = g if noise is None else g[g["noise_mm"] == noise]
-            names = sorted(h["group"].astype(str).unique(), key=lambda x: (len(x), x))
-            rows = []
-            for m, r in h.groupby("method", sort=True):
-                cells = {str(x["group"]): (esc(f"{with_interval(x, 'mae')[0]} ({x['segments']})"), repr(x["mae"]))
-                         for _, x in r.iterrows()}
-                rows.append((_row(m, methods), [_method_cell(m, methods, root)] + [cells.get(c, ("", ""))
-                                                                                   for c in names]))
-            title = f"By {by.replace('_', ' ')}" + ("" if noise is None else f", noise {noise:g} mm")
-            tid = f"breakdown-{by}-{'all' if noise is None else f'{noise:g}'}"
-            parts.append(f"<h3>{esc(title)}</h3>" + table(tid, [("method", False)] + [(c, True) for c in names], rows))
-    return "\n".join(parts)
-
-
-def suite_page(key, g: dict, folder: Path, lb: dict, tab: pd.DataFrame, bd, figures: list[str]) -> str:
-    """The page of one suite (or data) and track."""
+def suite_page(key, g: dict, folder: Path, lb: dict, tab: pd.DataFrame, bd, figures: list[str],
+               mae: pd.DataFrame) -> str:
+    """The page of one suite (or data) and track: what it is, its figures (the headline chart first), then its
+    tables."""
     (pid, track), s, root, methods = key, g["suite"], "../../", lb["methods"]
     html_ = [f"<h1>{esc(pid)} · track {esc(track)}</h1>"]
     if s is not None:
@@ -237,35 +174,31 @@ def suite_page(key, g: dict, folder: Path, lb: dict, tab: pd.DataFrame, bd, figu
               "interval over segments; Δ: the paired difference of the absolute error against the best baseline "
               "(negative: better). Rows marked * are references (given ground truth, or the constant guess); † marks "
               "the shipped reference results, ‡ submitted results (others' runs, checked by colonbench results check "
-              "and kept in the repository's results/). Click a column header to sort.</p>"]
+              "and kept in the repository's results/). A method's version is on its page. Click a column header to "
+              "sort.</p>"]
     html_ += [f'<p class="note">Left out of this page: {esc(n)}.</p>' for n in lb.get("notes") or ()]
     html_ += ["<p>Files: " + " ".join(
                   f'<a href="{f}">{f}</a>' for f in ("leaderboard.md", "leaderboard.csv", "leaderboard.json",
                                                      "breakdowns.md", "breakdowns.csv") if (folder / f).is_file())
-              + "</p>"]
+              + "</p>", "<h2>Figures</h2>", chart_figure(mae, methods, root, f"{pid} · track {track}", "chart")]
+    html_ += [f'<figure><img src="{esc(f)}" alt="{esc(cap)}"><figcaption>{esc(cap)}</figcaption></figure>'
+              for f in figures for cap in [CAPTIONS.get(f[:-4], f[:-4].replace("-", " "))]]
     for noise, h in tab.groupby("noise_mm", sort=True):
         n = f"noise{noise:g}"
         html_ += [f'<h2 id="{n}">Noise sigma = {noise:g} mm</h2>', main_table(f"coverage-{n}", h, methods, root),
-                  pr_table(f"pr-{n}", h, methods, root)]
+                  interval_table(f"intervals-{n}", h, methods, root), pr_table(f"pr-{n}", h, methods, root)]
     extra = pd.DataFrame(lb.get("in_context") or [])
     if len(extra):
         html_ += ["<h2>In context vs segment-only, the same segments</h2>", table(
             "in-context", [(c, extra[c].dtype.kind in "if") for c in extra.columns],
             [({}, [(esc(t), v) for t, v in (fmt(x, c) for c, x in r.items())]) for _, r in extra.iterrows()])]
     if bd is not None and len(bd):
-        html_ += ['<h2>Breakdowns</h2><p class="note">Coverage MAE in points with its 95 % interval over the '
-                  "group's segments, and the group's size.</p>", breakdown_tables(bd, methods, root)]
-    if figures:
-        html_ += ["<h2>Figures</h2>"] + [
-            f'<figure><img src="{esc(f)}" alt="{esc(cap)}"><figcaption>{esc(cap)}</figcaption></figure>'
-            for f in figures for cap in [CAPTIONS.get(f[:-4], f[:-4].replace("-", " "))]]
-    every = [(_row(r["method"], methods), [(esc(t), v) for t, v in (fmt(r[c], c) for c in tab.columns)])
-             for _, r in tab.iterrows()]
-    html_ += ["<h2>Every statistic</h2><details><summary>the leaderboard table as computed (leaderboard.csv)"
-              "</summary>", table("all-columns", [(c, tab[c].dtype.kind in "ifb") for c in tab.columns], every),
-              "</details>",
+        html_ += ['<h2>Breakdowns</h2><p class="note">Coverage MAE in percentage points with its 95 % interval over '
+                  "the group's segments, and the group's size.</p>", breakdown_tables(bd, methods, root)]
+    html_ += ["<h2>Every statistic</h2><details><summary>the leaderboard table as computed (leaderboard.csv; the "
+              "versions are on the methods' pages)</summary>", every_tables(tab, methods, root), "</details>",
               "<p>Runs: " + ", ".join(f"<code>{esc(r['path'])}</code>" for r in lb["runs"]) + ".</p>"]
-    return page(f"{pid} · {track}: colonbench leaderboard", "\n".join(html_), root)
+    return page(f"{pid} · track {track}: colonbench leaderboard", "\n".join(html_), root)
 
 
 def model_card(version: str) -> str | None:
@@ -289,7 +222,7 @@ def method_page(name: str, seen: list[dict]) -> str:
                   if "takes_length" in rec else {}),
                "source": {"shipped": "shipped reference results",
                           "submitted": f"submitted results ({rec.get('run', '')[len('submitted '):]} in the "
-                                       "repository's results/)"}.get(_source(rec), rec.get("run", ""))}
+                                       "repository's results/)"}.get(source(rec), rec.get("run", ""))}
         mae = [({}, [(esc(f"{r['noise_mm']:g}"), repr(r["noise_mm"])),
                      (esc(with_interval(r, "mae")[0]), fmt(r["mae"])[1])]) for _, r in a["mae"].iterrows()]
         body += [f'<h2><a href="../{esc(a["pid"])}/{esc(a["track"])}/index.html">{esc(a["pid"])} · track '
@@ -312,11 +245,12 @@ def method_page(name: str, seen: list[dict]) -> str:
 
 
 def index_page(pages: list[dict]) -> str:
-    """The site's front page: the pages and every method's MAE on each, per noise level."""
+    """The site's front page: the headline chart of each page, the pages, and every method's MAE on each, per
+    noise level."""
     rows = []
     for p in pages:
         s, lb = p["suite"], p["lb"]
-        mine = sorted(m for m, r in lb["methods"].items() if _source(r) == "mine")
+        mine = sorted(m for m, r in lb["methods"].items() if source(r) == "mine")
         rows.append(({"data-page": p["name"]}, [
             (f'<a href="{esc(p["name"])}/index.html">{esc(p["pid"])}</a>', p["pid"]), (esc(p["track"]), p["track"]),
             (esc(s.tests if s else "not a named suite"), None),
@@ -326,21 +260,24 @@ def index_page(pages: list[dict]) -> str:
     body = ["<h1>colonbench leaderboard</h1>", "<p>Coverage estimation for colonoscopy: each page is one suite (or "
             "dataset) and track, the built-in methods' shipped results (†) and the submitted results (‡) beside "
             "the runs given; * marks reference rows. Click a column header to sort.</p>",
-            table("pages", [("suite", False), ("track", False), ("what it tests", False), ("cite as", False),
-                            ("data", False), ("runs given", False)], rows)]
+            "<h2>Coverage MAE, percentage points</h2>"]
+    for i, p in enumerate(pages):
+        name = f"{p['pid']} · track {p['track']}"
+        body += [f'<h3><a href="{esc(p["name"])}/index.html">{esc(name)}</a></h3>',
+                 chart_figure(p["mae"], p["lb"]["methods"], "", name, f"chart-{i + 1}")]
+    body += ["<h2>Pages</h2>", table("pages", [
+        ("suite", False), ("track", False), ("what it tests", False), ("cite as", False), ("data", False),
+        ("runs given", False)], rows)]
     recs = {m: r for p in pages for m, r in p["lb"]["methods"].items()}
     summary = pd.concat([p["mae"].assign(page=p["name"]) for p in pages], ignore_index=True)
     for noise, g in summary.groupby("noise_mm", sort=True):
         keyed = {(r["method"], r["page"]): r for _, r in g.iterrows()}
-        order = g.groupby("method")["mae"].mean().reset_index()
-        order["reference"] = order["method"].map(lambda m: bool(recs.get(m, {}).get("reference")))
-        trs = [(_row(m, recs), [_method_cell(m, recs, "")] + [
-            ("—", "") if (m, p["name"]) not in keyed else
-            (esc(with_interval(keyed[m, p["name"]], "mae")[0]), fmt(keyed[m, p["name"]]["mae"])[1]) for p in pages])
-            for m in order.sort_values(["reference", "mae", "method"], na_position="last")["method"]]
-        body += [f"<h2>Coverage MAE, points, noise sigma = {noise:g} mm</h2>", table(
-            f"summary-noise{noise:g}", [("method", False)] + [(f"{p['pid']} · {p['track']}", True) for p in pages],
-            trs)]
+        trs = [(row_attrs(m, recs), [method_cell(m, recs, "")] + [
+            ("—", "") if (m, p["name"]) not in keyed else interval_cell(keyed[m, p["name"]], "mae") for p in pages])
+            for m in dict.fromkeys(chart_rows(g, recs, "")["method"])]
+        heads = [("method", False)] + [(f"{p['pid']} · track {p['track']}", True) for p in pages]
+        body += [f"<h2>Coverage MAE [95 % CI], percentage points, noise sigma = {noise:g} mm</h2>",
+                 table(f"summary-noise{noise:g}", heads, trs)]
     return page("colonbench leaderboard", "\n".join(body), "")
 
 
@@ -360,8 +297,8 @@ def _write_pages(found: dict, out: Path, figures: bool) -> tuple[list, dict, lis
         tab = pd.read_csv(folder / "leaderboard.csv")
         bd = pd.read_csv(folder / "breakdowns.csv") if (folder / "breakdowns.csv").is_file() else None
         pngs = [Path(p).name for p in res["paths"] if str(p).endswith(".png")]
-        (folder / "index.html").write_text(suite_page(key, g, folder, lb, tab, bd, pngs))
         mae = headline(tab, g["suite"])
+        (folder / "index.html").write_text(suite_page(key, g, folder, lb, tab, bd, pngs, mae))
         pages.append({"pid": pid, "track": track, "name": f"{pid}/{track}", "suite": g["suite"], "lb": lb,
                       "mae": mae})
         written += [*res["paths"], folder / "index.html"]

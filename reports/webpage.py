@@ -22,11 +22,14 @@ COUNTS = {"segments", "maps", "failed", "failed_maps", "failed_segments", "estim
           "interval_segments", "end_unobserved"}
 #: Every page's style, inline.
 STYLE = """body{font:15px/1.45 system-ui,sans-serif;margin:0 auto;max-width:1600px;padding:1em 2em;color:#222}
-table{border-collapse:collapse;margin:.6em 0 1.2em;font-size:13px}th,td{border:1px solid #ccc;padding:3px 7px}
-th{background:#eef2f7;cursor:pointer;white-space:nowrap}td.n,td:first-child{white-space:nowrap}td.n{text-align:right}
+table{border-collapse:collapse;margin:.6em 0 1.2em;font-size:13px}th,td{border:1px solid #ccc;padding:3px 6px}
+th{background:#eef2f7;cursor:pointer;vertical-align:bottom}td.n{text-align:right}td:first-child{white-space:nowrap}
 th[aria-sort=ascending]::after{content:" \\25B2"}th[aria-sort=descending]::after{content:" \\25BC"}
-tr.mine td{background:#fff7e0}code,pre{font-size:12px;background:#f4f4f4}pre{padding:.6em;white-space:pre-wrap}
-img{max-width:100%}.wrap{overflow-x:auto}.note{color:#555;font-size:13px}"""
+.ci{white-space:nowrap;color:#555}tr.mine td{background:#fff7e0}code,pre{font-size:12px;background:#f4f4f4}
+pre{padding:.6em;white-space:pre-wrap}img,svg.chart{max-width:100%;height:auto}.wrap{overflow-x:auto}
+.note,figcaption{color:#555;font-size:13px}figure{margin:1em 0 1.5em}
+svg.chart{font:12px system-ui,sans-serif;fill:#222}svg.chart .panel{font-weight:600}svg.chart .tick{fill:#555}
+svg.chart a text{fill:#1a4f9c}svg.chart text.failed{font-weight:600}"""
 #: Every page's table sorter, inline: a click (or Enter) on a header sorts by that column, ascending then descending.
 SORTER = """document.querySelectorAll("table.sortable th").forEach(function (th) {
   th.tabIndex = 0; th.addEventListener("click", function () { sortBy(th); });
@@ -95,6 +98,14 @@ def with_interval(r, col: str) -> tuple[str, str]:
     sign = "+" if col.startswith("vs_") else ""
     ci = "" if missing(lo) or missing(hi) else f" [{lo:{sign}.2f}, {hi:{sign}.2f}]"
     return f"{v:{sign}.2f}{ci}", repr(float(v))
+
+
+def interval_cell(r, col: str) -> tuple[str, str]:
+    """A cell of :func:`with_interval` as HTML: the value, then its interval kept on one line (a narrow column
+    wraps between the two)."""
+    text, v = with_interval(r, col)
+    value, _, ci = text.partition(" [")
+    return esc(value) + (f' <span class="ci">[{esc(ci)}</span>' if ci else ""), v
 
 
 def _attrs(d: dict) -> str:

@@ -67,7 +67,7 @@ def test_the_page_of_a_benchmark_folder_in_chromium(site):
         summary = [m for m, _ in rows(driver, "summary-noise0")]
         assert set(summary) == published | {"constant_method"}
         driver.find_element(By.CSS_SELECTOR, "#pages a").click()               # follow to the suite's page
-        assert driver.title.startswith("demo-v1 · points")
+        assert driver.title.startswith("demo-v1 · track points")
         assert "Cite as demo-v1 (cbs1-" in driver.find_element(By.TAG_NAME, "body").text
         images = driver.execute_script("return Array.from(document.images).map(i => i.complete && i.naturalWidth)")
         assert len(images) >= 2 and all(images)                                # the figures, loaded from file://
@@ -212,3 +212,77 @@ def test_the_chart_draws_each_mae_with_its_interval_and_marks_failures():
     gone = marks["gone", 0.5]
     assert gone.find(f"{ns}circle") is None and "n/a" in "".join(gone.itertext()) and "24 failed" in \
         "".join(gone.itertext())
+
+
+def test_the_index_shows_the_headline_chart_before_the_tables(site):
+    """Done when: the index holds one chart per page, every method of the page on it, before the tables; a suite
+    page's figures come before its long tables."""
+    index = (site / "index.html").read_text()
+    tab = pd.read_csv(site / "demo-v1" / "points" / "leaderboard.csv")
+    assert index.count("<svg") == 1 and 'aria-label="Coverage MAE' in index
+    assert index.index("<svg") < index.index('id="pages"') < index.index('id="summary-noise0"')
+    for _, r in tab.iterrows():
+        assert f'data-method="{r["method"]}" data-noise="{r["noise_mm"]:g}"' in index
+    page = (site / "demo-v1" / "points" / "index.html").read_text()
+    assert page.index("<svg") < page.index("<figure><img") < page.index('id="coverage-noise0"')
+
+
+def test_a_method_with_failures_is_marked_on_the_chart(bench, demo_data, tmp_path):
+    """Done when: a run whose method failed on every segment shows on the index's chart with a failure mark and the
+    count, at each noise level; the others have none."""
+    import re
+
+    broken = tmp_path / "broken"
+    assert main(["evaluate", str(demo_data / "demo-v1"), "--methods", "plugin_methods:Broken", "--out", str(broken),
+                 "--quiet"]) == 0
+    out = tmp_path / "site"
+    assert main(["leaderboard", str(bench), str(broken), "--out", str(out), "--html", "--no-figures"]) == 0
+    index = (out / "index.html").read_text()
+    marks = {m: c for c, m in re.findall(r'<g class="([^"]*)" data-method="([^"]*)" data-noise="0.5">', index)}
+    assert "constant_method" in marks and {m for m, c in marks.items() if c == "mark failed"} == {"broken"}
+    assert index.count("✕ 24 failed</text>") == 2
+
+
+def test_headings_say_percentage_points(site):
+    """Done when: no heading, column header, caption, chart text or note says 'points' alone, which a reader could
+    take for the points track: it says 'percentage points' (the track reads 'track points')."""
+    import re
+
+    for html in site.rglob("*.html"):
+        text = html.read_text()
+        found = re.findall(r"<(h[1-6]|th|figcaption|caption|text|title|desc)\b[^>]*>(.*?)</\1>", text, re.S) + \
+            [("note", t) for t in re.findall(r'<p class="note">(.*?)</p>', text, re.S)]
+        for tag, words in found:
+            plain = re.sub(r"percentage points|track points|points track", "", re.sub(r"<[^>]+>", "", words))
+            assert not re.search(r"\bpoints\b", plain), (html, tag, words)
+
+
+def test_the_version_string_is_on_the_method_page_not_the_suite_page(site):
+    tab = pd.read_csv(site / "demo-v1" / "points" / "leaderboard.csv")
+    page = (site / "demo-v1" / "points" / "index.html").read_text()
+    version = tab.set_index("method").loc["completion", "version"].iloc[0]
+    assert ">version<" not in page and version not in page
+    assert version in (site / "methods" / "completion.html").read_text()
+
+
+@pytest.mark.skipif(browser.binaries() is None, reason="Chromium is not installed")
+def test_the_pages_fit_a_1280_px_window(site):
+    """Done when: at 1280 px no table of the suite page or the index (its details open) is wider than its container
+    and the page needs no horizontal scrollbar; the index's chart is in the first screen."""
+    from selenium.webdriver.common.by import By
+
+    tables = """document.querySelectorAll("details").forEach(function (d) { d.open = true; });
+      return Array.from(document.querySelectorAll("table")).map(function (t) {
+        return [t.id, t.scrollWidth, t.parentElement.clientWidth]; });"""
+    with browser.chromium(1280, 900) as driver:
+        for page in (site / "demo-v1" / "points" / "index.html", site / "index.html"):
+            driver.get(page.as_uri())
+            assert driver.execute_script("return window.innerWidth") == 1280
+            wide = [t for t in driver.execute_script(tables) if t[1] > t[2]]
+            assert not wide, (page, wide)
+            assert driver.execute_script("return document.documentElement.scrollWidth") <= 1280, page
+            if page.parent.name == "points":
+                heads = [h.text for h in driver.find_elements(By.CSS_SELECTOR, "#coverage-noise0 th")]
+                assert "MAE [95 % CI]" in heads and "version" not in heads
+        chart = driver.find_element(By.CSS_SELECTOR, "svg[role=img]").rect
+        assert chart["width"] > 600 and chart["x"] + chart["width"] <= 1280 and 0 < chart["y"] < 900 - 200
