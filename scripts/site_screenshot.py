@@ -1,9 +1,13 @@
-"""A page of the leaderboard site in headless Chromium, sorted by a column, as a PNG (docs/leaderboard-page.png).
+"""A page of the leaderboard site in headless Chromium, sorted by a column if asked, as a PNG.
+
+docs/leaderboard-page.png is the site's front page, its headline chart in view, in a 1280 x 900 window:
 
     colonbench benchmark --methods "exec:python examples/constant_method.py" --suites demo-v1 --out runs/try
     colonbench leaderboard runs/try --out site --html
-    python scripts/site_screenshot.py site/demo-v1/points/index.html --sort "MAE [95 % CI]" \\
-        --out docs/leaderboard-page.png
+    python scripts/site_screenshot.py site/index.html --out docs/leaderboard-page.png
+
+A suite's page, sorted: ``python scripts/site_screenshot.py site/demo-v1/points/index.html --sort "MAE [95 % CI]"
+--out page.png``.
 
 It drives the system's Chromium (``apt-get install chromium chromium-driver``, as scripts/system-deps.sh does)
 through selenium and the system's chromedriver, never a downloaded driver, with no network: the flags below keep
