@@ -107,11 +107,7 @@ def load_method(spec: str, **options):
         obj = _import(spec)
         default_name = spec.rpartition(":")[2].rpartition(".")[2]
     else:
-        registered = available()
-        if spec not in registered:
-            raise InputError(f"unknown method {spec!r}; registered: {', '.join(sorted(registered)) or 'none'} "
-                             "(or give package.module:Class)")
-        obj = _import(registered[spec])
+        obj = _import(_registered(spec, options.get("name")))
         default_name = spec
     method = _instantiate(obj, {k: v for k, v in options.items() if k in CLASS_OPTIONS})
     if options.get("name"):
@@ -158,18 +154,49 @@ def as_method(method, default_name: str | None = None, spec: str | None = None):
     return method
 
 
+def _registered(spec: str, named: str | None = None) -> str:
+    """The ``module:attr`` of a registered method's name.
+
+    Raises
+    ------
+    InputError
+        No method of that name: the message names the closest, or, for what looks like a program's command line
+        (words, a script, a program on ``PATH``), the ``exec:`` spec it may have meant (with its ``named`` row name).
+    """
+    import shutil
+
+    from colonbench.benchmark.external import SCRIPT_SUFFIXES
+    from colonbench.errors import did_you_mean
+
+    registered = available()
+    if spec in registered:
+        return registered[spec]
+    first = spec.split()[0] if spec.split() else spec
+    if len(spec.split()) > 1 or Path(first).suffix in SCRIPT_SUFFIXES or shutil.which(first):
+        meant = ("" if named is None else f"{named}=") + f"exec:{spec}"
+        raise InputError(f"unknown method {spec!r}; a program's command line is given as exec:PROGRAM ARGS: did you "
+                         f"mean {meant}?")
+    raise InputError(f"unknown method {spec!r}{did_you_mean(spec, registered)}; registered: "
+                     f"{', '.join(sorted(registered)) or 'none'} (or give package.module:Class, or exec:PROGRAM ARGS)")
+
+
 def check_spec(spec: str) -> None:
-    """Refuse, before anything runs or is written, a method spec that cannot run: an ``exec:`` program or a script
-    its command line names that is not there (:func:`colonbench.benchmark.external.check_command`), or a
-    ``predictions:`` folder that is not one. Other specs are checked when they are loaded.
+    """Refuse, before anything runs or is written, a method spec that cannot run: an unknown name
+    (:func:`_registered`), a ``module:attr`` that cannot be imported, an ``exec:`` program or a script its command
+    line names that is not there (:func:`colonbench.benchmark.external.check_command`), or a ``predictions:``
+    folder that is not one. What a method does when it is made is checked when it is loaded.
 
     Raises
     ------
     InputError
     """
-    _, given = _split_name(spec.strip())
-    kind, _, rest = given.partition(":")
-    if kind == "exec":
+    named, given = _split_name(spec.strip())
+    kind, colon, rest = given.partition(":")
+    if not colon:
+        _registered(given, named)
+    elif kind not in ("exec", "predictions"):
+        _import(given)
+    elif kind == "exec":
         from colonbench.benchmark.external import check_command
 
         check_command(rest)

@@ -18,7 +18,7 @@ import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from colonbench.errors import InputError
+from colonbench.errors import InputError, did_you_mean
 
 SEGMENT_METRICS = ("coverage MAE with 95 % bootstrap interval, median, bias, q95 (points)",
                    "holes and centerline precision / recall at 1 and 2 mm")
@@ -182,7 +182,8 @@ def get(name, root=None) -> Suite:
     if local is not None:
         return local
     built = [s.id for s in local_suites.found(root)]
-    raise InputError(f"unknown suite {name!r}; the suites are {', '.join(s.id for s in SUITES)} (or all)"
+    close = did_you_mean(name, [s.id for s in SUITES] + list(latest()) + built)
+    raise InputError(f"unknown suite {name!r}{close}; the suites are {', '.join(s.id for s in SUITES)} (or all)"
                      + (f", and built here {', '.join(built)}" if built else ""))
 
 

@@ -15,7 +15,7 @@ import logging
 import sys
 
 from colonbench import __version__
-from colonbench.errors import ColonbenchError
+from colonbench.errors import ColonbenchError, did_you_mean
 
 
 #: The verb groups, in the order ``colonbench --help`` lists them (data flow: data, model, maps, video, benchmark).
@@ -82,22 +82,31 @@ class _Verb(VerbParser):
                 a.required = True
 
     def _did_you_mean(self, extras) -> str:
-        import difflib
-
         options = [o for o in self._option_string_actions if o.startswith("--")]
         for arg in extras:
-            if arg.startswith("-"):
-                close = difflib.get_close_matches(arg.split("=", 1)[0], options, n=1, cutoff=0.6)
-                if close:
-                    return f" (did you mean {close[0]}?)"
+            if arg.startswith("-") and (close := did_you_mean(arg.split("=", 1)[0], options)):
+                return close
         return ""
+
+
+class _Top(VerbParser):
+    """The ``colonbench`` parser: a mistyped verb is refused naming the closest verb, where one is close."""
+
+    verbs: dict = {}
+
+    def parse_known_args(self, args=None, namespace=None):
+        args = list(sys.argv[1:] if args is None else args)
+        word = next((a for a in args if not a.startswith("-")), None)
+        if word is not None and self.verbs and word not in self.verbs and (close := did_you_mean(word, self.verbs)):
+            self.error(f"argument COMMAND: invalid choice: {word!r}{close}; colonbench --help lists the commands")
+        return super().parse_known_args(args, namespace)
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``colonbench`` parser: each verb group's module adds its verbs (:mod:`colonbench.commands`)."""
     import importlib
 
-    parser = VerbParser(
+    parser = _Top(
         prog="colonbench",
         description="colonbench: synthetic colonoscopy coverage data and a benchmark of coverage-estimation methods. "
                     "All geometry is in millimetres.")
@@ -105,6 +114,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Verb)
     for group in GROUPS:
         importlib.import_module(f"colonbench.commands.{group}").add_parsers(sub)
+    parser.verbs = sub.choices
     for action in sub._choices_actions:  # each verb's help line opens its --help
         verb = sub.choices[action.dest]
         if verb.description is None and action.help:

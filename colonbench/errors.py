@@ -29,3 +29,12 @@ def listing(names, most: int = 4) -> str:
     if len(names) <= most:
         return ", ".join(names)
     return f"{', '.join(names[:most])} and {len(names) - most} more"
+
+
+def did_you_mean(word: str, choices) -> str:
+    """`` (did you mean CHOICE?)`` naming the choice closest to a mistyped ``word``, or ``""`` where none is close
+    (:func:`difflib.get_close_matches`): the one way colonbench suggests a verb, an option, a method or a suite."""
+    import difflib
+
+    close = difflib.get_close_matches(str(word), [str(c) for c in choices], n=1, cutoff=0.6)
+    return f" (did you mean {close[0]}?)" if close else ""

@@ -179,3 +179,27 @@ def test_a_mistyped_option_shows_the_verbs_usage_and_the_closest_option(argv, us
         main(["estimate", "--out-dir", "x"])      # other errors as before, with the verb's usage
     err = capsys.readouterr().err
     assert err.startswith("usage: colonbench estimate") and "required: files" in err
+
+
+def test_a_mistyped_verb_gets_the_closest_verb(capsys):
+    with pytest.raises(SystemExit) as exit_:
+        main(["benchmrk", "--out", "x"])
+    err = capsys.readouterr().err
+    assert exit_.value.code == 2 and err.startswith("usage: colonbench")
+    assert "invalid choice: 'benchmrk' (did you mean benchmark?)" in err
+
+
+@pytest.mark.parametrize("argv, said", [
+    (["--methods", "python my.py"], "unknown method 'python my.py'; a program's command line is given as exec:PROGRAM "
+                                    "ARGS: did you mean exec:python my.py?"),
+    (["--methods", "thresholdng"], "unknown method 'thresholdng' (did you mean thresholding?)"),
+    (["--methods", "constant", "--suites", "demo-v2"], "unknown suite 'demo-v2' (did you mean demo-v1?)"),
+    (["--methods", "constant", "--suites", "dmeo-v1"], "unknown suite 'dmeo-v1' (did you mean demo-v1?)"),
+])
+def test_an_unknown_method_or_suite_is_refused_with_the_closest_and_no_folder_made(argv, said, demo_data, tmp_path,
+                                                                                   capsys):
+    out = tmp_path / "bench"
+    assert main(["benchmark", *argv, "--out", str(out), "--data", str(demo_data), "--quiet", "--no-figures"]) == 2
+    err = capsys.readouterr().err
+    assert said in err and "Traceback" not in err, err
+    assert not out.exists()
