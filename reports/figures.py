@@ -46,7 +46,7 @@ def boxplots(results: pd.DataFrame, tab: pd.DataFrame, path, threshold_mm: float
               (f"holes_recall_{t}", f"holes recall @{threshold_mm:g} mm"),
               (f"centerline_precision_{t}", f"centerline precision @{threshold_mm:g} mm"),
               (f"centerline_recall_{t}", f"centerline recall @{threshold_mm:g} mm"),
-              ("abs_error", "|coverage error| (points)")]
+              ("abs_error", "|coverage error|, percentage points")]
     fig, axes = plt.subplots(len(noises), len(panels), figsize=(3.4 * len(panels), 3.3 * len(noises)),
                              squeeze=False)
     df = results.assign(abs_error=100 * results["coverage_error"].abs())
