@@ -6,9 +6,10 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 #: Folders in data-flow order: a package may import its own layer and the layers before it, never after.
 #: The methods (completion, baselines) and the whole-colon map sit side by side; the command line, the pipelines
-#: that span the layers (colonbench.pipeline) and the package's facade (colonbench/__init__.py) sit on top.
+#: that span the layers (colonbench.pipeline) and the package's facade (colonbench/__init__.py) sit on top; the
+#: evaluation server (server/) is the last room, over the benchmark and its reports.
 LAYERS = {"colonbench": 0, "datagen": 1, "video": 2, "shards": 3, "completion": 4, "baselines": 4, "mapping": 5,
-          "benchmark": 6, "reports": 7}
+          "benchmark": 6, "reports": 7, "server": 8}
 TOP = ("colonbench.cli", "colonbench.commands", "colonbench.pipeline")
 FOLDER = {"colonbench": "colonbench", **{k: k for k in LAYERS if k != "colonbench"}}
 MAX_LINES = 500

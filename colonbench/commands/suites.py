@@ -7,7 +7,7 @@ import argparse
 import time
 
 #: The datasets ``colonbench suites build`` reads (their layouts).
-BUILDERS = ("c3vd",)
+BUILDERS = ("c3vd", "hidden")
 DATA_HELP = ("suite data folder (default $COLONBENCH_DATA, else $XDG_CACHE_HOME/colonbench/suites, else "
              "~/.cache/colonbench/suites)")
 
@@ -114,6 +114,12 @@ def _card(args):
 def _build(args):
     from pathlib import Path
 
+    if args.dataset == "hidden":
+        return _build_hidden(args)
+    if args.seed_file or args.publish or args.name:
+        from colonbench.errors import InputError
+
+        raise InputError("--seed-file, --publish and --name are for 'suites build hidden'")
     from colonbench.benchmark import c3vd_suite
     from colonbench.benchmark.local_suites import read_entry
 
@@ -130,12 +136,19 @@ def _build(args):
         for name, seq in entry["source"]["sequences"].items():
             conv = seq.get("convention")
             if suite.task == "colon":
+                if seq.get("skipped"):      # among the download's skipped folders, printed below
+                    continue
                 print(f"{name}: a screening withdrawal of {seq['poses']} poses over {seq['colon']}, camera centres "
                       f"{conv['inside_share']:.1%} inside its lumen with poses {conv['convention']}; "
                       f"{seq['observed_share']:.1%} of the phantom seen from {seq['frames_seen_from']} frames")
                 continue
             check = (f"poses {conv['convention']}, depth on the mesh within {conv['median_mm']:.3f} mm (median)"
                      if conv else "no depth frames: no pose check, no fused partial")
+            video = seq.get("video_check")
+            if video:
+                check += (f"; its fused partials reach {video['reach']:.1%} of the observed area within "
+                          f"{video['tolerance_mm']:g} mm ({video['threshold']:.0%} needed"
+                          + ("" if video["passed"] else ": its video samples left out") + ")")
             print(f"{name}: {seq['samples']} samples, {seq['observed_share']:.1%} of the phantom observed; {check}"
                   + (f"; {len(seq['skipped_segments'])} segment sample(s) left out" if seq["skipped_segments"] else ""))
         what = "whole-colon reconstructions" if suite.task == "colon" else "samples"
@@ -145,6 +158,36 @@ def _build(args):
     for suite, _ in built:
         print(f"score it: colonbench benchmark --suites {suite.id} --methods METHOD --out DIR"
               + (f" --data {args.data}" if args.data else ""))
+    return 0
+
+
+def _build_hidden(args):
+    """``suites build hidden``: a suite generated from a manifest with a secret seed, truth under --data, inputs
+    exported to --publish (colonbench.server.hidden)."""
+    from pathlib import Path
+
+    from colonbench.errors import InputError
+    from colonbench.pipeline import export_suite
+    from colonbench.server import hidden
+
+    data = getattr(args, "data", None)
+    if not data or not args.publish:
+        raise InputError("suites build hidden needs --data DIR (the private folder of the truth, which only the "
+                         "server reads) and --publish DIR (the inputs to publish)")
+    if Path(args.publish).resolve().is_relative_to(Path(data).resolve()):
+        raise InputError(f"--publish {args.publish} is inside --data {data}: publish the inputs elsewhere")
+    publish = Path(args.publish)
+    if publish.exists() and any(publish.iterdir()):
+        raise InputError(f"{publish} is not empty: publish into a new or empty folder")
+    seed = hidden.read_seed(args.seed_file) if args.seed_file else hidden.new_seed()
+    suite, new = hidden.build(args.source_dir, data, seed, name=args.name, workers=args.workers,
+                              progress=not args.quiet)
+    export_suite(suite.id, publish, data=data, progress=not args.quiet)
+    inputs = hidden.seal_public(publish, suite)
+    print(f"{'built' if new else 'found'} hidden suite {suite.id}: {suite.samples} segments, truth in {suite.folder} "
+          f"(keep it private: it holds the secret seed)\npublished inputs in {publish}: "
+          f"{len(inputs['files'])} files, inputs sha256 {inputs['inputs_sha256']}\nserve it: colonbench serve "
+          f"--suites {data} --db sqlite:///server.db")
     return 0
 
 
@@ -213,16 +256,29 @@ def add_parsers(sub) -> None:
                                        "colon, mapped and scored as colon-v1 (suite c3vd-colon-...). The suites go "
                                        "into the suite cache under ids made from the download's file digests; a "
                                        "refused download leaves nothing behind (docs/benchmark.md, 'Real "
-                                       "trajectories: C3VD').")
+                                       "trajectories: C3VD'). 'suites build hidden' generates a segment suite "
+                                       "from a manifest with a secret seed: its truth into --data, which only "
+                                       "the evaluation server reads, its inputs (as export writes them) into "
+                                       "--publish (docs/server.md).")
     b.add_argument("dataset", type=_dataset, metavar="DATASET",
-                   help=f"the dataset's layout: {', '.join(BUILDERS)} (C3VD and C3VDv2)")
-    b.add_argument("--from", dest="source_dir", required=True, metavar="DIR", help="the download's folder")
+                   help=f"the dataset's layout: {', '.join(BUILDERS)} (C3VD and C3VDv2; hidden: a generated suite "
+                        "with a secret seed, its truth kept for the evaluation server, docs/server.md)")
+    b.add_argument("--from", dest="source_dir", required=True, metavar="DIR",
+                   help="the download's folder; hidden: a named segment suite (demo-v1) or a procedural segment "
+                        "manifest file")
+    b.add_argument("--publish", metavar="DIR", help="hidden: the folder of the published inputs (as colonbench "
+                                                    "export writes them, without truth or seeds)")
+    b.add_argument("--seed-file", metavar="FILE", help="hidden: a file holding the secret seed, an integer of at "
+                                                       "least 2**40 (default: a new one drawn; it is kept only in "
+                                                       "the suite's private folder)")
+    b.add_argument("--name", help="hidden: the suite's name (default: the manifest's name with -hidden)")
     b.add_argument("--data", "--out", dest="data", default=argparse.SUPPRESS, help=DATA_HELP)
-    b.add_argument("--frames-every", type=int, default=5, metavar="K",
-                   help="fuse every K-th depth frame; a screening withdrawal's views: every K-th frame "
+    b.add_argument("--frames-every", type=int, default=None, metavar="K",
+                   help="fuse every K-th depth frame (default 2); a screening withdrawal's views: every K-th frame "
                         "(default 5)")
-    b.add_argument("--width-px", type=int, default=240, metavar="W",
-                   help="width of the pinhole each fused fisheye frame is resampled into (default 240)")
+    b.add_argument("--width-px", type=int, default=None, metavar="W",
+                   help="width of each of the five pinholes a fused fisheye frame is resampled into, 90 degrees "
+                        "across (default 128)")
     b.add_argument("--intrinsics", metavar="FILE",
                    help="the camera's camera_intrinsics.txt for every sequence, in place of the download's own "
                         "(needed where it holds none beside its sequences)")
