@@ -36,7 +36,7 @@ from colonbench.errors import ColonbenchError, InputError
 from colonbench.progress import bar as progress_bar
 
 #: Columns of :func:`failures`.
-FAILURE_COLUMNS = ["suite", "method", "noise_mm", "samples", "failed", "first_error"]
+FAILURE_COLUMNS = ["suite", "method", "noise_mm", "samples", "failed", "first_error", "first_sample"]
 
 
 class RunFailed(ColonbenchError):
@@ -174,7 +174,8 @@ def run_benchmark(methods=(), suites_=("demo-v1",), out="runs/benchmark", data=N
         _remove_tables(out, chosen)
         first = failed[failed["method"] == dead[0]].iloc[0]
         raise RunFailed(f"{', '.join(dead)} failed on every sample (first, {first['suite']} at noise "
-                        f"{first['noise_mm']:g} mm: {first['first_error']}); no leaderboard was written: every "
+                        f"{first['noise_mm']:g} mm, {first['first_sample']}: {first['first_error']}); no leaderboard "
+                        "was written: every "
                         f"sample's row and its error are in {out / 'runs'}/<suite>/results", failed)
     result = write_report(out, chosen, runs, shipped=shipped, figures=figures, track=track, submitted=submitted)
     result["runs"], result["seconds"], result["failures"] = runs, timing, failed
@@ -191,10 +192,13 @@ def failures(suite, run_dir) -> list[dict]:
     Returns
     -------
     list of dict
-        :data:`FAILURE_COLUMNS`: ``samples``, ``failed`` (rows with an error) and ``first_error`` (the first of
-        them at that noise level, "" for none).
+        :data:`FAILURE_COLUMNS`: ``samples``, ``failed`` (rows with an error), ``first_error`` (the first of
+        them at that noise level, "" for none) and ``first_sample``, its sample id (a whole-colon map's segment:
+        ``<sample id>_seg<k>``).
     """
     import pandas as pd
+
+    from colonbench.benchmark.exchange import sample_id, segment_id
 
     if suite.task == "colon":
         from colonbench.benchmark.colon_evaluate import load_colon_results, skipped_rows
@@ -204,6 +208,8 @@ def failures(suite, run_dir) -> list[dict]:
         segs = segs[segs["track"] == suite.headline_track]
         segs = segs[~skipped_rows(segs)]          # given to no method: neither a sample nor a failure of one
         rows = pd.concat([maps, segs], ignore_index=True)
+        rows["sample_id"] = [sample_id(*key) if seg != seg else segment_id(sample_id(*key), seg)   # NaN: a map
+                             for *key, seg in zip(rows["shard"], rows["index"], rows["noise_mm"], rows["segment"])]
     else:
         from colonbench.benchmark.evaluate import load_results
 
@@ -213,7 +219,8 @@ def failures(suite, run_dir) -> list[dict]:
         errors = g["error"].fillna("").astype(str)
         errors = errors[errors != ""]
         out.append({"suite": suite.id, "method": method, "noise_mm": float(noise), "samples": len(g),
-                    "failed": len(errors), "first_error": errors.iloc[0] if len(errors) else ""})
+                    "failed": len(errors), "first_error": errors.iloc[0] if len(errors) else "",
+                    "first_sample": str(g.loc[errors.index[0], "sample_id"]) if len(errors) else ""})
     return out
 
 

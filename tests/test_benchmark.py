@@ -294,3 +294,26 @@ def test_a_changed_exec_method_is_refused_saying_its_version_is_the_hash_of_its_
     assert "method 'mine' was evaluated as version 'command:" in err and "Traceback" not in err
     assert "an exec: method's version is a hash of its command line and of the files it names (its script)" in err
     assert "evaluate into a new run folder (colonbench benchmark: another --out), or undo the change" in err
+
+
+def test_a_failure_warning_names_the_sample_of_its_first_failure(demo_data, tmp_path, capsys):
+    from colonbench.commands.benchmark import warn_failures
+    from colonbench.pipeline import run_benchmark
+
+    class Third:                                        # fails on its third segment, at noise 0
+        name, version, calls = "third", "1", 0
+
+        def estimate(self, points):
+            self.calls += 1
+            if self.calls == 3:
+                raise ValueError("the third segment")
+            return {"coverage": 0.5}
+
+    result = run_benchmark([Third()], "demo-v1", tmp_path / "bench", data=demo_data, figures=False, progress=False,
+                           shipped=False, submitted=False)
+    rows = read_rows(tmp_path / "bench" / "runs" / "demo-v1" / "results" / "third.csv")
+    (sid,) = rows.loc[rows["error"] != "", "sample_id"]
+    warn_failures(result["failures"], lambda suite: tmp_path / "bench" / "runs" / suite / "results")
+    (line,) = [x for x in capsys.readouterr().err.splitlines() if x.startswith("colonbench: warning: third")]
+    assert "failed on 1 of 24 samples of demo-v1 at noise 0 mm" in line, line
+    assert f"first: {sid}: ValueError: the third segment" in line, line

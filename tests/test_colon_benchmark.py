@@ -214,6 +214,9 @@ def test_a_program_maps_whole_colons_through_exec(colon_dataset, tmp_path):
     for name in ("point_eight", "constant"):
         assert rows[name]["samples"] == len(head) and rows[name]["failed"] == len(errors)
         assert rows[name]["first_error"] == (errors.iloc[0] if len(errors) else "")
+        ids = {f"{r['shard'].removesuffix('.h5').replace('/', '_')}_{i:03d}_noise{r['noise_mm']:g}_seg{k:03d}"
+               for (i, k), r in head[head["error"] != ""].iterrows()}           # its segment's id, as exec: gets it
+        assert rows[name]["first_sample"] in (ids or {""})
 
 
 def test_the_colon_task_scores_the_segments_intervals(colon_dataset, tmp_path):

@@ -96,7 +96,8 @@ def cmd_benchmark(args):
 
 
 def warn_failures(failures, where) -> None:
-    """One warning on stderr per suite, method and noise level with failed samples, naming the first failure.
+    """One warning on stderr per suite, method and noise level with failed samples, naming the first failure and
+    its sample.
 
     Parameters
     ----------
@@ -110,7 +111,8 @@ def warn_failures(failures, where) -> None:
         calls = f"; each program call's standard error and output are in {logs}" if logs.is_dir() else ""
         print(f"colonbench: warning: {r['method']} failed on {r['failed']} of {r['samples']} samples of "
               f"{r['suite']} at noise {r['noise_mm']:g} mm, scored as the farther of coverage 0 and 1; first: "
-              f"{r['first_error']} (every one is in {where(r['suite'])}{calls})", file=sys.stderr)
+              f"{r['first_sample']}: {r['first_error']} (every one is in {where(r['suite'])}{calls})",
+              file=sys.stderr)
 
 
 def cmd_export(args):

@@ -46,8 +46,8 @@ def cmd_evaluate(args):
     for name, g in errors.groupby("method"):
         logs = run / "logs" / name
         calls = f"; each program call's standard error and output are in {logs}" if logs.is_dir() else ""
-        print(f"colonbench: warning: {name} failed on {len(g)} segment(s); first: {g['error'].iloc[0]} (every one "
-              f"is in {run / 'results' / (name + '.csv')}{calls})", file=sys.stderr)
+        print(f"colonbench: warning: {name} failed on {len(g)} segment(s); first: {g['sample_id'].iloc[0]}: "
+              f"{g['error'].iloc[0]} (every one is in {run / 'results' / (name + '.csv')}{calls})", file=sys.stderr)
     session = meta["sessions"][-1]
     print(f"wrote {run}/results/: {session['segments']} segment evaluations in {time.perf_counter() - t:.0f} s "
           f"with {session['workers']} worker(s), peak memory {session['peak_process_mib']} MiB per process; "
