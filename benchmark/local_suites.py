@@ -32,6 +32,9 @@ from colonbench.errors import InputError
 
 #: A locally built suite's registry entry and its signature, in its folder.
 FILE = "built-suite.json"
+#: Datasets whose suites are built from a user's download (``colonbench suites build NAME --from DIR``), named
+#: ``<dataset>-<id>``.
+DOWNLOADS = ("c3vd",)
 SIGNATURE_FILE = "signature.json.gz"
 FORMAT = "colonbench-local-suite"
 FORMAT_VERSION = 1

@@ -183,8 +183,12 @@ def get(name, root=None) -> Suite:
         return local
     built = [s.id for s in local_suites.found(root)]
     close = did_you_mean(name, [s.id for s in SUITES] + list(latest()) + built)
+    # a suite built from a download (c3vd-<id>) exists only once built: say how, where none of that kind is built
+    kind = name.split("-", 1)[0]
+    how = (f"; a {kind} suite is built from your download first: colonbench suites build {kind} --from DIR"
+           if kind in local_suites.DOWNLOADS and not any(b.startswith(kind + "-") for b in built) else "")
     raise InputError(f"unknown suite {name!r}{close}; the suites are {', '.join(s.id for s in SUITES)} (or all)"
-                     + (f", and built here {', '.join(built)}" if built else ""))
+                     + (f", and built here {', '.join(built)}" if built else "") + how)
 
 
 def parse(text, root=None) -> list[Suite]:

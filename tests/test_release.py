@@ -37,7 +37,7 @@ sys.exit(3 if "--crash" in args else 0)
 # ------------------------------------------------------------------------------------------------ the registry
 
 
-def test_registry_names_every_v1_suite_with_its_manifest():
+def test_registry_names_every_v1_suite_with_its_manifest(tmp_path):
     ids = [s.id for s in suites.SUITES]
     assert ids == ["demo-v1", "paper-v1", "wide-v1", "real-v1", "video-v1", "colon-v1"]
     assert len(set(s.sha256 for s in suites.SUITES)) == len(ids)
@@ -51,6 +51,9 @@ def test_registry_names_every_v1_suite_with_its_manifest():
     assert [s.id for s in suites.parse("real,demo-v1,real-v1")] == ["real-v1", "demo-v1"]
     with pytest.raises(InputError, match="unknown suite 'paper-v9'"):
         suites.get("paper-v9")
+    # a suite built from a download, asked for before any is built, is told how to build it
+    with pytest.raises(InputError, match="colonbench suites build c3vd --from DIR"):
+        suites.get("c3vd", root=tmp_path)
 
 
 def test_hashing_rounds_to_a_micrometre():
