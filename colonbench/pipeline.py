@@ -174,12 +174,17 @@ def run_benchmark(methods=(), suites_=("demo-v1",), out="runs/benchmark", data=N
         _remove_tables(out, chosen)
         first = failed[failed["method"] == dead[0]].iloc[0]
         raise RunFailed(f"{', '.join(dead)} failed on every sample (first, {first['suite']} at noise "
-                        f"{first['noise_mm']:g} mm, {first['first_sample']}: {first['first_error']}); no leaderboard "
-                        "was written: every "
+                        f"{first['noise_mm']:g} mm: {with_sample(first['first_sample'], first['first_error'])}); no "
+                        "leaderboard was written: every "
                         f"sample's row and its error are in {out / 'runs'}/<suite>/results", failed)
     result = write_report(out, chosen, runs, shipped=shipped, figures=figures, track=track, submitted=submitted)
     result["runs"], result["seconds"], result["failures"] = runs, timing, failed
     return result
+
+
+def with_sample(sample: str, error: str) -> str:
+    """A failure's error, after its sample id where the error does not name it already."""
+    return error if not sample or sample in error else f"{sample}: {error}"
 
 
 def failures(suite, run_dir) -> list[dict]:

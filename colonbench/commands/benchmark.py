@@ -106,12 +106,14 @@ def warn_failures(failures, where) -> None:
     where : callable
         The results folder of a suite id, for the message.
     """
+    from colonbench.pipeline import with_sample
+
     for _, r in failures[failures["failed"] > 0].iterrows():
         logs = Path(where(r["suite"])).parent / "logs" / r["method"]
         calls = f"; each program call's standard error and output are in {logs}" if logs.is_dir() else ""
         print(f"colonbench: warning: {r['method']} failed on {r['failed']} of {r['samples']} samples of "
               f"{r['suite']} at noise {r['noise_mm']:g} mm, scored as the farther of coverage 0 and 1; first: "
-              f"{r['first_sample']}: {r['first_error']} (every one is in {where(r['suite'])}{calls})",
+              f"{with_sample(r['first_sample'], r['first_error'])} (every one is in {where(r['suite'])}{calls})",
               file=sys.stderr)
 
 

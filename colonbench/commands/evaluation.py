@@ -16,6 +16,7 @@ def cmd_evaluate(args):
     from colonbench.benchmark.colon_evaluate import dataset_task
     from colonbench.benchmark.evaluate import evaluate, load_results
     from colonbench.benchmark.summary import summarize
+    from colonbench.pipeline import with_sample
 
     made_for = dataset_task(args.data)
     task = args.task or made_for
@@ -46,8 +47,9 @@ def cmd_evaluate(args):
     for name, g in errors.groupby("method"):
         logs = run / "logs" / name
         calls = f"; each program call's standard error and output are in {logs}" if logs.is_dir() else ""
-        print(f"colonbench: warning: {name} failed on {len(g)} segment(s); first: {g['sample_id'].iloc[0]}: "
-              f"{g['error'].iloc[0]} (every one is in {run / 'results' / (name + '.csv')}{calls})", file=sys.stderr)
+        print(f"colonbench: warning: {name} failed on {len(g)} segment(s); first: "
+              f"{with_sample(g['sample_id'].iloc[0], g['error'].iloc[0])} (every one is in "
+              f"{run / 'results' / (name + '.csv')}{calls})", file=sys.stderr)
     session = meta["sessions"][-1]
     print(f"wrote {run}/results/: {session['segments']} segment evaluations in {time.perf_counter() - t:.0f} s "
           f"with {session['workers']} worker(s), peak memory {session['peak_process_mib']} MiB per process; "
