@@ -36,8 +36,8 @@ from pathlib import Path
 import pandas as pd
 
 from colonbench.benchmark import tracks
-from colonbench.benchmark.submitted import is_submitted
 from colonbench.errors import InputError
+from colonbench.reports.leaderboard import source
 
 SUMMARY_COLUMNS = ["suite", "noise_mm", "method", "version", "reference", "mae", "mae_lo", "mae_hi", "segments",
                    "failed", "source"]
@@ -62,10 +62,8 @@ def _rows(suite, folder: Path) -> tuple[list[dict], dict]:
                          "failed": r["failed"]})
     for row in rows:
         rec = methods.get(row["method"], {})
-        source = "shipped" if str(rec.get("run", "")).startswith("shipped") else (
-            "submitted" if is_submitted(rec) else str(rec.get("run", "")))
         row.update(suite=suite.id, version=rec.get("version", ""), reference=bool(rec.get("reference", False)),
-                   source=source)
+                   source=source(rec))
     return rows, lb.get("suite") or {}
 
 

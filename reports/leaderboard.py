@@ -11,9 +11,11 @@ method twice. :func:`write_leaderboard` writes
   0 and 1 and counted; undefined values counted) and a precision / recall
   table (mean, with the median in brackets; failed segments count 0;
   undefined counts), methods ranked by MAE, reference rows (given ground
-  truth) last and marked;
-* ``leaderboard.csv``: one row per noise level and method with every
-  statistic of :func:`colonbench.benchmark.summary.summarize`;
+  truth) last and marked *, the shipped reference results marked † and
+  submitted results ‡, as the pages mark them;
+* ``leaderboard.csv``: one row per noise level and method with its
+  ``source`` (:func:`source`) and every statistic of
+  :func:`colonbench.benchmark.summary.summarize`;
 * ``leaderboard.json``: the same rows with the runs, data identity and
   versions they came from.
 """
@@ -115,11 +117,18 @@ def add_run(meta: dict | None, run: dict, path, first, same) -> dict:
     return meta
 
 
+def source(record: dict) -> str:
+    """Where a method's rows came from, by its record's ``run``: ``shipped`` (the shipped reference results),
+    ``submitted`` (:mod:`colonbench.benchmark.submitted`), or else the run folder they were read from."""
+    run = str(record.get("run", ""))
+    return "shipped" if run.startswith("shipped") else "submitted" if is_submitted(record) else run
+
+
 def table(meta: dict, results: pd.DataFrame) -> pd.DataFrame:
-    """Summary rows (:func:`summarize`) with ``version``, ``reference``, the MAE's 95 % bootstrap interval
-    (``coverage_mae_lo``, ``coverage_mae_hi``) and the paired difference of the absolute error against the best
-    baseline of the noise level (``baseline``, ``vs_baseline``, ``vs_baseline_lo``, ``vs_baseline_hi``,
-    ``vs_baseline_pairs``; points, negative = better), ranked within each noise level."""
+    """Summary rows (:func:`summarize`) with ``version``, ``reference``, ``source`` (:func:`source`), the MAE's 95 %
+    bootstrap interval (``coverage_mae_lo``, ``coverage_mae_hi``) and the paired difference of the absolute error
+    against the best baseline of the noise level (``baseline``, ``vs_baseline``, ``vs_baseline_lo``,
+    ``vs_baseline_hi``, ``vs_baseline_pairs``; points, negative = better), ranked within each noise level."""
     from colonbench.benchmark import stats
     from colonbench.benchmark.registry import BASELINES
 
@@ -145,8 +154,10 @@ def table(meta: dict, results: pd.DataFrame) -> pd.DataFrame:
             at = (s["noise_mm"] == noise) & (s["method"] == m)
             s.loc[at, ["vs_baseline", "vs_baseline_lo", "vs_baseline_hi", "vs_baseline_pairs"]] = \
                 d.loc[m, ["diff", "diff_lo", "diff_hi", "pairs"]].to_numpy(float)
+    s["source"] = s["method"].map(lambda m: source(meta["methods"][m]))
     s = s.sort_values(["noise_mm", "reference", "coverage_mae", "method"], na_position="last")
     cols = ["noise_mm", "method", "version", "reference"] + (["takes_length"] if "takes_length" in s.columns else [])
+    cols += ["source"]
     return s[cols + [c for c in s.columns if c not in cols]].reset_index(drop=True)
 
 
@@ -190,9 +201,9 @@ def suite_state(suite: dict) -> str:
 
 
 def _name(r, meta: dict) -> str:
-    """A row's method with its marks: * a reference, ‡ a submitted result."""
-    return r["method"] + (" *" if r["reference"] else "") + (
-        " ‡" if is_submitted(meta["methods"].get(r["method"], {})) else "")
+    """A row's method with its marks: * a reference, † the shipped results, ‡ a submitted result."""
+    return r["method"] + (" *" if r["reference"] else "") + {"shipped": " †", "submitted": " ‡"}.get(
+        source(meta["methods"].get(r["method"], {})), "")
 
 
 def markdown(meta: dict, tab: pd.DataFrame, notes=()) -> str:
@@ -207,6 +218,9 @@ def markdown(meta: dict, tab: pd.DataFrame, notes=()) -> str:
              "score. *Undefined*: answered segments where a metric has no value.", "",
              "Rows marked * are references that bound the problem, not methods: they are given ground truth (the GT "
              "target heatmap or centerline) or guess the training data's mean coverage.", ""]
+    if any(source(rec) == "shipped" for rec in meta["methods"].values()):
+        lines += ["Rows marked † are the shipped reference results: colonbench's own runs of its built-in methods on "
+                  "the published suite, merged in (`source` `shipped` in leaderboard.csv).", ""]
     if any(is_submitted(rec) for rec in meta["methods"].values()):
         lines += ["Rows marked ‡ are submitted results: others' runs of the suite, checked by `colonbench results "
                   "check` and kept in the repository's `results/` (docs/benchmark.md, Submitting results).", ""]

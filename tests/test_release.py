@@ -150,7 +150,7 @@ def test_a_program_outside_colonbench_joins_the_shipped_leaderboard(demo_data, t
     assert np.array_equal(a["coverage_error"], b["coverage_error"])
     assert main(["leaderboard", str(run), "--out", str(tmp_path / "lb"), "--shipped", "--no-figures"]) == 0
     text = (tmp_path / "lb" / "leaderboard.md").read_text()
-    assert "constant_method" in text and "| completion |" in text
+    assert "constant_method" in text and "| completion † |" in text    # the shipped rows marked
     # one malformed prediction: score says which file and why, as benchmark does
     bad = preds / f"{index['sample_id'].iloc[-1]}.json"
     bad.write_text('{"coverage": 1.5}')

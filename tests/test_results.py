@@ -171,7 +171,8 @@ def test_a_run_whose_method_failed_on_every_segment_is_refused_as_benchmark_call
     run_dir = out / "runs" / "demo-v1"
     assert main(["results", "check", str(run_dir)]) == 2
     err = capsys.readouterr().err
-    assert "method dead failed on every one of its 48 segment evaluations (48 failed; first: ValueError: nothing here)" in err
+    assert ("method dead failed on every one of its 48 segment evaluations (48 failed; first: ValueError: nothing "
+            "here)") in err
     assert "colonbench benchmark calls such a method failed" in err and "Traceback" not in err
     assert main(["results", "add", str(run_dir), "--method", "dead", "--into", str(tmp_path / "results")]) == 2
     assert not (tmp_path / "results").exists()
@@ -349,3 +350,27 @@ def test_the_results_verb_says_what_it_does(capsys):
                                                                                          f"{' '.join(argv[:-1])}")
     assert main(["results"]) == 2
     assert "give an action" in capsys.readouterr().err
+
+
+def test_a_suites_leaderboard_says_where_each_row_came_from(run, tmp_path, monkeypatch):
+    """Its CSV's source column and its markdown's marks, as the page says it: † shipped, ‡ submitted."""
+    lb = tmp_path / "lb"
+    assert main(["leaderboard", str(run), "--out", str(lb), "--no-figures", "--shipped"]) == 0
+    tab = pd.read_csv(lb / "leaderboard.csv")
+    source = dict(zip(tab["method"], tab["source"]))
+    assert source.pop("halfway") == str(run) and set(source.values()) == {"shipped"} and "completion" in source
+    rows = json.loads((lb / "leaderboard.json").read_text())["rows"]
+    assert {(r["method"], r["source"]) for r in rows} == set(zip(tab["method"], tab["source"]))
+    text = (lb / "leaderboard.md").read_text()
+    assert "| completion † |" in text and "| constant * † |" in text and "| halfway |" in text
+    assert "Rows marked † are the shipped reference results" in text and "‡" not in text
+    # a submitted result beside them, in colonbench benchmark's page of the suite
+    monkeypatch.setenv(submitted.ENV, str(tmp_path / "results"))
+    submitted.add(run, "halfway")
+    assert main(["benchmark", "--suites", "demo-v1", "--out", str(tmp_path / "b"), "--no-figures", "--quiet"]) == 0
+    page = tmp_path / "b" / "suites" / "demo-v1"
+    tab = pd.read_csv(page / "leaderboard.csv")
+    assert set(tab.loc[tab["method"] == "halfway", "source"]) == {"submitted"}
+    assert set(tab.loc[tab["method"] != "halfway", "source"]) == {"shipped"}
+    text = (page / "leaderboard.md").read_text()
+    assert "| halfway ‡ |" in text and "| completion † |" in text and "Rows marked † are the shipped" in text
