@@ -15,7 +15,12 @@ whole-colon shard, :mod:`colonbench.shards.colonshard`; its withdrawals are its 
    truth for that camera model;
 4. its whole partial reconstruction is drawn on the observed faces (2 points per mm^2, the whole-colon
    reconstructions' density), and its trajectory is every frame's camera centre in time order (what the map is
-   given as the scope's path).
+   given as the scope's path);
+5. a withdrawal the map cannot map is left out, with the reason, among the download's skipped folders: where the
+   map's own centerline of its partial and trajectory (:func:`colonbench.mapping.colonmap.map_centerline`) is a
+   single segment by the map's rule (:func:`colonbench.mapping.colonmap.single_segment`, the protocol's segment
+   length), every method would fail it. A colon left without a withdrawal has no shard, a download left without
+   one no whole-colon suite.
 
 The suite's protocol is ``colon-v1``'s: its noise levels and seed, tracks (context margins) and segment length, so
 ``colonbench benchmark`` / ``evaluate --task colon`` map and score it as they do ``colon-v1``. Its id is
@@ -36,7 +41,9 @@ from colonbench.errors import ColonbenchError, InputError
 from colonbench.video.c3vd_screening import FOV_DEG, MIN_INSIDE, MIN_SPAN, NEAR_MM, REACH_MM, WALL_MM
 
 IMPORTER = "c3vd-colon"
-IMPORTER_VERSION = 1
+IMPORTER_VERSION = 2
+#: The default step between the frames whose views make a withdrawal's visibility.
+FRAMES_EVERY = 5
 
 
 @dataclass(frozen=True)
@@ -95,9 +102,11 @@ def _mesh_and_centerline(name: str, seqs: list):
 
 
 def build_colon(name: str, seqs: list, colon_id: int, out, settings: ScreeningSettings, identity: dict,
-                frames_every: int, progress: bool = False) -> tuple[dict, dict]:
+                frames_every: int, segment_mm: float, progress: bool = False) -> tuple[dict | None, dict]:
     """Check, see and write one whole-colon phantom's withdrawals as ``out/test/<name>.h5`` (see the module's
-    description); its shard and, per withdrawal, what was found."""
+    description); its shard (None where every withdrawal is left out) and, per withdrawal, what was found (with
+    ``skipped``, the reason, where it is left out)."""
+    from colonbench.mapping.colonmap import map_centerline, single_segment
     from colonbench import seeding
     from colonbench._version import __version__
     from colonbench.datagen.camera import SurfaceScene
@@ -117,7 +126,7 @@ def build_colon(name: str, seqs: list, colon_id: int, out, settings: ScreeningSe
     area = triangle_areas(stored.astype(float), f)      # as the evaluation reads the truth back
     shard = f"test/{name}.h5"
     samples, reports, starts = [], {}, []
-    for index, seq in enumerate(seqs):
+    for seq in seqs:
         t = time.perf_counter()
         raw = c3vd.read_poses(seq.poses)
         conv = check_trajectory(seq.name, raw, inside, extent, settings.min_inside, settings.min_span)
@@ -136,14 +145,26 @@ def build_colon(name: str, seqs: list, colon_id: int, out, settings: ScreeningSe
         points = sample_surface(rng, v, f[observed], settings.point_density, areas=area[observed])
         coverage = float(area[observed].sum() / area.sum())
         positions = poses[:, :3, 3]
+        reports[seq.name] = {"folder": seq.folder.name, "mesh": Path(seq.mesh).name, "colon": name, "shard": shard,
+                             "index": len(samples), "faces": int(len(f)), "poses": int(len(raw)),
+                             "frames_seen_from": int(len(frames)), "convention": conv, "observed_share": coverage,
+                             "points": int(len(points)), "samples": 1}
+        # the map's own line of this partial and its rule: a colon it takes for a single segment, every method fails
+        pieces, _ = map_centerline(points.astype(float), positions)
+        mapped = float(sum(p.length for p in pieces))
+        reports[seq.name]["map_centerline_mm"] = mapped
+        why = single_segment(mapped, segment_mm)
+        if why:
+            reports[seq.name].update(index=None, shard=None, samples=0, seconds=round(time.perf_counter() - t, 2),
+                                     skipped=f"a screening withdrawal the whole-colon map cannot map ({why}; the map's "
+                                             f"line of what its camera saw): left out")
+            continue
         starts.append(positions[0])
         samples.append({"hole_model": "camera", "noise_mm": 0.0, "coverage": coverage, "observed_faces": observed,
                         "points": points, "positions": positions})
-        reports[seq.name] = {"folder": seq.folder.name, "mesh": Path(seq.mesh).name, "colon": name, "shard": shard,
-                             "index": index, "faces": int(len(f)), "poses": int(len(raw)),
-                             "frames_seen_from": int(len(frames)), "convention": conv, "observed_share": coverage,
-                             "points": int(len(points)), "samples": 1,
-                             "seconds": round(time.perf_counter() - t, 2)}
+        reports[seq.name]["seconds"] = round(time.perf_counter() - t, 2)
+    if not samples:
+        return None, reports
     ends = centerline.point_at([0.0, centerline.length])
     mean_start = np.mean(starts, axis=0)
     if np.linalg.norm(ends[1] - mean_start) < np.linalg.norm(ends[0] - mean_start):
@@ -177,9 +198,10 @@ def write_colon_lock(out_dir, identity: dict, shards: list[dict]) -> dict:
     return write_built_lock(out, identity, split, entries, schema.COLON_FORMAT_VERSION)
 
 
-def colon_job(screening, skipped, frames_every: int, progress: bool = False):
+def colon_job(screening, skipped: list, frames_every: int, progress: bool = False):
     """The whole-colon suite of a download's screening withdrawals: its id and its maker
-    (:func:`colonbench.benchmark.local_suites.publish`)."""
+    (:func:`colonbench.benchmark.local_suites.publish`). The maker adds the withdrawals it leaves out to
+    ``skipped`` and returns None where it leaves out every one (no suite)."""
     from colonbench.benchmark.c3vd_suite import CITE, LICENCE, suite_identity
 
     t0 = time.perf_counter()
@@ -190,12 +212,17 @@ def colon_job(screening, skipped, frames_every: int, progress: bool = False):
     sid, identity, digests, digest_seconds = suite_identity(IMPORTER, IMPORTER_VERSION, options, screening)
     key = identity["manifest_sha256"]
 
-    def make(tmp: Path) -> dict:
+    def make(tmp: Path) -> dict | None:
         shards, reports = [], {}
-        for k, (name, seqs) in enumerate(groups(screening)):
-            info, found = build_colon(name, seqs, k, tmp, settings, identity, frames_every, progress)
-            shards.append(info)
+        for name, seqs in groups(screening):
+            info, found = build_colon(name, seqs, len(shards), tmp, settings, identity, frames_every, base.segment_mm,
+                                      progress)
+            shards += [info] if info is not None else []
             reports.update(found)
+            # a withdrawal left out is one of the download's skipped folders (every suite of the build lists them)
+            skipped.extend({"folder": r["folder"], "reason": r["skipped"]} for r in found.values() if r.get("skipped"))
+        if not shards:
+            return None
         entry = _finish(tmp, sid, key, identity, screening, skipped, shards, reports, options, digests, base, t0)
         entry.update(digest_seconds=digest_seconds, licence=LICENCE, cite=list(CITE))
         return entry
@@ -225,7 +252,7 @@ def _finish(tmp: Path, sid, key, identity, screening, skipped, shards, reports, 
                                    noise_mm=base.noise_mm, noise_seed=base.noise_seed, local_id=sid)
     published = verification.make(stub, lock, sha256, records)
     verification.write(published, tmp / local_suites.SIGNATURE_FILE)
-    names = [s.name for s in screening]
+    names = [s.name for s in screening if not reports[s.name].get("skipped")]
     tests = (f"real screening trajectories of C3VDv2: {len(names)} withdrawal(s) over {len(shards)} whole-colon "
              f"phantom(s) ({', '.join(sorted(names)[:4])}{', ...' if len(names) > 4 else ''}), what each saw by "
              f"colonbench's camera along it ({options['settings']['fov_deg']:g} degree view, "

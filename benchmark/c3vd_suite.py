@@ -7,10 +7,13 @@ C3VD's licence (CC BY-NC-SA 4.0) forbids redistributing it, so colonbench ships 
    must land on its mesh (median distance at most :data:`colonbench.video.c3vd.MAX_MEDIAN_MM`) in one of the pose
    conventions tried (as written or transposed, translation in mm or m); the first that does is used and
    recorded, and a sequence where none does is refused, naming it;
-2. fuses its depth frames (every ``frames_every``-th) into a reconstruction-like surface
-   (:mod:`colonbench.video.c3vd_fusion`);
+2. fuses its depth frames (every ``frames_every``-th, each as five virtual pinholes covering the fisheye's
+   field) into a reconstruction-like surface (:mod:`colonbench.video.c3vd_fusion`);
 3. cuts its phantom into segments along the mesh's own centerline and writes their samples, truth from C3VD's
-   per-face coverage (:mod:`colonbench.shards.c3vd_shards`);
+   per-face coverage (:mod:`colonbench.shards.c3vd_shards`); checks that the fused partials reach what that
+   truth calls observed (:func:`colonbench.shards.c3vd_shards.video_check`: at least 95 % of the observed area
+   within 1.5 mm, recorded per sequence as ``video_check``), and leaves out the sequence's ``video`` samples,
+   with the figure, where they do not;
 
 then writes the suite's lock, its per-sample signature and its registry entry
 (:mod:`colonbench.benchmark.local_suites`). The suite is built in a hidden sibling folder and renamed into place
@@ -34,7 +37,7 @@ from colonbench.errors import ColonbenchError, InputError
 
 #: The importer's name and version: a change that moves a built suite's data is a new version (a new id).
 IMPORTER = "c3vd"
-IMPORTER_VERSION = 1
+IMPORTER_VERSION = 2
 NOISE_MM = (0.0, 0.5)
 NOISE_SEED = 0
 LICENCE = ("C3VD and C3VDv2 are licensed CC BY-NC-SA 4.0 (non-commercial, share alike): a suite built from them "
@@ -149,8 +152,8 @@ def build_sequence(seq, colon_id: int, out: str, settings, identity: dict, frame
         raise InputError(f"sequence {seq.name} ({seq.mesh}): no centerline of its mesh ({why})") from None
     report["centerline_mm"] = float(centerline.length)
     lap("centerline")
-    shards, skipped = write_sequence_shards(out, seq.name, colon_id, v, f, observed, centerline, fused, settings,
-                                            identity)
+    shards, skipped, report["video_check"] = write_sequence_shards(out, seq.name, colon_id, v, f, observed, centerline,
+                                                                   fused, settings, identity)
     lap("segments")
     report["samples"] = int(sum(s["samples"] for s in shards))
     return shards, skipped, report
@@ -168,10 +171,16 @@ def _run_all(sequences, tmp: Path, settings, identity, frames_every, width_px, w
     return [build_sequence(*a, progress=progress) for a in args]
 
 
-def _check_options(frames_every: int, width_px: int, workers: int) -> None:
-    if frames_every < 1 or width_px < 16 or workers < 1:
+def _check_options(frames_every: int | None, width_px: int | None, workers: int) -> tuple[int, int]:
+    """The frames step and view width to fuse at (the fusion's defaults for None), checked."""
+    from colonbench.video import c3vd_fusion
+
+    every = c3vd_fusion.EVERY if frames_every is None else frames_every
+    width = c3vd_fusion.WIDTH_PX if width_px is None else width_px
+    if every < 1 or width < 16 or workers < 1:
         raise InputError(f"--frames-every must be >= 1, the pinhole width >= 16 and --workers >= 1; got "
-                         f"{frames_every}, {width_px}, {workers}")
+                         f"{every}, {width}, {workers}")
+    return every, width
 
 
 def segment_job(sequences, skipped, frames_every: int, width_px: int, workers: int, progress: bool):
@@ -195,8 +204,8 @@ def segment_job(sequences, skipped, frames_every: int, width_px: int, workers: i
     return sid, make
 
 
-def build(source, root=None, frames_every: int = 5, width_px: int = 240, workers: int = 1, intrinsics=None,
-          progress: bool = True) -> tuple[local_suites.LocalSuite, bool]:
+def build(source, root=None, frames_every: int | None = None, width_px: int | None = None, workers: int = 1,
+          intrinsics=None, progress: bool = True) -> tuple[local_suites.LocalSuite, bool]:
     """Build (or find already built) the segment suite of a C3VD download's registered sequences
     (:func:`build_all` also builds the whole-colon suite of its screening withdrawals).
 
@@ -206,10 +215,11 @@ def build(source, root=None, frames_every: int = 5, width_px: int = 240, workers
         The download's folder (registered sequences at any depth; :func:`colonbench.video.c3vd.find_download`).
     root : path, optional
         The suite data root (default :func:`colonbench.benchmark.suites.default_data_root`).
-    frames_every : int
-        Fuse every this many-th depth frame.
-    width_px : int
-        Width of the virtual pinhole the fused frames are resampled into, pixels.
+    frames_every : int, optional
+        Fuse every this many-th depth frame (default :data:`colonbench.video.c3vd_fusion.EVERY`).
+    width_px : int, optional
+        Width of each virtual pinhole the fused frames are resampled into, pixels (default
+        :data:`colonbench.video.c3vd_fusion.WIDTH_PX`).
     workers : int
         Sequences built at a time (processes).
     intrinsics : path, optional
@@ -230,7 +240,7 @@ def build(source, root=None, frames_every: int = 5, width_px: int = 240, workers
     """
     from colonbench.video.c3vd import find_download
 
-    _check_options(frames_every, width_px, workers)
+    frames_every, width_px = _check_options(frames_every, width_px, workers)
     sequences, screening, skipped = find_download(Path(source), intrinsics)
     if not sequences:
         raise InputError(f"{source}: no registered C3VD sequence found (a folder with pose.txt and "
@@ -240,8 +250,8 @@ def build(source, root=None, frames_every: int = 5, width_px: int = 240, workers
                                                           progress)])[0]
 
 
-def build_all(source, root=None, frames_every: int = 5, width_px: int = 240, workers: int = 1, intrinsics=None,
-              progress: bool = True) -> list[tuple[local_suites.LocalSuite, bool]]:
+def build_all(source, root=None, frames_every: int | None = None, width_px: int | None = None, workers: int = 1,
+              intrinsics=None, progress: bool = True) -> list[tuple[local_suites.LocalSuite, bool]]:
     """Build (or find already built) every suite of a C3VD download: the segment suite of its registered
     sequences (:func:`build`) and the whole-colon suite of its screening withdrawals
     (:mod:`colonbench.benchmark.c3vd_colon`), whichever it holds, both or neither put in place.
@@ -250,7 +260,7 @@ def build_all(source, root=None, frames_every: int = 5, width_px: int = 240, wor
     ----------
     source, root, frames_every, width_px, workers, intrinsics, progress
         As :func:`build`; ``frames_every`` is also the step between the frames whose views make a screening
-        withdrawal's visibility.
+        withdrawal's visibility (default :data:`colonbench.benchmark.c3vd_colon.FRAMES_EVERY`).
 
     Returns
     -------
@@ -260,20 +270,26 @@ def build_all(source, root=None, frames_every: int = 5, width_px: int = 240, wor
     Raises
     ------
     InputError
-        As :func:`build`, and a screening withdrawal whose trajectory does not lie inside its phantom (named);
-        nothing is left in the data root.
+        As :func:`build`, a screening withdrawal whose trajectory does not lie inside its phantom (named), and a
+        download of which no suite can be made (every withdrawal left out: the reasons); nothing is left in the
+        data root.
     """
     from colonbench.benchmark import c3vd_colon
     from colonbench.video.c3vd import find_download
 
-    _check_options(frames_every, width_px, workers)
+    fuse_every, width_px = _check_options(frames_every, width_px, workers)
     sequences, screening, skipped = find_download(Path(source), intrinsics)
     jobs = []
+    if screening:    # first: a withdrawal it leaves out joins the download's skipped folders every entry lists
+        view_every = c3vd_colon.FRAMES_EVERY if frames_every is None else frames_every
+        jobs.append(c3vd_colon.colon_job(screening, skipped, view_every, progress))
     if sequences:
-        jobs.append(segment_job(sequences, skipped, frames_every, width_px, workers, progress))
-    if screening:
-        jobs.append(c3vd_colon.colon_job(screening, skipped, frames_every, progress))
-    return local_suites.publish(_root(root), jobs)
+        jobs.append(segment_job(sequences, skipped, fuse_every, width_px, workers, progress))
+    built = [b for b in local_suites.publish(_root(root), jobs) if b is not None]
+    if not built:
+        raise InputError(f"{source}: no suite can be made of the download ("
+                         + "; ".join(f"{s['folder']}: {s['reason']}" for s in skipped) + ")")
+    return sorted(built, key=lambda b: b[0].task != "segments")
 
 
 def _root(root) -> Path:
@@ -313,11 +329,11 @@ def _finish(tmp: Path, sid, key, identity, sequences, skipped, results, options,
     verification.write(published, tmp / local_suites.SIGNATURE_FILE)
     reports = {seq.name: {**digests["sequences"][seq.name], **r[2], "skipped_segments": r[1]}
                for seq, r in zip(sequences, results)}
-    depth = sum(1 for seq in sequences if seq.depth)
+    depth = sum(1 for r in results if (r[2].get("video_check") or {}).get("passed"))
     tests = (f"real colonoscope trajectories of C3VD: {len(sequences)} registered sequence(s) of silicone phantoms "
              f"({', '.join(seq.name for seq in sequences[:4])}{', ...' if len(sequences) > 4 else ''}) cut into "
              f"50-70 mm segments along their centerlines, truth from C3VD's per-face coverage; partials on the observed "
-             f"faces (camera) and, for {depth} with depth frames, the frames fused by TSDF (video)")
+             f"faces (camera) and, for {depth} whose fused depth frames reach their truth, the frames fused by TSDF (video)")
     entry = {"format": local_suites.FORMAT, "format_version": local_suites.FORMAT_VERSION, "id": sid,
              "name": IMPORTER, "version": IMPORTER_VERSION, "task": "segments", "tests": tests,
              "samples": len(records), "sha256": sha256, "signature": verification.digest(published),

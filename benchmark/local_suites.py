@@ -183,12 +183,13 @@ def publish(root, jobs) -> list[tuple[LocalSuite, bool]]:
         The suite data root.
     jobs : list of (str, callable)
         Each suite's id and its maker: ``make(folder) -> entry`` writes the suite's data into ``folder`` and
-        returns its registry entry (written here as :data:`FILE`, last).
+        returns its registry entry (written here as :data:`FILE`, last), or None where there is no such suite.
 
     Returns
     -------
-    list of (LocalSuite, bool)
-        Per job, the suite and whether it was built (False: it was already built, nothing was done).
+    list of (LocalSuite, bool) or None
+        Per job, the suite and whether it was built (False: it was already built, nothing was done); None where
+        its maker returned None.
 
     Raises
     ------
@@ -214,6 +215,10 @@ def publish(root, jobs) -> list[tuple[LocalSuite, bool]]:
             tmp.mkdir()
             staged.append((k, tmp, target))
             entry = make(tmp)
+            if entry is None:                  # nothing of the download makes this suite
+                shutil.rmtree(tmp, ignore_errors=True)
+                staged.pop()
+                continue
             (tmp / FILE).write_text(json.dumps(entry, indent=1) + "\n")
         for k, tmp, target in staged:
             try:

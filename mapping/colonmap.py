@@ -162,6 +162,15 @@ def map_centerline(points: np.ndarray, positions: np.ndarray | None = None, piec
     return bridge_by_trajectory(pieces, positions, points), orientation
 
 
+def single_segment(length_mm: float, segment_mm: float) -> str:
+    """Why the map takes a centerline of ``length_mm`` for a single segment and maps nothing: it is shorter than
+    two segments of ``segment_mm``; "" where the map takes it for a colon."""
+    if length_mm < 2 * segment_mm:
+        return (f"the centerline found is {length_mm:.0f} mm long, not more than two segments of {segment_mm:g} mm: "
+                "this looks like a single segment, not a colon")
+    return ""
+
+
 @dataclass
 class JoinedLine:
     """The map's pieces as one centerline, arc length running on over the gaps between them (mm).
@@ -309,11 +318,9 @@ def map_colon(points: np.ndarray, method, segment_mm: float = SEGMENT_MM, positi
     t0 = time.perf_counter()
     pieces, orientation = map_centerline(points, positions, pieces)
     seconds["centerline"] = time.perf_counter() - t0
-    total = sum(p.length for p in pieces)
-    if total < 2 * segment_mm:
-        raise InputError(f"the centerline found is {total:.0f} mm long, not more than two segments of "
-                         f"{segment_mm:g} mm: this looks like a single segment, not a colon; use colonbench "
-                         "estimate for one segment")
+    why = single_segment(sum(p.length for p in pieces), segment_mm)
+    if why:
+        raise InputError(f"{why}; use colonbench estimate for one segment")
     joined = join_pieces(pieces)
     line, arc, spans, unseen = joined.line, joined.arc, joined.spans, joined.unseen
     t0 = time.perf_counter()

@@ -19,8 +19,18 @@ For one registered sequence (read by :mod:`colonbench.video.c3vd`):
    centerline) and sampled at the same density.
 
 A segment (or one sample of it) is left out, with the reason in the shard's ``skipped_segments``, when its
-partial has fewer than ``min_points`` points (nothing was seen there, or nothing fused). Random draws descend from
-``seed`` through the stream ``("c3vd", sequence, length in µm, segment, permutation)``.
+partial has fewer than ``min_points`` points (nothing was seen there, or nothing fused).
+
+5. the video check: a ``video`` sample's truth is C3VD's map, made from every pixel of every frame; its partial is
+   what the fused frames hold. The two describe the same observation only where the partial reaches what the map
+   calls observed. Per video sample, :func:`reach` measures the segment's observed area within
+   ``reach_tolerance_mm`` (1.5 mm) of its fused surface; pooled over the sequence's video samples, the share of
+   their observed area reached (:func:`video_check`) must be at least ``min_reach`` (0.95), or every video
+   sample of the sequence is left out, the figure in the reason. The figure, per sample and pooled, is
+   returned to be recorded.
+
+Random draws descend from ``seed`` through the stream ``("c3vd", sequence, length in µm, segment, permutation)``
+(the check's points: permutation ``"reach"``).
 """
 
 from __future__ import annotations
@@ -58,6 +68,8 @@ class ImportSettings:
     grid_margin: int = 4
     grid_min_extent_mm: float = 70.0
     grid_axes: str = "tube"
+    reach_tolerance_mm: float = 1.5
+    min_reach: float = 0.95
     seed: int = 0
 
     def to_dict(self) -> dict:
@@ -109,8 +121,41 @@ def _sample_row(settings, partial, surface, verts64, faces, centerline64, observ
                         hole_areas_mm2=areas)), ""
 
 
+def reach(mesh, observed, fused_vertices, fused_faces, rng, tolerance_mm: float, density: float):
+    """What a fused partial reaches of a segment's observed surface: the observed area (mm^2) and the part of it
+    within ``tolerance_mm`` of the fused surface (estimated from points drawn on the observed faces, ``density``
+    per mm^2)."""
+    areas = mesh.area_faces[observed]
+    seen = float(areas.sum())
+    if seen == 0 or len(fused_faces) == 0:
+        return seen, 0.0
+    points = sample_surface(rng, mesh.vertices, mesh.faces[observed], density, areas=areas)
+    if len(points) == 0:
+        return seen, 0.0
+    near = SurfaceScene(fused_vertices, fused_faces).distance(points) <= tolerance_mm
+    return seen, seen * float(near.mean())
+
+
+def video_check(reached: list[dict], settings: ImportSettings) -> dict | None:
+    """The sequence's video check: the share of its video samples' observed area their fused partials reach
+    (:func:`reach`), pooled over the samples, against ``settings.min_reach``; None without video samples."""
+    if not reached:
+        return None
+    share = sum(r["reached_mm2"] for r in reached) / max(sum(r["observed_mm2"] for r in reached), 1e-12)
+    each = [r["reached_mm2"] / r["observed_mm2"] if r["observed_mm2"] > 0 else 1.0 for r in reached]
+    return {"reach": float(share), "threshold": settings.min_reach, "tolerance_mm": settings.reach_tolerance_mm,
+            "samples": len(reached), "min_sample": float(min(each)), "passed": bool(share >= settings.min_reach)}
+
+
+def refusal(check: dict) -> str:
+    """Why a sequence's video samples are left out, with its figure."""
+    return (f"video: the fused partials reach {check['reach']:.1%} of their segments' observed area within "
+            f"{check['tolerance_mm']:g} mm, under the {check['threshold']:.0%} needed for the truth to describe "
+            "what they hold: every video sample of the sequence left out (fuse more frames: --frames-every 1)")
+
+
 def write_sequence_shards(out_dir, name: str, colon_id: int, vertices, faces, observed, centerline,
-                          fused: dict | None, settings: ImportSettings, identity: dict) -> tuple[list[dict], list[dict]]:
+                          fused: dict | None, settings: ImportSettings, identity: dict) -> tuple[list, list, dict]:
     """Cut one sequence's phantom and write one shard per segment length, ``out_dir/test/<name>-<L>mm.h5``.
 
     Parameters
@@ -137,18 +182,21 @@ def write_sequence_shards(out_dir, name: str, colon_id: int, vertices, faces, ob
         ``name`` (relative to ``out_dir``), ``samples``, ``segments``, ``length_mm``, ``colon_id``.
     skipped : list of dict
         Segments and samples left out, with the length, window and reason.
+    check : dict or None
+        :func:`video_check` of the video samples made (None without); where it fails, they are all left out.
     """
     observed = np.asarray(observed, bool)
     scene = SurfaceScene(vertices, faces)
-    shards, skipped = [], []
+    cut, reached = [], []
     for length, wins in segment_windows(centerline.length, settings):
         lmm = int(round(length * 1000))
         rows, left_out = [], []
         for k, (s0, s1) in enumerate(wins):
+            where = {"window_mm": [float(s0), float(s1)], "segment": k}
             try:
                 surface = segment_surface(scene, centerline, s0, s1)
             except ColonbenchError as exc:   # no wall there (a gap in the phantom's mesh)
-                left_out.append({"window_mm": [float(s0), float(s1)], "segment": k, "reason": str(exc)})
+                left_out.append({**where, "reason": str(exc)})
                 continue
             mesh = surface.mesh
             obs = observed[surface.parent_face]
@@ -172,33 +220,56 @@ def write_sequence_shards(out_dir, name: str, colon_id: int, vertices, faces, ob
                 row, why = _sample_row(settings, points, surface, verts.astype(float), tris, cl.astype(float),
                                        obs, coverage, holes, pieces, p, model)
                 if row is None:
-                    left_out.append({"window_mm": [float(s0), float(s1)], "segment": k, "reason": why})
-                else:
-                    made.append(row)
+                    left_out.append({**where, "reason": why})
+                    continue
+                made.append((model, row))
+                if model == "video":
+                    seen, near = reach(mesh, obs, fv, ff, seeding.rng(settings.seed, "c3vd", name, lmm, k, "reach"),
+                                       settings.reach_tolerance_mm, settings.hole_point_density)
+                    reached.append({"length_mm": length, **where, "observed_mm2": seen, "reached_mm2": near})
             if made:
-                rows.append((k, surface, verts, tris, cl, made))
-        n = sum(len(r[5]) for r in rows)
+                rows.append((k, surface, verts, tris, cl, made, where))
+        cut.append((length, rows, left_out))
+    check = video_check(reached, settings)
+    if check is not None:
+        check["segments"] = [{"length_mm": r["length_mm"], "segment": r["segment"],
+                              "reach": round(r["reached_mm2"] / r["observed_mm2"], 4) if r["observed_mm2"] else None}
+                             for r in reached]
+    shards, skipped = [], []
+    for length, rows, left_out in cut:
+        if check is not None and not check["passed"]:
+            why = refusal(check)
+            left_out += [{**r[6], "reason": why} for r in rows if any(m == "video" for m, _ in r[5])]
+            rows = [(*r[:5], [(m, x) for m, x in r[5] if m != "video"], r[6]) for r in rows]
+            rows = [r for r in rows if r[5]]
         skipped += [{"length_mm": length, **s} for s in left_out]
-        if n == 0:
-            continue
-        shard = f"test/{name}-{length:g}mm.h5"
-        attrs = {"format": schema.FORMAT, "format_version": schema.FORMAT_VERSION, "generator_version": __version__,
-                 **identity, "seed": settings.seed, "split": "test", "colon_id": int(colon_id), "length_mm": length,
-                 "grid_size": settings.grid_size, "grid_margin": settings.grid_margin,
-                 "grid_min_extent_mm": settings.grid_min_extent_mm, "heatmap_scale": HEATMAP_SCALE, "n_samples": n,
-                 "n_segments": len(rows), "colon_source": name, "skipped_segments": json.dumps(left_out)}
-        if settings.grid_axes != "pca":
-            attrs["grid_axes"] = settings.grid_axes
-        with ShardWriter(Path(out_dir) / shard, n, settings.grid_size) as writer:
-            for k, surface, verts, tris, cl, made in rows:
-                row = writer.add_segment(segment_id=k, window_mm=surface.window, complete_area_mm2=surface.mesh.area,
-                                         vertices=verts, faces=tris, centerline=cl)
-                for grids, fields in made:
-                    writer.add_sample(grids, segment=row, **fields)
-            writer.close(attrs)
-        shards.append({"name": shard, "samples": n, "segments": len(rows), "length_mm": length,
-                       "colon_id": int(colon_id)})
-    return shards, skipped
+        shard = _write_shard(out_dir, name, colon_id, length, rows, left_out, settings, identity)
+        if shard is not None:
+            shards.append(shard)
+    return shards, skipped, check
+
+
+def _write_shard(out_dir, name, colon_id, length, rows, left_out, settings, identity) -> dict | None:
+    """One segment length's shard of a sequence, or None where it holds no sample."""
+    n = sum(len(r[5]) for r in rows)
+    if n == 0:
+        return None
+    shard = f"test/{name}-{length:g}mm.h5"
+    attrs = {"format": schema.FORMAT, "format_version": schema.FORMAT_VERSION, "generator_version": __version__,
+             **identity, "seed": settings.seed, "split": "test", "colon_id": int(colon_id), "length_mm": length,
+             "grid_size": settings.grid_size, "grid_margin": settings.grid_margin,
+             "grid_min_extent_mm": settings.grid_min_extent_mm, "heatmap_scale": HEATMAP_SCALE, "n_samples": n,
+             "n_segments": len(rows), "colon_source": name, "skipped_segments": json.dumps(left_out)}
+    if settings.grid_axes != "pca":
+        attrs["grid_axes"] = settings.grid_axes
+    with ShardWriter(Path(out_dir) / shard, n, settings.grid_size) as writer:
+        for k, surface, verts, tris, cl, made, _ in rows:
+            row = writer.add_segment(segment_id=k, window_mm=surface.window, complete_area_mm2=surface.mesh.area,
+                                     vertices=verts, faces=tris, centerline=cl)
+            for _, (grids, fields) in made:
+                writer.add_sample(grids, segment=row, **fields)
+        writer.close(attrs)
+    return {"name": shard, "samples": n, "segments": len(rows), "length_mm": length, "colon_id": int(colon_id)}
 
 
 def write_lock(out_dir, identity: dict, shards: list[dict]) -> dict:

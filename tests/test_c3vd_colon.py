@@ -181,7 +181,7 @@ def test_benchmark_maps_and_scores_it_as_colon_v1(built, tmp_path):
                  "--out", str(out), "--quiet", "--no-figures"]) == 0
     run = json.loads((out / "runs" / whole.id / "run.json").read_text())
     assert run["task"] == "colon" and run["suite"]["id"] == whole.id and run["suite"]["verified"]
-    assert run["suite"]["local"] and run["suite"]["importer"] == {"name": "c3vd-colon", "version": 1}
+    assert run["suite"]["local"] and run["suite"]["importer"] == {"name": "c3vd-colon", "version": 2}
     colons = pd.read_csv(out / "runs" / whole.id / "results" / "colons.csv")
     segs = pd.read_csv(out / "runs" / whole.id / "results" / "segments.csv")
     assert len(colons) == 2 * 2 * 2 and colons["error"].isna().all()           # 2 maps x 2 noise levels x 2 tracks
@@ -231,6 +231,35 @@ def test_pose_conventions_corrected_or_refused_naming_the_sequence(tmp_path, col
                                              r"phantom's lumen in any pose convention"):
             build_all(dl, suites, frames_every=EVERY, progress=False)
         assert not suites.exists() or not any(suites.iterdir())
+
+
+def test_a_withdrawal_over_a_phantom_too_short_for_the_map_is_skipped(tmp_path, capsys):
+    """A screening withdrawal over a 130 mm phantom: the map's own line of what its camera saw (about 109 mm) is not
+    two of colon-v1's 60 mm segments, so the map would take it for a single segment and every method would fail
+    it. It is left out at build, with the map's reason, among the download's skipped folders: the segment suite
+    of the download is built alone; a download holding nothing else is refused with the reason."""
+    from colonbench.benchmark.c3vd_suite import build_all
+    from colonbench.cli import main
+
+    mesh, line = phantom_tube(length_mm=130.0, ring_mm=1.5, around=40)
+    root = tmp_path / "dl"
+    write_screening(root, "c3_full_t1_v1", mesh, withdrawal_poses(line, 30))
+    only = tmp_path / "only"
+    shutil.copytree(root, only)
+    _registered(root)
+    ((suite, new),) = build_all(root, tmp_path / "suites", frames_every=EVERY, progress=False)
+    assert new and suite.task == "segments" and not any(p.name.startswith("c3vd-colon")
+                                                        for p in (tmp_path / "suites").iterdir())
+    (why,) = json.loads((Path(suite.folder) / "built-suite.json").read_text())["source"]["skipped"]
+    assert why["folder"] == "c3_full_t1_v1"
+    assert "the whole-colon map cannot map" in why["reason"] and "looks like a single segment" in why["reason"]
+    assert main(["suites", "build", "c3vd", "--from", str(root), "--data", str(tmp_path / "cli"), "--frames-every",
+                 str(EVERY), "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert "skipped c3_full_t1_v1: a screening withdrawal the whole-colon map cannot map (the centerline found" in out
+    with pytest.raises(InputError, match=r"no suite can be made of the download \(c3_full_t1_v1: .*single segment"):
+        build_all(only, tmp_path / "none", frames_every=EVERY, progress=False)
+    assert not (tmp_path / "none").exists() or not any((tmp_path / "none").iterdir())
 
 
 def test_a_refused_withdrawal_leaves_neither_suite_and_the_command_line(download, tmp_path, colon, capsys):
