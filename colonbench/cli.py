@@ -19,7 +19,7 @@ from colonbench.errors import ColonbenchError, did_you_mean
 
 
 #: The verb groups, in the order ``colonbench --help`` lists them (data flow: data, model, maps, video, benchmark).
-GROUPS = ("data", "model", "maps", "video", "evaluation", "suites", "benchmark", "results", "demo")
+GROUPS = ("data", "model", "maps", "video", "evaluation", "suites", "benchmark", "results", "server", "demo")
 
 
 class VerbParser(argparse.ArgumentParser):

@@ -1,0 +1,272 @@
+"""The evaluation server's HTTP app (Starlette): uploads, their status, each hidden suite's public leaderboard.
+
+Routes (every error a JSON body ``{"error": code, "message": ..., "problems": [...]}`` with a 4xx status):
+
+``GET /``, ``GET /suites/{suite}``
+    HTML: the hidden suites, and a suite's public leaderboard (autoescaping Jinja2 templates of this package).
+``GET /api/v1/health``, ``GET /api/v1/suites``, ``GET /api/v1/suites/{suite}/leaderboard``
+    JSON, no token: the suites (id, name, samples, noise levels, the published inputs' digest) and a suite's
+    leaderboard of public, scored submissions.
+``POST /api/v1/suites/{suite}/submissions?method=M&version=V&public=0|1``
+    Token (``Authorization: Bearer``); the body is the predictions zip (``application/zip``). Checked whole
+    before anything is stored (:mod:`colonbench.server.uploads`), then the team's limits; 202 with the
+    submission's id, queued for a worker.
+``GET /api/v1/submissions``, ``GET /api/v1/submissions/{id}``
+    Token: the team's own submissions (another team's id is answered as an unknown one), with their status, the
+    reason of a failure and, once scored, the summary row per noise level.
+
+The truth is never served: no route reads a suite's folder, and of a result only :data:`SERVED` summary columns
+are sent, never the per-sample rows (they hold each sample's true coverage).
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import json
+import secrets
+from pathlib import Path
+
+from sqlalchemy import func, select, update
+from sqlalchemy.orm import Session
+from starlette.applications import Starlette
+from starlette.concurrency import run_in_threadpool
+from starlette.exceptions import HTTPException
+from starlette.requests import Request
+from starlette.responses import HTMLResponse, JSONResponse
+from starlette.routing import Route
+
+from colonbench.server import accounts
+from colonbench.server.db import SCORED, Result, Submission, Team, engine, now
+from colonbench.server.uploads import Limits, UploadError, canonical_zip, check
+
+#: The summary columns a result is served with (per noise level); the rest stay in the database.
+SERVED = ("noise_mm", "segments", "failed", "coverage_undefined", "coverage_mae", "coverage_median",
+          "coverage_q95", "holes_precision_2mm_mean", "holes_recall_2mm_mean", "centerline_precision_2mm_mean",
+          "centerline_recall_2mm_mean")
+HEADERS = {"X-Content-Type-Options": "nosniff", "Referrer-Policy": "no-referrer",
+           "Content-Security-Policy": "default-src 'none'; style-src 'unsafe-inline'; frame-ancestors 'none'"}
+
+
+def _error(status: int, code: str, message: str, problems=()) -> JSONResponse:
+    return JSONResponse({"error": code, "message": message, "problems": list(problems)}, status, headers=HEADERS)
+
+
+def _text(value, what: str, longest: int, empty: bool = False) -> str:
+    """A text field of a request: printable, at most ``longest`` characters (stored as given, escaped when shown)."""
+    value = "" if value is None else str(value)
+    if (not value and not empty) or len(value) > longest or any(ord(c) < 32 or ord(c) == 127 for c in value):
+        raise UploadError(400, "bad_field", f"{what}: {'1' if not empty else '0'} to {longest} printable characters")
+    return value
+
+
+def _flag(value) -> bool:
+    if value in (None, "", "0", "false", "no"):
+        return False
+    if value in ("1", "true", "yes"):
+        return True
+    raise UploadError(400, "bad_field", "public: 0 or 1")
+
+
+def _summary(result: Result | None) -> list[dict] | None:
+    if result is None:
+        return None
+    return [{k: r.get(k) for k in SERVED} for r in json.loads(result.summary_json)]
+
+
+def _submission(sub: Submission, result: Result | None) -> dict:
+    return {"id": sub.public_id, "suite": sub.suite_id, "method": sub.method, "version": sub.version,
+            "public": sub.public, "status": sub.status, "reason": sub.reason, "files": sub.files,
+            "archive_sha256": sub.archive_sha256, "submitted_at": sub.created_at.isoformat() + "Z",
+            "finished_at": sub.finished_at.isoformat() + "Z" if sub.finished_at else None,
+            "summary": _summary(result)}
+
+
+class Server:
+    """The app's state: the database, the hidden suites it serves and their sample ids, the upload caps."""
+
+    def __init__(self, url: str, suites: dict, limits: Limits = Limits()):
+        from jinja2 import Environment, FileSystemLoader, select_autoescape
+
+        from colonbench.server.hidden import sample_ids
+
+        self.engine = engine(url)
+        self.suites = suites
+        self.ids = {sid: sample_ids(s) for sid, s in suites.items()}
+        self.limits = limits
+        self.templates = Environment(loader=FileSystemLoader(Path(__file__).parent / "templates"),
+                                     autoescape=select_autoescape(default=True, default_for_string=True))
+
+    # ------------------------------------------------------------------------------------------ reads
+    def suite_list(self) -> list[dict]:
+        from colonbench.benchmark.local_suites import read_entry
+
+        return [{"id": sid, "name": s.name, "samples": s.samples, "noise_mm": list(s.noise_mm),
+                 "inputs_sha256": read_entry(Path(s.folder)).get("inputs_sha256")}
+                for sid, s in sorted(self.suites.items())]
+
+    def leaderboard(self, suite_id: str) -> list[dict]:
+        """The public scored submissions of a suite, best first (by the mean coverage MAE over noise levels)."""
+        with Session(self.engine) as s:
+            found = s.execute(select(Submission, Result, Team).join(Result, Result.submission_id == Submission.id)
+                              .join(Team, Team.id == Submission.team_id)
+                              .where(Submission.suite_id == suite_id, Submission.public.is_(True),
+                                     Submission.status == SCORED)).all()
+        rows = []
+        for sub, result, team in found:
+            summary = _summary(result)
+            maes = [r["coverage_mae"] for r in summary if r["coverage_mae"] is not None]
+            rows.append({"id": sub.public_id, "team": team.name, "method": sub.method, "version": sub.version,
+                         "submitted_at": sub.created_at.isoformat() + "Z", "signature": result.signature,
+                         "coverage_mae": sum(maes) / len(maes) if maes else None, "by_noise": summary})
+        rows.sort(key=lambda r: (r["coverage_mae"] is None, r["coverage_mae"] or 0.0, r["submitted_at"]))
+        for k, r in enumerate(rows, 1):
+            r["rank"] = k
+        return rows
+
+    def own(self, token_header: str | None, public_id: str | None = None):
+        with Session(self.engine) as s:
+            tok = accounts.authenticate(s, token_header)
+            if tok is None:
+                return None
+            q = select(Submission, Result).outerjoin(Result, Result.submission_id == Submission.id).where(
+                Submission.team_id == tok.team_id)
+            if public_id is not None:
+                q = q.where(Submission.public_id == public_id)
+            return [_submission(sub, res) for sub, res in s.execute(q.order_by(Submission.id)).all()]
+
+    # ------------------------------------------------------------------------------------------ upload
+    def refuse(self, actor: str, suite_id: str, err: UploadError, remote: str) -> None:
+        with Session(self.engine) as s, s.begin():
+            accounts.audit(s, actor, "upload", f"suite {suite_id}"[:200], "refused",
+                           {"error": err.code, "message": err.message, "problems": err.problems[:5]}, remote)
+
+    def accept(self, tok_id: int, suite_id: str, method: str, version: str, public: bool, data: bytes,
+               remote: str) -> dict:
+        """Check an upload and, within the team's limits, store it queued (one transaction)."""
+        predictions = check(data, self.ids[suite_id], self.limits)
+        archive, digest = canonical_zip(predictions)
+        with Session(self.engine) as s, s.begin():
+            tok = s.get(accounts.Token, tok_id)
+            # lock the team (its row in PostgreSQL, the database in SQLite) before counting: limits hold under
+            # concurrent uploads
+            s.execute(update(Team).where(Team.id == tok.team_id).values(name=Team.name))
+            team = s.get(Team, tok.team_id)
+            day = now().replace(hour=0, minute=0, second=0, microsecond=0)
+            total = s.scalar(select(func.count()).select_from(Submission).where(Submission.team_id == team.id))
+            today = s.scalar(select(func.count()).select_from(Submission).where(Submission.team_id == team.id,
+                                                                               Submission.created_at >= day))
+            if team.total_limit is not None and total >= team.total_limit:
+                raise UploadError(429, "total_limit", f"team {team.name} has used all its {team.total_limit} "
+                                                      "submissions")
+            if team.daily_limit is not None and today >= team.daily_limit:
+                tomorrow = (day + dt.timedelta(days=1)).isoformat() + "Z"
+                raise UploadError(429, "daily_limit", f"team {team.name} has used its {team.daily_limit} "
+                                                      f"submissions of today (UTC); the next one from {tomorrow}")
+            sub = Submission(public_id=secrets.token_hex(12), suite_id=suite_id, team_id=team.id, token_id=tok.id,
+                             method=method, version=version, public=public, files=len(predictions),
+                             archive_sha256=digest, archive=archive, reason="", worker="", attempts=0)
+            s.add(sub)
+            s.flush()
+            accounts.audit(s, f"team {team.name}", "upload", f"submission {sub.public_id}", "accepted",
+                           {"suite": suite_id, "method": method, "version": version, "public": public,
+                            "files": len(predictions), "sha256": digest}, remote)
+            return _submission(sub, None)
+
+    def token_of(self, header: str | None):
+        with Session(self.engine) as s:
+            tok = accounts.authenticate(s, header)
+            return (tok.id, s.get(Team, tok.team_id).name) if tok else None
+
+
+async def _body(request: Request, cap: int) -> bytes:
+    """The request body, read no further than ``cap`` bytes."""
+    length = request.headers.get("content-length")
+    if length is not None and (not length.isdigit() or int(length) > cap):
+        raise UploadError(413, "too_large", f"the upload is over {cap} bytes")
+    chunks, size = [], 0
+    async for chunk in request.stream():
+        size += len(chunk)
+        if size > cap:
+            raise UploadError(413, "too_large", f"the upload is over {cap} bytes")
+        chunks.append(chunk)
+    return b"".join(chunks)
+
+
+def create_app(url: str, suites: dict, limits: Limits = Limits()) -> Starlette:
+    """The ASGI app serving ``suites`` (id -> hidden suite) on the database at ``url`` (migrated already)."""
+    srv = Server(url, suites, limits)
+
+    def page(name: str, status: int = 200, **context) -> HTMLResponse:
+        return HTMLResponse(srv.templates.get_template(name).render(**context), status, headers=HEADERS)
+
+    async def index(request):
+        return page("index.html", suites=srv.suite_list())
+
+    async def suite_page(request):
+        sid = request.path_params["suite"]
+        if sid not in srv.suites:
+            return page("missing.html", 404, what=sid)
+        rows = await run_in_threadpool(srv.leaderboard, sid)
+        return page("leaderboard.html", suite=next(s for s in srv.suite_list() if s["id"] == sid), rows=rows)
+
+    async def health(request):
+        return JSONResponse({"ok": True, "suites": sorted(srv.suites)}, headers=HEADERS)
+
+    async def suites_api(request):
+        return JSONResponse({"suites": srv.suite_list()}, headers=HEADERS)
+
+    async def leaderboard_api(request):
+        sid = request.path_params["suite"]
+        if sid not in srv.suites:
+            return _error(404, "unknown_suite", "no such hidden suite on this server")
+        return JSONResponse({"suite": sid, "rows": await run_in_threadpool(srv.leaderboard, sid)}, headers=HEADERS)
+
+    async def submit(request):
+        sid = request.path_params["suite"]
+        remote = request.client.host if request.client else ""
+        who = await run_in_threadpool(srv.token_of, request.headers.get("authorization"))
+        actor = f"team {who[1]}" if who else "unknown token"
+        try:
+            if who is None:
+                raise UploadError(401, "bad_token", "a valid API token is needed (Authorization: Bearer cbt_...)")
+            if sid not in srv.suites:
+                raise UploadError(404, "unknown_suite", "no such hidden suite on this server")
+            q = request.query_params
+            method = _text(q.get("method"), "method", 100)
+            version = _text(q.get("version"), "version", 100, empty=True)
+            public = _flag(q.get("public"))
+            data = await _body(request, srv.limits.max_bytes)
+            made = await run_in_threadpool(srv.accept, who[0], sid, method, version, public, data, remote)
+        except UploadError as err:
+            await run_in_threadpool(srv.refuse, actor, sid, err, remote)
+            return JSONResponse(err.body(), err.status, headers=HEADERS)
+        return JSONResponse(made, 202, headers=HEADERS)
+
+    async def my_submissions(request):
+        found = await run_in_threadpool(srv.own, request.headers.get("authorization"))
+        if found is None:
+            return _error(401, "bad_token", "a valid API token is needed (Authorization: Bearer cbt_...)")
+        return JSONResponse({"submissions": found}, headers=HEADERS)
+
+    async def my_submission(request):
+        found = await run_in_threadpool(srv.own, request.headers.get("authorization"), request.path_params["id"])
+        if found is None:
+            return _error(401, "bad_token", "a valid API token is needed (Authorization: Bearer cbt_...)")
+        if not found:
+            return _error(404, "unknown_submission", "no submission of your team has this id")
+        return JSONResponse(found[0], headers=HEADERS)
+
+    async def http_error(request, exc: HTTPException):
+        return _error(exc.status_code, "http", str(exc.detail))
+
+    async def server_error(request, exc: Exception):
+        return _error(500, "internal", "the server failed on this request; it is logged")
+
+    routes = [Route("/", index), Route("/suites/{suite}", suite_page),
+              Route("/api/v1/health", health), Route("/api/v1/suites", suites_api),
+              Route("/api/v1/suites/{suite}/leaderboard", leaderboard_api),
+              Route("/api/v1/suites/{suite}/submissions", submit, methods=["POST"]),
+              Route("/api/v1/submissions", my_submissions), Route("/api/v1/submissions/{id}", my_submission)]
+    app = Starlette(routes=routes, exception_handlers={HTTPException: http_error, Exception: server_error})
+    app.state.server = srv
+    return app
