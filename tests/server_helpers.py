@@ -37,9 +37,9 @@ def colonbench(*args, env=None, timeout: float = 120) -> subprocess.CompletedPro
 class Server:
     """``colonbench serve`` on a free loopback port over a SQLite file, stopped by :meth:`stop`."""
 
-    def __init__(self, suites: Path, db_file: Path, workers: int = 1, extra=()):
-        self.db = f"sqlite:///{db_file}"
-        self.db_file = db_file
+    def __init__(self, suites: Path, db_file: Path, workers: int = 1, extra=(), url: str | None = None):
+        self.db = url or f"sqlite:///{db_file}"
+        self.db_file = db_file     # with a url: where the log goes
         self.port = free_port()
         self.url = f"http://127.0.0.1:{self.port}"
         self.log = open(db_file.with_suffix(".log"), "w")
@@ -98,12 +98,23 @@ class Server:
         return out.getvalue()
 
     def rows(self, sql: str) -> list[tuple]:
-        """Rows of a query on the server's database (read only)."""
-        con = sqlite3.connect(f"file:{self.db_file}?mode=ro", uri=True, timeout=30)
+        """Rows of a query on the server's database (read only on SQLite)."""
+        if self.db.startswith("sqlite"):
+            con = sqlite3.connect(f"file:{self.db_file}?mode=ro", uri=True, timeout=30)
+            try:
+                return con.execute(sql).fetchall()
+            finally:
+                con.close()
+        from sqlalchemy import text
+
+        from colonbench.server.db import engine
+
+        eng = engine(self.db)
         try:
-            return con.execute(sql).fetchall()
+            with eng.connect() as conn:
+                return [tuple(r) for r in conn.execute(text(sql)).all()]
         finally:
-            con.close()
+            eng.dispose()
 
     def wait_final(self, timeout: float = 120) -> list[tuple]:
         """Wait until no submission is queued or scoring; every (public id, status, reason)."""
