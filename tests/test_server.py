@@ -132,6 +132,21 @@ def test_daily_and_total_limits_hold(server, hidden_suite):
     server.wait_final()
 
 
+def test_concurrent_uploads_of_one_team_keep_its_limit(server, hidden_suite):
+    from concurrent.futures import ThreadPoolExecutor
+
+    sid, _, public, _ = hidden_suite
+    server.admin("team", "set", "racing", "--daily", 3)
+    token = server.token("racing")
+    data = _all(public)
+    with ThreadPoolExecutor(8) as pool:
+        statuses = sorted(pool.map(lambda _: server.upload(sid, data, token)[0], range(8)))
+    assert statuses == [202] * 3 + [429] * 5
+    assert server.rows("select count(*) from submissions s join teams t on t.id = s.team_id "
+                       "where t.name = 'racing'") == [(3,)]
+    server.wait_final()
+
+
 def test_a_method_name_with_html_is_escaped_on_the_page(server, hidden_suite):
     sid, _, public, _ = hidden_suite
     token = server.token("html")

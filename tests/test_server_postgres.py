@@ -1,6 +1,6 @@
 """The evaluation server on PostgreSQL (psycopg 3): a throwaway cluster on loopback, the real server and workers,
 an upload through the real client scored and on the leaderboard, a hostile upload refused with nothing stored,
-workers claiming concurrently without scoring one submission twice, a killed worker's submission finished."""
+concurrent uploads of one team within its limit, workers claiming concurrently without scoring one submission twice, a killed worker's submission finished."""
 
 from __future__ import annotations
 
@@ -84,3 +84,16 @@ def test_workers_claim_once_and_a_killed_one_leaves_nothing_stuck(server, hidden
     assert {p: s for p, s, _ in final if p in ids} == {i: "scored" for i in ids}
     assert server.rows("select count(*) from (select submission_id from results group by submission_id "
                        "having count(*) > 1) t") == [(0,)]
+
+
+def test_concurrent_uploads_of_one_team_keep_its_limit(server, hidden_suite):
+    from concurrent.futures import ThreadPoolExecutor
+
+    sid, _, public, _ = hidden_suite
+    server.admin("team", "set", "pg-racing", "--daily", 3)
+    token = server.token("pg-racing")
+    data = zip_of({f"{i}.json": prediction() for i in sample_ids(public)})
+    with ThreadPoolExecutor(8) as pool:
+        statuses = sorted(pool.map(lambda _: server.upload(sid, data, token)[0], range(8)))
+    assert statuses == [202] * 3 + [429] * 5
+    server.wait_final()
