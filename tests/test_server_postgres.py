@@ -1,6 +1,7 @@
 """The evaluation server on PostgreSQL (psycopg 3): a throwaway cluster on loopback, the real server and workers,
 an upload through the real client scored and on the leaderboard, a hostile upload refused with nothing stored,
-concurrent uploads of one team within its limit, workers claiming concurrently without scoring one submission twice, a killed worker's submission finished."""
+concurrent uploads of one team within its limit, workers claiming concurrently without scoring one submission
+twice, a killed worker's submission finished."""
 
 from __future__ import annotations
 
