@@ -135,7 +135,8 @@ def main(argv=None) -> int:
         for k, st, _, _ in results:
             per_team[k] = per_team.get(k, 0) + (st == 202)
         lat = [dt for *_, dt in results]
-        print(f"{len(results)} uploads by {args.clients} clients in {upload_s:.1f} s ({len(results) / upload_s:.1f}/s); "
+        print(f"{len(results)} uploads by {args.clients} clients in {upload_s:.1f} s "
+              f"({len(results) / upload_s:.1f}/s); "
               f"upload latency p50 {_pct(lat, .5) * 1000:.0f} ms, p95 {_pct(lat, .95) * 1000:.0f} ms; "
               f"page p50 {_pct(pages, .5) * 1000:.0f} ms, p95 {_pct(pages, .95) * 1000:.0f} ms over {len(pages)} "
               f"loads; {len(accepted)} accepted, {len(refused)} refused, all scored or failed {scored_s:.0f} s after "
