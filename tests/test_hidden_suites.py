@@ -93,3 +93,7 @@ def test_a_whole_colon_suite_or_a_mesh_manifest_is_refused(tmp_path, capsys):
     rc = main(["suites", "build", "hidden", "--from", "colon-v1", "--data", str(tmp_path / "p"), "--publish",
                str(tmp_path / "q")])
     assert rc == 2 and "segment manifests" in capsys.readouterr().err
+    rc = main(["suites", "build", "hidden", "--from", "real-v1", "--data", str(tmp_path / "p"), "--publish",
+               str(tmp_path / "q")])
+    assert rc == 2 and "procedural manifests only" in capsys.readouterr().err
+    assert not (tmp_path / "p").exists() and not (tmp_path / "q").exists()
