@@ -178,8 +178,11 @@ def process(eng, sid: int, suites: dict, worker: str, beat: float = 5.0, slow: f
 
 
 def run(url: str, suites: dict, once: bool = False, poll: float = 1.0, stale_after: float = 120.0,
-        max_attempts: int = 2, slow: float = 0.0, stop: threading.Event | None = None) -> int:
-    """Claim and score submissions until stopped (``once``: until none is queued); how many were processed."""
+        max_attempts: int = 2, slow: float = 0.0, stop: threading.Event | None = None,
+        parent: int | None = None) -> int:
+    """Claim and score submissions until stopped (``once``: until none is queued; ``parent``: until the process of
+    that id, the ``colonbench serve`` that started this worker, is no longer its parent); how many were
+    processed."""
     eng = engine(url)
     worker = worker_name()
     log.info("worker %s on %s, suites %s", worker, url.split("?")[0], ", ".join(sorted(suites)))
@@ -187,6 +190,9 @@ def run(url: str, suites: dict, once: bool = False, poll: float = 1.0, stale_aft
     stop = stop or threading.Event()
     try:
         while not stop.is_set():
+            if parent is not None and os.getppid() != parent:
+                log.warning("worker %s: its server (process %s) stopped; stopping", worker, parent)
+                break
             recover(eng, stale_after, max_attempts)
             sid = claim(eng, worker)
             if sid is None:

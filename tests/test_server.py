@@ -182,3 +182,21 @@ def test_no_route_serves_the_truth(server, hidden_suite):
                 for bad in ["true_coverage", "hole_points", "partial_points", ".h5", "signature.json", "manifest.yaml",
                             str(seed), "noise_seed", "rows_json", *truths]:
                     assert bad not in text, (method, route, bool(tok), bad)
+
+
+@pytest.mark.parametrize("how", ["SIGTERM", "SIGKILL"])
+def test_the_servers_workers_stop_with_it(hidden_suite, tmp_path, how):
+    psutil = pytest.importorskip("psutil")
+
+    _, private, _, _ = hidden_suite
+    srv = Server(private, tmp_path / "s.db", workers=2)
+    workers = psutil.Process(srv.proc.pid).children()
+    assert len(workers) == 2
+    if how == "SIGKILL":
+        srv.proc.kill()
+        srv.proc.wait(timeout=30)
+    srv.stop()
+    gone, alive = psutil.wait_procs(workers, timeout=30)
+    for p in alive:     # a failure: stop them anyway, then say so
+        p.kill()
+    assert not alive, f"workers left running after the server's {how}"

@@ -24,6 +24,7 @@ def _limits(args):
 
 def cmd_serve(args):
     """Run the server on one address, with ``--workers`` scoring workers beside it."""
+    import os
     import signal
     import subprocess
 
@@ -36,9 +37,11 @@ def cmd_serve(args):
     revision = db.migrate(args.db)
     app = create_app(args.db, suites, _limits(args))
     procs = []
-    for _ in range(args.workers):
+    for _ in range(args.workers):   # each stops when this process does (--parent), however it ends
         procs.append(subprocess.Popen([sys.executable, "-m", "colonbench.cli", "serve-worker", "--db", args.db,
-                                       "--suites", *map(str, args.suites)]))
+                                       "--parent", str(os.getpid()), "--suites", *map(str, args.suites)]))
+    # uvicorn shuts down on SIGTERM and then raises it again: exit through the finally below, stopping the workers
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))
     print(f"colonbench serve: {len(suites)} hidden suite(s) ({', '.join(sorted(suites))}), database at schema "
           f"{revision}, {args.workers} scoring worker(s); http://{args.host}:{args.port}/", flush=True)
     try:
@@ -68,7 +71,7 @@ def cmd_worker(args):
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     n = worker.run(args.db, suites, once=args.once, poll=args.poll, stale_after=args.stale_after,
-                   max_attempts=args.max_attempts, slow=args.slow, stop=stop)
+                   max_attempts=args.max_attempts, slow=args.slow, stop=stop, parent=args.parent)
     print(f"colonbench serve-worker: {n} submission(s) processed")
     return 0
 
@@ -205,6 +208,7 @@ def add_parsers(sub) -> None:
     p.add_argument("--max-attempts", type=int, default=2, help="claims of one submission before it is failed "
                                                                "(default 2)")
     p.add_argument("--slow", type=float, default=0.0, help=argparse.SUPPRESS)   # tests: seconds held per scoring
+    p.add_argument("--parent", type=int, help=argparse.SUPPRESS)   # colonbench serve's pid: stop when it is gone
     p.set_defaults(func=cmd_worker)
 
     p = sub.add_parser("serve-admin", help="the server's teams, API tokens, audit log and schema")
