@@ -49,7 +49,7 @@ def tables() -> str:
         a, b = got.get((m, 0.0), math.nan), got.get((m, 0.5), math.nan)
         return "—" if math.isnan(a) else f"{a:.1f} / {b:.1f}"
 
-    lines = ["| coverage MAE, points (noiseless / 0.5 mm) | " + " | ".join(s.id for s in chosen) + " |",
+    lines = ["| coverage MAE, percentage points (noiseless / 0.5 mm) | " + " | ".join(s.id for s in chosen) + " |",
              "|---|" + "---:|" * len(chosen)]
     for row in ROWS:
         lines.append(f"| {LABELS.get(row, row)} | " + " | ".join(cell(s.id, row) for s in chosen) + " |")
