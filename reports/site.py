@@ -21,9 +21,14 @@ or a project page):
 * ``SITE/methods/<method>.html``: a method's version, how it was run, its model
   card where one ships, and the package versions and machine its run recorded.
 
-Every table sorts by a click on a column header (:mod:`colonbench.reports.webpage`:
-a small inline script); every string from a run (method names, versions, command
-lines) is escaped.
+The pages are rendered from autoescaping Jinja2 templates (``templates/``:
+``suite.html``, ``index.html``, each extending ``page.html``;
+:func:`colonbench.reports.webpage.render`); the chart and the tables come to them
+as HTML built with every string from a run (method names, versions, command
+lines) escaped. Every table sorts by a click on a column header
+(:mod:`colonbench.reports.webpage`: a small inline script). The evaluation
+server's live page of a hidden suite is the same suite page
+(:mod:`colonbench.reports.live`).
 """
 
 from __future__ import annotations
@@ -42,7 +47,8 @@ from colonbench.reports.chart import mae_chart
 from colonbench.reports.leaderboard import data_line, suite_state
 from colonbench.reports.site_tables import (
     breakdown_tables, chart_rows, every_tables, interval_table, main_table, method_cell, pr_table, row_attrs, source)
-from colonbench.reports.webpage import esc, fmt, inline, interval_cell, kv_table, page, slug, table, with_interval
+from colonbench.reports.webpage import (
+    esc, fmt, inline, interval_cell, kv_table, page, render, safe, slug, table, with_interval)
 
 #: The track of a run whose run.json names none.
 DEFAULT_TRACK = tracks.DEFAULT
@@ -152,53 +158,55 @@ def headline(tab: pd.DataFrame, suite) -> pd.DataFrame:
         ["noise_mm", "method", "mae", "mae_lo", "mae_hi", "failed"]]
 
 
-def chart_figure(mae: pd.DataFrame, methods: dict, root: str, title: str, cid: str) -> str:
-    """The headline chart of one page (:func:`colonbench.reports.chart.mae_chart`) as a figure with its caption."""
-    return (f'<figure class="chart">{mae_chart(chart_rows(mae, methods, root), title, cid)}'
-            f"<figcaption>{esc(CHART_CAPTION)}</figcaption></figure>")
+def section(title: str, tables: str, id: str | None = None, note: str | None = None,
+            details: str | None = None) -> dict:
+    """A section of a suite page (``parts.html``'s ``section``): its heading, an optional note, its tables (HTML of
+    :mod:`colonbench.reports.site_tables`, every string from a run escaped there), folded under ``details`` if
+    given."""
+    return {"title": title, "tables": safe(tables), "id": id, "note": note, "details": details}
+
+
+def chart_svg(mae: pd.DataFrame, methods: dict, root: str, title: str, cid: str):
+    """The headline chart of one page (:func:`colonbench.reports.chart.mae_chart`, every name escaped there)."""
+    return safe(mae_chart(chart_rows(mae, methods, root), title, cid))
 
 
 def suite_page(key, g: dict, folder: Path, lb: dict, tab: pd.DataFrame, bd, figures: list[str],
                mae: pd.DataFrame) -> str:
-    """The page of one suite (or data) and track: what it is, its figures (the headline chart first), then its
-    tables."""
+    """The page of one suite (or data) and track (``suite.html``): what it is, its figures (the headline chart
+    first), then its tables."""
     (pid, track), s, root, methods = key, g["suite"], "../../", lb["methods"]
-    html_ = [f"<h1>{esc(pid)} · track {esc(track)}</h1>"]
-    if s is not None:
-        html_.append(f"<p>{esc(s.tests)}. Cite as <code>{esc(tracks.cite(s, track))}</code>.</p>")
     unit = "reconstructions" if lb.get("task") == "colon" else "segments"
-    html_ += [f"<p>{inline(data_line({'data': lb['data'], 'suite': lb.get('suite'), 'track': track}, unit))} "
-              f"Noise levels: "
-              f"{esc(', '.join(f'{n:g}' for n in lb['noise_mm']))} mm (Gaussian, seed {esc(lb['noise_seed'])}).</p>",
-              '<p class="note">Coverage errors in percentage points (estimated - true), MAE with its 95 % bootstrap '
-              "interval over segments; Δ: the paired difference of the absolute error against the best baseline "
-              "(negative: better). Rows marked * are references (given ground truth, or the constant guess); † marks "
-              "the shipped reference results, ‡ submitted results (others' runs, checked by colonbench results check "
-              "and kept in the repository's results/). A method's version is on its page. Click a column header to "
-              "sort.</p>"]
-    html_ += [f'<p class="note">Left out of this page: {esc(n)}.</p>' for n in lb.get("notes") or ()]
-    html_ += ["<p>Files: " + " ".join(
-                  f'<a href="{f}">{f}</a>' for f in ("leaderboard.md", "leaderboard.csv", "leaderboard.json",
-                                                     "breakdowns.md", "breakdowns.csv") if (folder / f).is_file())
-              + "</p>", "<h2>Figures</h2>", chart_figure(mae, methods, root, f"{pid} · track {track}", "chart")]
-    html_ += [f'<figure><img src="{esc(f)}" alt="{esc(cap)}"><figcaption>{esc(cap)}</figcaption></figure>'
-              for f in figures for cap in [CAPTIONS.get(f[:-4], f[:-4].replace("-", " "))]]
+    sections = []
     for noise, h in tab.groupby("noise_mm", sort=True):
         n = f"noise{noise:g}"
-        html_ += [f'<h2 id="{n}">Noise sigma = {noise:g} mm</h2>', main_table(f"coverage-{n}", h, methods, root),
-                  interval_table(f"intervals-{n}", h, methods, root), pr_table(f"pr-{n}", h, methods, root)]
+        sections.append(section(f"Noise sigma = {noise:g} mm", main_table(f"coverage-{n}", h, methods, root)
+                                + interval_table(f"intervals-{n}", h, methods, root)
+                                + pr_table(f"pr-{n}", h, methods, root), id=n))
     extra = pd.DataFrame(lb.get("in_context") or [])
     if len(extra):
-        html_ += ["<h2>In context vs segment-only, the same segments</h2>", table(
+        sections.append(section("In context vs segment-only, the same segments", table(
             "in-context", [(c, extra[c].dtype.kind in "if") for c in extra.columns],
-            [({}, [(esc(t), v) for t, v in (fmt(x, c) for c, x in r.items())]) for _, r in extra.iterrows()])]
+            [({}, [(esc(t), v) for t, v in (fmt(x, c) for c, x in r.items())]) for _, r in extra.iterrows()])))
     if bd is not None and len(bd):
-        html_ += ['<h2>Breakdowns</h2><p class="note">Coverage MAE in percentage points with its 95 % interval over '
-                  "the group's segments, and the group's size.</p>", breakdown_tables(bd, methods, root)]
-    html_ += ["<h2>Every statistic</h2><details><summary>the leaderboard table as computed (leaderboard.csv; the "
-              "versions are on the methods' pages)</summary>", every_tables(tab, methods, root), "</details>",
-              "<p>Runs: " + ", ".join(f"<code>{esc(r['path'])}</code>" for r in lb["runs"]) + ".</p>"]
-    return page(f"{pid} · track {track}: colonbench leaderboard", "\n".join(html_), root)
+        sections.append(section("Breakdowns", breakdown_tables(bd, methods, root),
+                                note="Coverage MAE in percentage points with its 95 % interval over the group's "
+                                     "segments, and the group's size."))
+    sections.append(section("Every statistic", every_tables(tab, methods, root),
+                             details="the leaderboard table as computed (leaderboard.csv; the versions are on the "
+                                     "methods' pages)"))
+    return render(
+        "suite.html", title=f"{pid} · track {track}: colonbench leaderboard", root=root,
+        heading=f"{pid} · track {track}", tests=s.tests if s is not None else None,
+        cite=tracks.cite(s, track) if s is not None else None,
+        data=safe(inline(data_line({"data": lb["data"], "suite": lb.get("suite"), "track": track}, unit))),
+        noise_levels=", ".join(f"{n:g}" for n in lb["noise_mm"]), noise_seed=lb["noise_seed"],
+        notes=list(lb.get("notes") or ()),
+        files=[f for f in ("leaderboard.md", "leaderboard.csv", "leaderboard.json", "breakdowns.md", "breakdowns.csv")
+               if (folder / f).is_file()],
+        chart=chart_svg(mae, methods, root, f"{pid} · track {track}", "chart"), chart_caption=CHART_CAPTION,
+        figures=[{"src": f, "caption": CAPTIONS.get(f[:-4], f[:-4].replace("-", " "))} for f in figures],
+        sections=sections, runs=[r["path"] for r in lb["runs"]])
 
 
 def model_card(version: str) -> str | None:
@@ -245,8 +253,8 @@ def method_page(name: str, seen: list[dict]) -> str:
 
 
 def index_page(pages: list[dict]) -> str:
-    """The site's front page: the headline chart of each page, the pages, and every method's MAE on each, per
-    noise level."""
+    """The site's front page (``index.html``): the headline chart of each page, the pages, and every method's MAE
+    on each, per noise level."""
     rows = []
     for p in pages:
         s, lb = p["suite"], p["lb"]
@@ -257,28 +265,23 @@ def index_page(pages: list[dict]) -> str:
             (esc(tracks.cite(s, p["track"])) if s else "", None),
             (inline(suite_state(lb["suite"])) if lb.get("suite") else "", None),
             (esc(", ".join(mine) or "none (shipped or submitted results only)"), None)]))
-    body = ["<h1>colonbench leaderboard</h1>", "<p>Coverage estimation for colonoscopy: each page is one suite (or "
-            "dataset) and track, the built-in methods' shipped results (†) and the submitted results (‡) beside "
-            "the runs given; * marks reference rows. Click a column header to sort.</p>",
-            "<h2>Coverage MAE, percentage points</h2>"]
-    for i, p in enumerate(pages):
-        name = f"{p['pid']} · track {p['track']}"
-        body += [f'<h3><a href="{esc(p["name"])}/index.html">{esc(name)}</a></h3>',
-                 chart_figure(p["mae"], p["lb"]["methods"], "", name, f"chart-{i + 1}")]
-    body += ["<h2>Pages</h2>", table("pages", [
-        ("suite", False), ("track", False), ("what it tests", False), ("cite as", False), ("data", False),
-        ("runs given", False)], rows)]
+    charts = [{"href": f"{p['name']}/index.html", "name": f"{p['pid']} · track {p['track']}",
+               "svg": chart_svg(p["mae"], p["lb"]["methods"], "", f"{p['pid']} · track {p['track']}", f"chart-{i}")}
+              for i, p in enumerate(pages, 1)]
     recs = {m: r for p in pages for m, r in p["lb"]["methods"].items()}
     summary = pd.concat([p["mae"].assign(page=p["name"]) for p in pages], ignore_index=True)
+    summaries = []
     for noise, g in summary.groupby("noise_mm", sort=True):
         keyed = {(r["method"], r["page"]): r for _, r in g.iterrows()}
         trs = [(row_attrs(m, recs), [method_cell(m, recs, "")] + [
             ("—", "") if (m, p["name"]) not in keyed else interval_cell(keyed[m, p["name"]], "mae") for p in pages])
             for m in dict.fromkeys(chart_rows(g, recs, "")["method"])]
         heads = [("method", False)] + [(f"{p['pid']} · track {p['track']}", True) for p in pages]
-        body += [f"<h2>Coverage MAE [95 % CI], percentage points, noise sigma = {noise:g} mm</h2>",
-                 table(f"summary-noise{noise:g}", heads, trs)]
-    return page("colonbench leaderboard", "\n".join(body), "")
+        summaries.append({"noise": f"{noise:g}", "table": safe(table(f"summary-noise{noise:g}", heads, trs))})
+    return render("index.html", title="colonbench leaderboard", root="", charts=charts, chart_caption=CHART_CAPTION,
+                  pages=safe(table("pages", [("suite", False), ("track", False), ("what it tests", False),
+                                             ("cite as", False), ("data", False), ("runs given", False)], rows)),
+                  summaries=summaries)
 
 
 # ---------------------------------------------------------------------------------------------------- the site

@@ -1,5 +1,12 @@
 """HTML for the leaderboard site (:mod:`colonbench.reports.site`): escaping, cells, sortable tables, pages.
 
+Pages are rendered from the Jinja2 templates in ``templates/`` (:func:`render`;
+``page.html`` the skeleton every page extends), with autoescaping: a value
+is shown as text unless it comes as :class:`markupsafe.Markup`, which only the
+pieces built here and in :mod:`colonbench.reports.chart` are, every string
+from a run escaped in them by :func:`esc`. The evaluation server
+(:mod:`colonbench.server`) renders its pages from the same templates.
+
 Pages are self-contained: their style and a small table sorter (vanilla
 JavaScript, no network) are inline, so they work from ``file://`` and as a
 project page. A click on a column header sorts its table, ascending then
@@ -8,12 +15,16 @@ descending (numbers by the value in a cell's ``data-v``; missing values last).
 
 from __future__ import annotations
 
+import base64
 import hashlib
-import html
 import re
+from functools import lru_cache
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from jinja2 import ChoiceLoader, Environment, FileSystemLoader, PackageLoader, StrictUndefined
+from markupsafe import Markup, escape
 
 from colonbench._version import __version__
 
@@ -54,9 +65,14 @@ function sortBy(th) {
 }"""
 
 
+#: The sorter's hash for a Content-Security-Policy (``script-src 'sha256-...'``): a server that sends one lets the
+#: inline sorter run and no other script.
+SORTER_SHA256 = "sha256-" + base64.b64encode(hashlib.sha256(SORTER.encode()).digest()).decode()
+
+
 def esc(x) -> str:
-    """``x`` as text safe inside HTML and its attributes."""
-    return html.escape(str(x), quote=True)
+    """``x`` as text safe inside HTML and its attributes (as the templates' autoescaping escapes it)."""
+    return str(escape(str(x)))
 
 
 def inline(text: str) -> str:
@@ -128,11 +144,48 @@ def kv_table(d: dict) -> str:
         "</table>"
 
 
+def environment(*folders: str | Path) -> Environment:
+    """A Jinja2 environment of the site's templates (this package's ``templates/``), autoescaping.
+
+    Parameters
+    ----------
+    *folders : str or Path
+        Folders of other templates, looked in first (the evaluation server's own pages, which extend
+        ``page.html``).
+
+    Returns
+    -------
+    jinja2.Environment
+        Autoescaping, undefined names an error, with ``style``, ``sorter`` and ``version`` (colonbench's) as
+        globals.
+    """
+    loader = PackageLoader("colonbench.reports", "templates")
+    if folders:
+        loader = ChoiceLoader([FileSystemLoader([str(f) for f in folders]), loader])
+    env = Environment(loader=loader, autoescape=True, undefined=StrictUndefined, trim_blocks=True,
+                      lstrip_blocks=True, keep_trailing_newline=True)
+    env.globals.update(style=Markup(STYLE), sorter=Markup(SORTER), version=__version__)
+    return env
+
+
+@lru_cache(maxsize=1)
+def templates() -> Environment:
+    """The site's template environment (:func:`environment` of no other folder), made once."""
+    return environment()
+
+
+def render(name: str, **context) -> str:
+    """The template ``name`` rendered with ``context``: strings are escaped, :class:`markupsafe.Markup` is not."""
+    return templates().get_template(name).render(**context)
+
+
+def safe(text: str) -> Markup:
+    """HTML built here (or in :mod:`colonbench.reports.chart`), every string from a run escaped in it by
+    :func:`esc`, marked safe for a template."""
+    return Markup(text)
+
+
 def page(title: str, body: str, root: str) -> str:
-    """A whole HTML page, its style and table sorter inline (no network)."""
-    return (f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8"><title>{esc(title)}</title>'
-            f'<meta name="viewport" content="width=device-width, initial-scale=1"><style>{STYLE}</style></head>'
-            f'<body><nav><a href="{root}index.html">colonbench leaderboard</a></nav>\n{body}\n'
-            f'<p class="note">Made by colonbench {esc(__version__)} (<code>colonbench leaderboard RUN... --out SITE '
-            f'--html</code>) from stored runs; nothing here is edited by hand.</p><script>{SORTER}</script>'
-            '</body></html>\n')
+    """A whole HTML page (``page.html``): ``body`` is HTML built with :func:`esc`; the style and the table sorter
+    inline (no network)."""
+    return render("page.html", title=title, body=safe(body), root=root)

@@ -1,7 +1,6 @@
 """The leaderboard site (colonbench leaderboard RUN... --out SITE --html), built from a real benchmark folder and
 read in headless Chromium."""
 
-import importlib.util
 import json
 import shutil
 import sys
@@ -10,6 +9,8 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
+from site_browser import browser, needs_chromium
+
 from colonbench.benchmark import shipped, suites
 from colonbench.cli import main
 
@@ -17,17 +18,6 @@ ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "examples" / "constant_method.py"
 #: An argument the example program ignores, so that its command line (shown on its method page) holds markup.
 MARKUP = "--note=<b>bold</b>&amp;"
-
-
-def _script():
-    spec = importlib.util.spec_from_file_location("site_screenshot", ROOT / "scripts" / "site_screenshot.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
-
-#: scripts/site_screenshot.py, which drives the system's headless Chromium.
-browser = _script()
 
 
 @pytest.fixture(scope="module")
@@ -46,8 +36,7 @@ def site(bench):
     return out
 
 
-@pytest.mark.skipif(browser.binaries() is None, reason="Chromium is not installed (apt-get install chromium "
-                    "chromium-driver; scripts/system-deps.sh)")
+@needs_chromium
 def test_the_page_of_a_benchmark_folder_in_chromium(site):
     """Done when: the page opens in headless Chromium and shows the suite, the shipped rows and the user's method;
     a click on a header sorts the table."""
@@ -265,7 +254,7 @@ def test_the_version_string_is_on_the_method_page_not_the_suite_page(site):
     assert version in (site / "methods" / "completion.html").read_text()
 
 
-@pytest.mark.skipif(browser.binaries() is None, reason="Chromium is not installed")
+@needs_chromium
 def test_the_pages_fit_a_1280_px_window(site):
     """Done when: at 1280 px no table of the suite page or the index (its details open) is wider than its container
     and the page needs no horizontal scrollbar; the index's chart is in the first screen."""
