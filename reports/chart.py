@@ -90,7 +90,7 @@ def _mark(r, y: float, x, kind: str) -> str:
     return "".join(out) + "</g>"
 
 
-def mae_chart(frame: pd.DataFrame, title: str, cid: str) -> str:
+def mae_chart(frame: pd.DataFrame, title: str, cid: str, intervals: bool = True) -> str:
     """An SVG chart of the coverage MAE with its 95 % interval: panels per noise level, rows per method.
 
     Parameters
@@ -104,6 +104,9 @@ def mae_chart(frame: pd.DataFrame, title: str, cid: str) -> str:
         What the chart shows, for its ``<title>`` and ``aria-label`` (escaped here).
     cid : str
         The SVG's id (its title's and description's ids derive from it).
+    intervals : bool
+        Whether the frame has intervals, as its title and description say (without: a dot at each MAE, as the
+        evaluation server keeps no interval).
 
     Returns
     -------
@@ -121,8 +124,9 @@ def mae_chart(frame: pd.DataFrame, title: str, cid: str) -> str:
     grid = ticks(top)
     height = TOP + ROW * len(methods) + BOTTOM
     desc = (f"Coverage MAE of {len(methods)} method(s) at noise sigma {', '.join(f'{n:g}' for n in noises)} mm: a "
-            "dot at the MAE, a bar over its 95 % bootstrap interval, in percentage points; ✕ marks failed samples.")
-    name = f"Coverage MAE with its 95 % interval, percentage points: {title}"
+            f"dot at the MAE{', a bar over its 95 % bootstrap interval' if intervals else ''}, in percentage points; "
+            "✕ marks failed samples.")
+    name = f"Coverage MAE{' with its 95 % interval' if intervals else ''}, percentage points: {title}"
     out = [f'<svg id="{esc(cid)}" class="chart" role="img" '
            f'viewBox="0 0 {WIDTH} {height}" width="{WIDTH}" height="{height}" aria-label="{esc(name)}" '
            f'aria-describedby="{esc(cid)}-desc"><title>{esc(name)}</title>'

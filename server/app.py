@@ -3,7 +3,9 @@
 Routes (every error a JSON body ``{"error": code, "message": ..., "problems": [...]}`` with a 4xx status):
 
 ``GET /``, ``GET /suites/{suite}``
-    HTML: the hidden suites, and a suite's public leaderboard (autoescaping Jinja2 templates of this package).
+    HTML: the hidden suites, and a suite's public leaderboard: the leaderboard site's suite page, rendered live
+    (:func:`colonbench.reports.live.live_page`) from the autoescaping Jinja2 templates the static site uses; this
+    package's own pages (``templates/``) extend their ``page.html``.
 ``GET /api/v1/health``, ``GET /api/v1/suites``, ``GET /api/v1/suites/{suite}/leaderboard``
     JSON, no token: the suites (id, name, samples, noise levels, the published inputs' digest) and a suite's
     leaderboard of public, scored submissions.
@@ -35,6 +37,8 @@ from starlette.requests import Request
 from starlette.responses import HTMLResponse, JSONResponse
 from starlette.routing import Route
 
+from colonbench.reports.live import live_page
+from colonbench.reports.webpage import SORTER_SHA256, environment
 from colonbench.server import accounts
 from colonbench.server.db import SCORED, Result, Submission, Team, engine, now
 from colonbench.server.uploads import Limits, UploadError, canonical_zip, check
@@ -43,8 +47,10 @@ from colonbench.server.uploads import Limits, UploadError, canonical_zip, check
 SERVED = ("noise_mm", "segments", "failed", "coverage_undefined", "coverage_mae", "coverage_median",
           "coverage_q95", "holes_precision_2mm_mean", "holes_recall_2mm_mean", "centerline_precision_2mm_mean",
           "centerline_recall_2mm_mean")
+#: Every answer's headers: no script but the pages' table sorter (by its hash), no style from elsewhere, no framing.
 HEADERS = {"X-Content-Type-Options": "nosniff", "Referrer-Policy": "no-referrer",
-           "Content-Security-Policy": "default-src 'none'; style-src 'unsafe-inline'; frame-ancestors 'none'"}
+           "Content-Security-Policy": f"default-src 'none'; style-src 'unsafe-inline'; script-src '{SORTER_SHA256}'; "
+                                      "frame-ancestors 'none'"}
 
 
 def _error(status: int, code: str, message: str, problems=()) -> JSONResponse:
@@ -85,16 +91,13 @@ class Server:
     """The app's state: the database, the hidden suites it serves and their sample ids, the upload caps."""
 
     def __init__(self, url: str, suites: dict, limits: Limits = Limits()):
-        from jinja2 import Environment, FileSystemLoader, select_autoescape
-
         from colonbench.server.hidden import sample_ids
 
         self.engine = engine(url)
         self.suites = suites
         self.ids = {sid: sample_ids(s) for sid, s in suites.items()}
         self.limits = limits
-        self.templates = Environment(loader=FileSystemLoader(Path(__file__).parent / "templates"),
-                                     autoescape=select_autoescape(default=True, default_for_string=True))
+        self.templates = environment(Path(__file__).parent / "templates")   # autoescaping, over the site's
 
     # ------------------------------------------------------------------------------------------ reads
     def suite_list(self) -> list[dict]:
@@ -197,7 +200,7 @@ def create_app(url: str, suites: dict, limits: Limits = Limits()) -> Starlette:
     srv = Server(url, suites, limits)
 
     def page(name: str, status: int = 200, **context) -> HTMLResponse:
-        return HTMLResponse(srv.templates.get_template(name).render(**context), status, headers=HEADERS)
+        return HTMLResponse(srv.templates.get_template(name).render(root="/", **context), status, headers=HEADERS)
 
     async def index(request):
         return page("index.html", suites=srv.suite_list())
@@ -207,7 +210,8 @@ def create_app(url: str, suites: dict, limits: Limits = Limits()) -> Starlette:
         if sid not in srv.suites:
             return page("missing.html", 404, what=sid)
         rows = await run_in_threadpool(srv.leaderboard, sid)
-        return page("leaderboard.html", suite=next(s for s in srv.suite_list() if s["id"] == sid), rows=rows)
+        suite = next(s for s in srv.suite_list() if s["id"] == sid)
+        return HTMLResponse(await run_in_threadpool(live_page, suite, rows, "/"), headers=HEADERS)
 
     async def health(request):
         return JSONResponse({"ok": True, "suites": sorted(srv.suites)}, headers=HEADERS)
