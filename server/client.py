@@ -66,6 +66,26 @@ def zip_folder(folder) -> bytes:
     return buf.getvalue()
 
 
+def method_of(folder) -> str:
+    """The method a folder of predictions names: the ``method`` its ``<sample_id>.json`` files all give (the score
+    contract's field), else the folder's name.
+
+    Returns
+    -------
+    str
+        The name shown on the leaderboard when ``colonbench submit`` is given no ``--method``.
+    """
+    folder = Path(folder)
+    names = set()
+    for p in sorted(folder.glob("*.json")):
+        try:
+            got = json.loads(p.read_text()).get("method")
+        except (OSError, ValueError, AttributeError):   # the server names what is wrong with such a file
+            return folder.resolve().name
+        names.add(got if isinstance(got, str) and got.strip() else None)
+    return names.pop() if len(names) == 1 and None not in names else folder.resolve().name
+
+
 class Client:
     """Calls to one server with one token."""
 

@@ -73,3 +73,20 @@ def test_postgresql_urls_take_psycopg_3():
     assert normalize_url("postgresql://u@h/db") == "postgresql+psycopg://u@h/db"
     with pytest.raises(InputError):
         normalize_url("oracle://x")
+
+
+def test_a_submission_is_named_by_the_method_its_predictions_give(tmp_path):
+    """colonbench submit without --method: the 'method' every prediction gives, else the folder's name."""
+    import json
+
+    from colonbench.server.client import method_of
+
+    preds = tmp_path / "preds"
+    preds.mkdir()
+    for k in range(3):
+        (preds / f"s{k}.json").write_text(json.dumps({"coverage": 0.5, "method": "my-method"}))
+    assert method_of(preds) == "my-method"
+    (preds / "s3.json").write_text(json.dumps({"coverage": 0.5, "method": "other"}))
+    assert method_of(preds) == "preds"
+    (preds / "s3.json").write_text(json.dumps({"coverage": 0.5}))
+    assert method_of(preds) == "preds"

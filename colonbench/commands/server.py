@@ -124,13 +124,11 @@ def cmd_admin(args):
 
 def cmd_submit(args):
     """Upload a predictions folder to a server; print its status and, once scored, its summary row."""
-    from pathlib import Path
-
-    from colonbench.server.client import Client, read_token, zip_folder
+    from colonbench.server.client import Client, method_of, read_token, zip_folder
 
     client = Client(args.server, read_token(args.token_file), timeout=args.http_timeout)
     data = zip_folder(args.predictions)
-    method = args.method or Path(args.predictions).resolve().name
+    method = args.method or method_of(args.predictions)
     made = client.submit(args.suite, data, method, args.version, args.public)
     print(f"submission {made['id']}: {made['status']} ({made['files']} predictions, {len(data)} bytes, "
           f"{'public' if made['public'] else 'private'}) on {made['suite']}", flush=True)
@@ -150,7 +148,7 @@ def _report(got: dict) -> int:
         return 3
     for r in got["summary"]:
         mae = "n/a" if r["coverage_mae"] is None else f"{r['coverage_mae']:.2f}"
-        print(f"noise {r['noise_mm']:g} mm  {got['method']}: MAE {mae} points over {r['segments']} segments"
+        print(f"noise {r['noise_mm']:g} mm  {got['method']}: MAE {mae} percentage points over {r['segments']} segments"
               + (f", {r['failed']} failed" if r["failed"] else ""))
     print(json.dumps(got))
     return 0
@@ -241,7 +239,8 @@ def add_parsers(sub) -> None:
     p.add_argument("predictions", nargs="?", metavar="PRED_DIR", help="folder of <sample_id>.json predictions")
     p.add_argument("--server", required=True, help="the server's address, http(s)://HOST[:PORT]")
     p.add_argument("--suite", help="the hidden suite's id")
-    p.add_argument("--method", help="the method's name on the leaderboard (default: the folder's name)")
+    p.add_argument("--method", help="the method's name on the leaderboard (default: the 'method' every prediction "
+                                     "gives, else the folder's name)")
     p.add_argument("--version", default="", help="the method's version")
     p.add_argument("--public", action="store_true", help="show it on the public leaderboard once scored")
     p.add_argument("--token-file", help="a file holding the API token (default: $COLONBENCH_TOKEN)")
