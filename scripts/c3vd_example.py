@@ -1,7 +1,7 @@
 """Write a small synthetic download in C3VD's layout, to try ``colonbench suites build c3vd`` without the dataset.
 
     python scripts/c3vd_example.py DIR [--frames 40] [--scale 0.1]
-    colonbench suites build c3vd --from DIR --data /tmp/c3vd-try
+    colonbench suites build c3vd --from DIR --data c3vd-try
 
 Writes ``DIR/camera_intrinsics.txt`` and one registered sequence, ``DIR/c1_synthetic_t1_v1/`` (``coverage_mesh.obj``,
 ``pose.txt``, ``depth/NNNN_depth.tiff``), as C3VD's renderer writes them: a bent 130 mm phantom tube with folds,
