@@ -74,11 +74,24 @@ def source_digests(sequences) -> dict:
                 known[path] = sha256_of(path)
             mine[f"{seq.name}/{rel}"] = known[path]
         files.update(mine)
-        per[seq.name] = {"files": len(mine), "sha256": _digest(mine)}
-    return {"files": files, "sequences": per, "digest": _digest(files)}
+        per[seq.name] = {"files": len(mine), "sha256": json_digest(mine)}
+    return {"files": files, "sequences": per, "digest": json_digest(files)}
 
 
-def _digest(obj) -> str:
+def json_digest(obj) -> str:
+    """The sha256 (hex) of ``obj`` as canonical JSON (sorted keys, no spaces): the digest suite ids and digests of
+    digests are made of (also by :mod:`colonbench.server.hidden`).
+
+    Parameters
+    ----------
+    obj : object
+        Anything :func:`json.dumps` takes.
+
+    Returns
+    -------
+    str
+        64 hex digits.
+    """
     return hashlib.sha256(json.dumps(obj, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
 
 
@@ -89,9 +102,9 @@ def suite_identity(importer: str, version: int, options: dict, sequences) -> tup
     t0 = time.perf_counter()
     digests = source_digests(sequences)
     seconds = round(time.perf_counter() - t0, 1)
-    key = _digest({"importer": importer, "version": version, "options": options, "files": digests["files"]})
+    key = json_digest({"importer": importer, "version": version, "options": options, "files": digests["files"]})
     sid = f"{importer}-{key[:12]}"
-    return sid, {"manifest_name": sid, "manifest_sha256": key, "config_sha256": _digest(options)}, digests, seconds
+    return sid, {"manifest_name": sid, "manifest_sha256": key, "config_sha256": json_digest(options)}, digests, seconds
 
 
 def build_sequence(seq, colon_id: int, out: str, settings, identity: dict, frames_every: int, width_px: int,

@@ -19,7 +19,6 @@ same seed and manifest gives the same id. Seeds are drawn from ``secrets`` (or g
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 import secrets
@@ -27,7 +26,9 @@ import shutil
 import time
 from pathlib import Path
 
+from colonbench.benchmark.c3vd_suite import json_digest
 from colonbench.errors import InputError
+from colonbench.shards.schema import sha256_file
 
 #: Seeds below this are refused: anyone could regenerate the suite with every smaller seed and compare inputs.
 MIN_SEED = 2 ** 40
@@ -98,14 +99,10 @@ def _manifest(source) -> tuple[dict, str]:
     return raw, str(raw.get("name", path.stem))
 
 
-def _digest(obj) -> str:
-    return hashlib.sha256(json.dumps(obj, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
-
-
 def suite_id(name: str, manifest: dict, seed: int) -> str:
     """A hidden suite's id: ``<name>-<12 hex>`` of the seed and the manifest without its seed and name."""
     rest = {k: v for k, v in manifest.items() if k not in ("seed", "name")}
-    return f"{name}-{_digest({'hidden': IMPORTER_VERSION, 'seed': int(seed), 'manifest': rest})[:12]}"
+    return f"{name}-{json_digest({'hidden': IMPORTER_VERSION, 'seed': int(seed), 'manifest': rest})[:12]}"
 
 
 def build(source, root, seed: int, name: str | None = None, workers: int = 1, progress: bool = True):
@@ -148,7 +145,7 @@ def build(source, root, seed: int, name: str | None = None, workers: int = 1, pr
         return local_suites.load(target), False
     if target.exists():
         raise InputError(f"{target}: exists and is not a built suite; remove it and build again")
-    noise_seed = int(_digest({"noise": int(seed)})[:15], 16)
+    noise_seed = int(json_digest({"noise": int(seed)})[:15], 16)
     manifest = {**raw, "name": sid, "seed": int(seed),
                 "description": f"hidden suite {sid}: {manifest_name}'s manifest with a secret seed (never publish "
                                "this file)"}
@@ -223,14 +220,6 @@ def sample_ids(suite) -> set[str]:
     return {sample_id(n, i, s) for n, idx in picks for i in idx for s in suite.noise_mm}
 
 
-def _sha256_file(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
-
-
 def seal_public(folder, suite) -> dict:
     """Make an export of a hidden suite its published folder: ``suite.json`` cut down to what may be published
     (id, name, samples, noise levels, how to submit) and :data:`INPUTS_FILE` (every other file's sha256 and
@@ -252,8 +241,8 @@ def seal_public(folder, suite) -> dict:
               "contract": "predict <sample_id>.json for every input (docs/formats.md), zip them, then colonbench "
                           f"submit --server URL --suite {suite.id} PRED_DIR (docs/server.md)"}
     (folder / EXPORT_NAME).write_text(json.dumps(public, indent=1) + "\n")
-    files = {p.name: _sha256_file(p) for p in sorted(folder.iterdir()) if p.is_file() and p.name != INPUTS_FILE}
-    inputs = {"suite": suite.id, "files": files, "inputs_sha256": _digest(files)}
+    files = {p.name: sha256_file(p) for p in sorted(folder.iterdir()) if p.is_file() and p.name != INPUTS_FILE}
+    inputs = {"suite": suite.id, "files": files, "inputs_sha256": json_digest(files)}
     (folder / INPUTS_FILE).write_text(json.dumps(inputs, indent=1) + "\n")
     entry_path = Path(suite.folder) / local_suites.FILE
     entry = local_suites.read_entry(Path(suite.folder))
