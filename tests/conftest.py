@@ -1,4 +1,5 @@
-"""Shared fixtures: small procedural colons and the real CT colon."""
+"""Shared fixtures: small procedural colons, the real CT colon, and the tiny hidden suite of the server's tests
+(built once per session)."""
 
 from pathlib import Path
 
@@ -85,3 +86,20 @@ def demo_data(tmp_path_factory):
     root = tmp_path_factory.mktemp("suites")
     suites.ensure_data(suites.get("demo-v1"), root, workers=2, progress=False)
     return root
+
+
+@pytest.fixture(scope="session")
+def hidden_suite(tmp_path_factory):
+    """A tiny hidden suite built through the command line: (suite id, private root, published folder, seed)."""
+    from server_fixtures import SEED, tiny_manifest
+
+    from colonbench.cli import main
+
+    base = tmp_path_factory.mktemp("hidden")
+    (base / "seed.txt").write_text(f"{SEED}\n")
+    rc = main(["suites", "build", "hidden", "--from", str(tiny_manifest(base / "tiny.yaml")), "--data",
+               str(base / "private"), "--publish", str(base / "public"), "--seed-file", str(base / "seed.txt"),
+               "--quiet"])
+    assert rc == 0
+    (sid,) = [p.name for p in (base / "private").iterdir() if not p.name.startswith(".")]
+    return sid, base / "private", base / "public", SEED

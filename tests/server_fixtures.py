@@ -1,10 +1,10 @@
-"""Shared by the hidden-suite and server tests: a tiny hidden suite built once per test session."""
+"""Shared by the hidden-suite and server tests: the tiny hidden suite's manifest and seed (the ``hidden_suite``
+fixture, built from them once per test session, is in conftest.py) and predictions for it."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-import pytest
 import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -20,21 +20,6 @@ def tiny_manifest(path: Path) -> Path:
     m["splits"] = {"test": {**m["splits"]["test"], "colons": {"first": 3, "count": 1}, "segments_per_length": 1}}
     path.write_text(yaml.safe_dump(m, sort_keys=False))
     return path
-
-
-@pytest.fixture(scope="session")
-def hidden_suite(tmp_path_factory):
-    """A tiny hidden suite built through the command line: (suite id, private root, published folder, seed)."""
-    from colonbench.cli import main
-
-    base = tmp_path_factory.mktemp("hidden")
-    (base / "seed.txt").write_text(f"{SEED}\n")
-    rc = main(["suites", "build", "hidden", "--from", str(tiny_manifest(base / "tiny.yaml")), "--data",
-               str(base / "private"), "--publish", str(base / "public"), "--seed-file", str(base / "seed.txt"),
-               "--quiet"])
-    assert rc == 0
-    (sid,) = [p.name for p in (base / "private").iterdir() if not p.name.startswith(".")]
-    return sid, base / "private", base / "public", SEED
 
 
 def write_predictions(folder: Path, ids, coverage: float = 0.5) -> Path:

@@ -7,7 +7,7 @@ from __future__ import annotations
 import json
 
 import pytest
-from server_fixtures import hidden_suite, write_predictions  # noqa: F401  (a fixture)
+from server_fixtures import write_predictions
 from server_helpers import Server, colonbench, sample_ids
 from site_browser import browser, needs_chromium
 

@@ -9,7 +9,6 @@ import sys
 import time
 
 import pytest
-from server_fixtures import hidden_suite  # noqa: F401  (a fixture)
 from server_helpers import Server, prediction, sample_ids, zip_of
 
 pytestmark = pytest.mark.slow
