@@ -8,7 +8,7 @@ import hashlib
 import json
 
 import pytest
-from server_fixtures import hidden_suite, write_predictions  # noqa: F401  (a fixture)
+from server_fixtures import write_predictions
 
 from colonbench.cli import main
 
@@ -87,6 +87,15 @@ def test_publishing_inside_the_private_folder_is_refused(tmp_path, capsys):
     rc = main(["suites", "build", "hidden", "--from", str(tiny_manifest(tmp_path / "m.yaml")), "--data",
                str(tmp_path / "priv"), "--publish", str(tmp_path / "priv" / "pub")])
     assert rc == 2 and "inside --data" in capsys.readouterr().err
+
+
+def test_keeping_the_truth_inside_the_published_folder_is_refused(tmp_path, capsys):
+    from server_fixtures import tiny_manifest
+
+    rc = main(["suites", "build", "hidden", "--from", str(tiny_manifest(tmp_path / "m.yaml")), "--data",
+               str(tmp_path / "pub" / "priv"), "--publish", str(tmp_path / "pub")])
+    assert rc == 2 and "inside --publish" in capsys.readouterr().err
+    assert not (tmp_path / "pub").exists()      # refused before anything was built
 
 
 def test_a_whole_colon_suite_or_a_mesh_manifest_is_refused(tmp_path, capsys):

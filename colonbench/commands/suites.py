@@ -176,6 +176,9 @@ def _build_hidden(args):
                          "server reads) and --publish DIR (the inputs to publish)")
     if Path(args.publish).resolve().is_relative_to(Path(data).resolve()):
         raise InputError(f"--publish {args.publish} is inside --data {data}: publish the inputs elsewhere")
+    if Path(data).resolve().is_relative_to(Path(args.publish).resolve()):
+        raise InputError(f"--data {data} is inside --publish {args.publish}: the truth would be published with the "
+                         "inputs; keep it elsewhere")
     publish = Path(args.publish)
     if publish.exists() and any(publish.iterdir()):
         raise InputError(f"{publish} is not empty: publish into a new or empty folder")
