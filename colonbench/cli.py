@@ -42,9 +42,15 @@ class _Verb(VerbParser):
     """A verb's parser: what it does not recognise is refused here, with the verb's usage and, for a mistyped
     option, the closest of its options (argparse would hand the leftovers to the top-level parser, whose usage
     names no option of the verb). An unrecognised option is named before any other error (a mistyped required
-    option would otherwise be reported as missing)."""
+    option would otherwise be reported as missing). No option is taken by an abbreviation of its name."""
 
     _holding = False
+
+    def __init__(self, *args, **kwargs):
+        # an option is taken by its whole name only: argparse's prefix matching would read ``submit --token
+        # SECRET`` as ``--token-file SECRET``, and any new option could change what an abbreviation means
+        kwargs.setdefault("allow_abbrev", False)
+        super().__init__(*args, **kwargs)
 
     def error(self, message):
         if self._holding:

@@ -1,14 +1,18 @@
 """The evaluation server's client (``colonbench submit``): zip a predictions folder, upload it, follow it.
 
 The token is read from the environment (``COLONBENCH_TOKEN``) or a file, never from the command line (where other
-users of the machine and the shell's history would see it). Only the standard library is used, so a participant
-needs nothing beyond colonbench itself.
+users of the machine and the shell's history would see it). It is sent to the server named and nowhere else: a
+redirect is refused (naming where it pointed), not followed with the token; sending it over plain ``http://`` to
+a host that is not this machine is warned of. Only the standard library is used, so a participant needs nothing
+beyond colonbench itself.
 """
 
 from __future__ import annotations
 
 import io
+import ipaddress
 import json
+import logging
 import os
 import time
 import urllib.error
@@ -21,6 +25,24 @@ from colonbench.errors import InputError
 
 ENV = "COLONBENCH_TOKEN"
 FINAL = ("scored", "failed")
+log = logging.getLogger("colonbench.server.client")
+
+
+class _NoRedirects(urllib.request.HTTPRedirectHandler):
+    """Redirects are answered as the error they are (the request, and its token, goes nowhere else)."""
+
+    def redirect_request(self, req, fp, code, msg, headers, newurl):
+        return None
+
+
+def _loopback(host: str) -> bool:
+    """Whether ``host`` (a URL's host name) is this machine."""
+    if host.lower() in ("localhost", "localhost.") or host.lower().endswith(".localhost"):
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
 
 
 def read_token(token_file=None) -> str:
@@ -94,6 +116,10 @@ class Client:
         if parts.scheme not in ("http", "https") or not parts.netloc:
             raise InputError(f"--server {server}: an http:// or https:// address")
         self.base, self.token, self.timeout = server.rstrip("/"), token, timeout
+        self.opener = urllib.request.build_opener(_NoRedirects)
+        if token and parts.scheme == "http" and not _loopback(parts.hostname or ""):
+            log.warning("warning: the API token is sent over plain http to %s, where anyone on the way can read it; "
+                        "use https:// (a TLS-terminating proxy in front of the server, docs/server.md)", parts.netloc)
 
     def call(self, method: str, path: str, body: bytes | None = None, query: dict | None = None) -> tuple[int, dict]:
         """One request; the status and JSON body (an error's body too).
@@ -101,7 +127,7 @@ class Client:
         Raises
         ------
         InputError
-            The server cannot be reached, or its answer is not JSON.
+            The server cannot be reached, answers with a redirect (never followed), or its answer is not JSON.
         """
         url = self.base + path + ("?" + urllib.parse.urlencode(query) if query else "")
         headers = {"Accept": "application/json"}
@@ -111,10 +137,14 @@ class Client:
             headers["Content-Type"] = "application/zip"
         req = urllib.request.Request(url, data=body, headers=headers, method=method)
         try:
-            with urllib.request.urlopen(req, timeout=self.timeout) as resp:
+            with self.opener.open(req, timeout=self.timeout) as resp:
                 status, raw = resp.status, resp.read()
         except urllib.error.HTTPError as exc:
             status, raw = exc.code, exc.read()
+            if 300 <= status < 400:
+                raise InputError(f"{self.base} answered {status}, a redirect to {exc.headers.get('Location')!r}, "
+                                 "which is not followed (the token goes to the --server named only): give "
+                                 "--server the address it points to") from None
         except (urllib.error.URLError, OSError) as exc:
             raise InputError(f"cannot reach {self.base}: {getattr(exc, 'reason', exc)}") from None
         try:

@@ -9,7 +9,10 @@ A submission moves ``queued`` -> ``scoring`` -> ``scored`` or ``failed``; only a
 (:func:`colonbench.server.worker.claim`) moves it on. Its predictions, checked before anything was stored
 (:mod:`colonbench.server.uploads`), are kept as one canonical zip in ``archive``. Its results (the rows
 ``colonbench score`` writes, and their summary) are in ``results``; the rows hold each sample's truth, so the
-server never serves them (:mod:`colonbench.server.app` serves the summary).
+server never serves them (:mod:`colonbench.server.app` serves the summary). Both ``archive`` and ``rows_json``
+are deferred: a query loads them only where it names them (the worker, scoring), never for a listing.
+
+A URL is shown (in messages and logs) only by :func:`shown_url`, its password hidden.
 """
 
 from __future__ import annotations
@@ -19,7 +22,8 @@ from pathlib import Path
 
 from sqlalchemy import (Boolean, DateTime, ForeignKey, Integer, LargeBinary, MetaData, String, Text, create_engine,
                         event)
-from sqlalchemy.engine import Engine
+from sqlalchemy.engine import Engine, make_url
+from sqlalchemy.exc import ArgumentError
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 
 from colonbench.errors import InputError
@@ -86,7 +90,7 @@ class Submission(Base):
     attempts: Mapped[int] = mapped_column(Integer, default=0)
     files: Mapped[int] = mapped_column(Integer, default=0)
     archive_sha256: Mapped[str] = mapped_column(String(64))
-    archive: Mapped[bytes] = mapped_column(LargeBinary)
+    archive: Mapped[bytes] = mapped_column(LargeBinary, deferred=True)
 
 
 class Result(Base):
@@ -97,7 +101,7 @@ class Result(Base):
     submission_id: Mapped[int] = mapped_column(ForeignKey("submissions.id"), unique=True)
     suite_id: Mapped[str] = mapped_column(String(100), index=True)
     signature: Mapped[str] = mapped_column(String(100))
-    rows_json: Mapped[str] = mapped_column(Text)
+    rows_json: Mapped[str] = mapped_column(Text, deferred=True)
     summary_json: Mapped[str] = mapped_column(Text)
     scored_at: Mapped[dt.datetime] = mapped_column(DateTime, default=now)
 
@@ -131,6 +135,25 @@ def normalize_url(url: str) -> str:
         raise InputError(f"--db {url.split('://')[0]}://...: colonbench serve takes sqlite:///FILE or "
                          "postgresql://USER@HOST[:PORT]/DB")
     return url
+
+
+def shown_url(url: str) -> str:
+    """A database URL as it may be shown in a message or a log: its password replaced by ``***``.
+
+    Parameters
+    ----------
+    url : str
+        Any URL ``--db`` takes.
+
+    Returns
+    -------
+    str
+        The URL without its password (only its scheme where it cannot be parsed).
+    """
+    try:
+        return make_url(str(url)).render_as_string(hide_password=True)
+    except (ArgumentError, ValueError):
+        return str(url).split("://", 1)[0] + "://..."
 
 
 def engine(url: str = DEFAULT_URL) -> Engine:
@@ -174,6 +197,7 @@ def migrate(url: str = DEFAULT_URL) -> str:
         with eng.connect() as conn:
             return MigrationContext.configure(conn).get_current_revision()
     except OperationalError as exc:
-        raise InputError(f"cannot open the database {url.split('?')[0]}: {str(exc.orig).splitlines()[0]}") from None
+        reason = str(exc.orig).splitlines()[0] if str(exc.orig) else type(exc.orig).__name__
+        raise InputError(f"cannot open the database {shown_url(url)}: {reason}") from None
     finally:
         eng.dispose()

@@ -29,7 +29,7 @@ from pathlib import Path
 
 from sqlalchemy import select, update
 
-from colonbench.server.db import FAILED, QUEUED, SCORED, SCORING, Result, Submission, engine, now
+from colonbench.server.db import FAILED, QUEUED, SCORED, SCORING, Result, Submission, engine, now, shown_url
 
 log = logging.getLogger("colonbench.server.worker")
 
@@ -185,7 +185,7 @@ def run(url: str, suites: dict, once: bool = False, poll: float = 1.0, stale_aft
     processed."""
     eng = engine(url)
     worker = worker_name()
-    log.info("worker %s on %s, suites %s", worker, url.split("?")[0], ", ".join(sorted(suites)))
+    log.info("worker %s on %s, suites %s", worker, shown_url(url), ", ".join(sorted(suites)))
     done = 0
     stop = stop or threading.Event()
     try:

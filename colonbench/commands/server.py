@@ -1,13 +1,58 @@
 """``colonbench serve``, ``serve-worker``, ``serve-admin`` and ``submit``: the hidden-truth evaluation server, its
-scoring workers, its accounts, and its client (docs/server.md)."""
+scoring workers, its accounts, and its client (docs/server.md).
+
+``serve``, ``serve-worker`` and ``serve-admin`` need the ``server`` extra; without it they say what to install.
+``submit`` needs only the standard library. The workers ``serve`` starts take the database URL from
+:data:`DB_ENV` (the environment), never their argv, where any user of the machine would read a password in it.
+"""
 
 from __future__ import annotations
 
 import argparse
+import functools
 import json
+import os
 import sys
 
 DB_HELP = "the database URL: sqlite:///FILE (default sqlite:///server.db) or postgresql://USER@HOST[:PORT]/DB"
+#: The environment variable ``serve-worker`` reads its database URL from when --db is not given.
+DB_ENV = "COLONBENCH_DB"
+#: The packages of the ``server`` extra (pyproject.toml) the server's commands import.
+EXTRA = ("starlette", "uvicorn", "sqlalchemy", "alembic")
+TOKEN_ON_COMMAND_LINE = ("--token: the token is read from $COLONBENCH_TOKEN or --token-file, never the command "
+                         "line (where other users of the machine and the shell's history see it)")
+
+
+def _needs_extra(func):
+    """``func`` (a command) refused with what to install, where a package of the ``server`` extra is missing."""
+
+    @functools.wraps(func)
+    def run(args):
+        from colonbench.errors import InputError
+
+        def refuse(name):
+            return InputError(f"colonbench {args.command} needs the server's packages ({name} is not installed): "
+                              "pip install 'colonbench[server]'")
+
+        for name in EXTRA:
+            try:
+                __import__(name)
+            except ModuleNotFoundError:
+                raise refuse(name) from None
+        try:
+            return func(args)
+        except ModuleNotFoundError as exc:   # psycopg, for a postgresql:// URL
+            if (exc.name or "").split(".")[0] in (*EXTRA, "psycopg"):
+                raise refuse(exc.name) from None
+            raise
+    return run
+
+
+class _NoToken(argparse.Action):
+    """``submit --token``: refused without printing what followed it."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        parser.error(TOKEN_ON_COMMAND_LINE)
 
 
 def _suites(dirs) -> dict:
@@ -24,7 +69,6 @@ def _limits(args):
 
 def cmd_serve(args):
     """Run the server on one address, with ``--workers`` scoring workers beside it."""
-    import os
     import signal
     import subprocess
 
@@ -37,9 +81,10 @@ def cmd_serve(args):
     revision = db.migrate(args.db)
     app = create_app(args.db, suites, _limits(args))
     procs = []
+    env = {**os.environ, DB_ENV: args.db}   # the URL (and any password in it) not in the workers' argv
     for _ in range(args.workers):   # each stops when this process does (--parent), however it ends
-        procs.append(subprocess.Popen([sys.executable, "-m", "colonbench.cli", "serve-worker", "--db", args.db,
-                                       "--parent", str(os.getpid()), "--suites", *map(str, args.suites)]))
+        procs.append(subprocess.Popen([sys.executable, "-m", "colonbench.cli", "serve-worker", "--parent",
+                                       str(os.getpid()), "--suites", *map(str, args.suites)], env=env))
     # uvicorn shuts down on SIGTERM and then raises it again: exit through the finally below, stopping the workers
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))
     print(f"colonbench serve: {len(suites)} hidden suite(s) ({', '.join(sorted(suites))}), database at schema "
@@ -66,6 +111,7 @@ def cmd_worker(args):
 
     from colonbench.server import db, worker
 
+    args.db = args.db or os.environ.get(DB_ENV) or db.DEFAULT_URL
     suites = _suites(args.suites)
     db.migrate(args.db)
     stop = threading.Event()
@@ -83,6 +129,7 @@ def cmd_admin(args):
 
     from colonbench.errors import InputError
     from colonbench.server import accounts, db
+    from colonbench.server.accounts import printable
 
     revision = db.migrate(args.db)
     if args.what == "migrate":
@@ -113,9 +160,9 @@ def cmd_admin(args):
                       f"{team.total_limit if team.total_limit is not None else 'no'} total limit")
             else:
                 rows = s.scalars(select(db.Audit).order_by(db.Audit.id.desc()).limit(args.last)).all()
-                for a in reversed(rows):
-                    print(f"{a.at:%Y-%m-%d %H:%M:%S}  {a.actor:<24} {a.action:<13} {a.outcome:<9} {a.target}  "
-                          f"{a.detail}")
+                for a in reversed(rows):     # escaped: a line written raw by an older colonbench is shown safe
+                    print(f"{a.at:%Y-%m-%d %H:%M:%S}  {printable(a.actor):<24} {printable(a.action):<13} "
+                          f"{printable(a.outcome):<9} {printable(a.target)}  {printable(a.detail)}")
                 accounts.audit(s, "admin", "audit.read", detail={"last": args.last})
     finally:
         eng.dispose()
@@ -193,11 +240,11 @@ def add_parsers(sub) -> None:
     p.add_argument("--forwarded-allow-ips", default="127.0.0.1",
                    help="proxies whose X-Forwarded-For is trusted (default 127.0.0.1)")
     p.add_argument("--quiet", action="store_true", help="log warnings only")
-    p.set_defaults(func=cmd_serve)
+    p.set_defaults(func=_needs_extra(cmd_serve))
 
     p = sub.add_parser("serve-worker", help="score the server's queued submissions (any number, on one database)")
     p.add_argument("--suites", nargs="+", required=True, metavar="DIR", help="private folders of hidden suites")
-    p.add_argument("--db", default="sqlite:///server.db", help=DB_HELP)
+    p.add_argument("--db", help=f"{DB_HELP}; default ${DB_ENV} where it is set")
     p.add_argument("--once", action="store_true", help="stop when no submission is queued")
     p.add_argument("--poll", type=float, default=1.0, help="seconds between looks at the queue (default 1)")
     p.add_argument("--stale-after", type=float, default=120.0,
@@ -207,11 +254,11 @@ def add_parsers(sub) -> None:
                                                                "(default 2)")
     p.add_argument("--slow", type=float, default=0.0, help=argparse.SUPPRESS)   # tests: seconds held per scoring
     p.add_argument("--parent", type=int, help=argparse.SUPPRESS)   # colonbench serve's pid: stop when it is gone
-    p.set_defaults(func=cmd_worker)
+    p.set_defaults(func=_needs_extra(cmd_worker))
 
     p = sub.add_parser("serve-admin", help="the server's teams, API tokens, audit log and schema")
     p.add_argument("--db", default="sqlite:///server.db", help=DB_HELP)
-    p.set_defaults(func=cmd_admin, what=None, action=None)
+    p.set_defaults(func=_needs_extra(cmd_admin), what=None, action=None)
     what = p.add_subparsers(dest="what", metavar="WHAT")
     t = what.add_parser("token", help="create, revoke or list API tokens")
     t.set_defaults(action=None)
@@ -244,6 +291,7 @@ def add_parsers(sub) -> None:
     p.add_argument("--version", default="", help="the method's version")
     p.add_argument("--public", action="store_true", help="show it on the public leaderboard once scored")
     p.add_argument("--token-file", help="a file holding the API token (default: $COLONBENCH_TOKEN)")
+    p.add_argument("--token", nargs="?", action=_NoToken, help=argparse.SUPPRESS)   # refused, never echoed
     p.add_argument("--wait", action="store_true", help="poll until it is scored or failed")
     p.add_argument("--status", metavar="ID", help="the state of an earlier submission, in place of an upload")
     p.add_argument("--timeout", type=float, default=600.0, help="--wait: give up after this many seconds (600)")
