@@ -6,7 +6,8 @@ the stored and computed hashes are compared with :func:`hmac.compare_digest`. A 
 (``--expires-days``) and may be revoked; a revoked or expired token is refused as an unknown one is. Rotating a
 team's token is creating a new one and revoking the old.
 
-Every admin action and every upload (accepted or refused) is written to the audit log (:func:`audit`).
+Every admin action and every upload (accepted or refused) is written to the audit log (:func:`audit`), every
+field :func:`printable` (no control character, which would act on the terminal of whoever reads the log).
 """
 
 from __future__ import annotations
@@ -33,12 +34,30 @@ def token_hash(token: str) -> str:
     return hashlib.sha256(token.encode("utf-8", "replace")).hexdigest()
 
 
+def printable(text) -> str:
+    """``text`` with every character that is not printable (control characters: an escape sequence, a carriage
+    return, a bell; line and paragraph separators) written as its Python escape (``\\x1b``).
+
+    Parameters
+    ----------
+    text : object
+        Anything; its ``str``.
+
+    Returns
+    -------
+    str
+        Safe to write to a terminal: what it shows is what was stored.
+    """
+    return "".join(c if c.isprintable() else c.encode("unicode_escape").decode("ascii") for c in str(text))
+
+
 def audit(session: Session, actor: str, action: str, target: str = "", outcome: str = "ok", detail=None,
           remote: str = "") -> None:
-    """Add one line to the audit log (committed with the session)."""
-    session.add(Audit(actor=str(actor)[:200], action=action[:50], target=str(target)[:200], outcome=outcome[:20],
-                      detail=json.dumps(detail if detail is not None else {}, sort_keys=True)[:20000],
-                      remote=str(remote)[:100]))
+    """Add one line to the audit log (committed with the session), every field :func:`printable`."""
+    session.add(Audit(actor=printable(actor)[:200], action=printable(action)[:50], target=printable(target)[:200],
+                      outcome=printable(outcome)[:20],
+                      detail=printable(json.dumps(detail if detail is not None else {}, sort_keys=True))[:20000],
+                      remote=printable(remote)[:100]))
 
 
 def _check_name(name: str) -> str:

@@ -18,7 +18,12 @@ Routes (every error a JSON body ``{"error": code, "message": ..., "problems": [.
     reason of a failure and, once scored, the summary row per noise level.
 
 The truth is never served: no route reads a suite's folder, and of a result only :data:`SERVED` summary columns
-are sent, never the per-sample rows (they hold each sample's true coverage).
+are sent, never the per-sample rows (they hold each sample's true coverage) nor the suite's signature digest. A
+listing reads neither the stored archives nor the rows.
+
+Every upload is audited, accepted or refused, a team's every time; an unknown or missing token's refusals at most
+:data:`ANONYMOUS_AUDITS` times a minute per client address (the next line audited says how many were left out),
+so that anyone without a token cannot fill the log. An unknown suite id is audited as its ``repr``.
 """
 
 from __future__ import annotations
@@ -26,6 +31,8 @@ from __future__ import annotations
 import datetime as dt
 import json
 import secrets
+import threading
+import time
 from pathlib import Path
 
 from sqlalchemy import func, select, update
@@ -40,7 +47,7 @@ from starlette.routing import Route
 from colonbench.reports.live import live_page
 from colonbench.reports.webpage import SORTER_SHA256, environment
 from colonbench.server import accounts
-from colonbench.server.db import SCORED, Result, Submission, Team, engine, now
+from colonbench.server.db import SCORED, Result, Submission, Team, Token, engine, now
 from colonbench.server.uploads import Limits, UploadError, canonical_zip, check
 
 #: The summary columns a result is served with (per noise level); the rest stay in the database.
@@ -51,6 +58,8 @@ SERVED = ("noise_mm", "segments", "failed", "coverage_undefined", "coverage_mae"
 HEADERS = {"X-Content-Type-Options": "nosniff", "Referrer-Policy": "no-referrer",
            "Content-Security-Policy": f"default-src 'none'; style-src 'unsafe-inline'; script-src '{SORTER_SHA256}'; "
                                       "frame-ancestors 'none'"}
+#: Refused uploads of an unknown or missing token audited per client address and minute; the rest are counted.
+ANONYMOUS_AUDITS = 10
 
 
 def _error(status: int, code: str, message: str, problems=()) -> JSONResponse:
@@ -73,18 +82,58 @@ def _flag(value) -> bool:
     raise UploadError(400, "bad_field", "public: 0 or 1")
 
 
-def _summary(result: Result | None) -> list[dict] | None:
-    if result is None:
+def _summary(summary_json: str | None) -> list[dict] | None:
+    if summary_json is None:
         return None
-    return [{k: r.get(k) for k in SERVED} for r in json.loads(result.summary_json)]
+    return [{k: r.get(k) for k in SERVED} for r in json.loads(summary_json)]
 
 
-def _submission(sub: Submission, result: Result | None) -> dict:
+class _Budget:
+    """How many lines a client address may add to the audit log per window (anonymous refusals)."""
+
+    def __init__(self, per_window: int, seconds: float = 60.0):
+        self.per, self.seconds, self.lock, self.seen = per_window, seconds, threading.Lock(), {}
+
+    def take(self, remote: str) -> tuple[bool, int]:
+        """Whether a line of ``remote`` is written now, and how many of its lines were left out before it."""
+        t = time.monotonic()
+        with self.lock:
+            if len(self.seen) > 4096:       # forget addresses whose window is over
+                self.seen = {k: v for k, v in self.seen.items() if t - v[0] < self.seconds}
+            start, used, dropped = self.seen.get(remote, (t, 0, 0))
+            carried = 0
+            if t - start >= self.seconds:
+                start, used, carried, dropped = t, 0, dropped, 0
+            if used >= self.per:
+                self.seen[remote] = (start, used, dropped + 1)
+                return False, 0
+            self.seen[remote] = (start, used + 1, dropped)
+            return True, carried
+
+
+def _over_limits(s: Session, team: Team) -> UploadError | None:
+    """The refusal of one more upload of ``team``, if it has used its total or today's (UTC) submissions."""
+    if team.total_limit is None and team.daily_limit is None:
+        return None
+    day = now().replace(hour=0, minute=0, second=0, microsecond=0)
+    total = s.scalar(select(func.count()).select_from(Submission).where(Submission.team_id == team.id))
+    if team.total_limit is not None and total >= team.total_limit:
+        return UploadError(429, "total_limit", f"team {team.name} has used all its {team.total_limit} submissions")
+    today = s.scalar(select(func.count()).select_from(Submission).where(Submission.team_id == team.id,
+                                                                       Submission.created_at >= day))
+    if team.daily_limit is not None and today >= team.daily_limit:
+        tomorrow = (day + dt.timedelta(days=1)).isoformat() + "Z"
+        return UploadError(429, "daily_limit", f"team {team.name} has used its {team.daily_limit} submissions of "
+                                               f"today (UTC); the next one from {tomorrow}")
+    return None
+
+
+def _submission(sub: Submission, summary_json: str | None) -> dict:
     return {"id": sub.public_id, "suite": sub.suite_id, "method": sub.method, "version": sub.version,
             "public": sub.public, "status": sub.status, "reason": sub.reason, "files": sub.files,
             "archive_sha256": sub.archive_sha256, "submitted_at": sub.created_at.isoformat() + "Z",
             "finished_at": sub.finished_at.isoformat() + "Z" if sub.finished_at else None,
-            "summary": _summary(result)}
+            "summary": _summary(summary_json)}
 
 
 class Server:
@@ -98,6 +147,7 @@ class Server:
         self.ids = {sid: sample_ids(s) for sid, s in suites.items()}
         self.limits = limits
         self.templates = environment(Path(__file__).parent / "templates")   # autoescaping, over the site's
+        self.anonymous = _Budget(ANONYMOUS_AUDITS)
 
     # ------------------------------------------------------------------------------------------ reads
     def suite_list(self) -> list[dict]:
@@ -108,18 +158,21 @@ class Server:
                 for sid, s in sorted(self.suites.items())]
 
     def leaderboard(self, suite_id: str) -> list[dict]:
-        """The public scored submissions of a suite, best first (by the mean coverage MAE over noise levels)."""
+        """The public scored submissions of a suite, best first (by the mean coverage MAE over noise levels); only
+        the columns shown are read (never the archive, the per-sample rows or the signature)."""
         with Session(self.engine) as s:
-            found = s.execute(select(Submission, Result, Team).join(Result, Result.submission_id == Submission.id)
+            found = s.execute(select(Submission.public_id, Submission.method, Submission.version,
+                                     Submission.created_at, Team.name, Result.summary_json)
+                              .join(Result, Result.submission_id == Submission.id)
                               .join(Team, Team.id == Submission.team_id)
                               .where(Submission.suite_id == suite_id, Submission.public.is_(True),
                                      Submission.status == SCORED)).all()
         rows = []
-        for sub, result, team in found:
-            summary = _summary(result)
+        for public_id, method, version, created_at, team, summary_json in found:
+            summary = _summary(summary_json)
             maes = [r["coverage_mae"] for r in summary if r["coverage_mae"] is not None]
-            rows.append({"id": sub.public_id, "team": team.name, "method": sub.method, "version": sub.version,
-                         "submitted_at": sub.created_at.isoformat() + "Z", "signature": result.signature,
+            rows.append({"id": public_id, "team": team, "method": method, "version": version,
+                         "submitted_at": created_at.isoformat() + "Z",
                          "coverage_mae": sum(maes) / len(maes) if maes else None, "by_noise": summary})
         rows.sort(key=lambda r: (r["coverage_mae"] is None, r["coverage_mae"] or 0.0, r["submitted_at"]))
         for k, r in enumerate(rows, 1):
@@ -127,44 +180,55 @@ class Server:
         return rows
 
     def own(self, token_header: str | None, public_id: str | None = None):
+        """The submissions of the token's team (one, by its public id), or None for a token that is not live; the
+        archives (deferred) and the per-sample rows are not read."""
         with Session(self.engine) as s:
             tok = accounts.authenticate(s, token_header)
             if tok is None:
                 return None
-            q = select(Submission, Result).outerjoin(Result, Result.submission_id == Submission.id).where(
-                Submission.team_id == tok.team_id)
+            q = (select(Submission, Result.summary_json).outerjoin(Result, Result.submission_id == Submission.id)
+                 .where(Submission.team_id == tok.team_id))
             if public_id is not None:
                 q = q.where(Submission.public_id == public_id)
             return [_submission(sub, res) for sub, res in s.execute(q.order_by(Submission.id)).all()]
 
     # ------------------------------------------------------------------------------------------ upload
-    def refuse(self, actor: str, suite_id: str, err: UploadError, remote: str) -> None:
+    def refuse(self, actor: str | None, suite_id: str, err: UploadError, remote: str) -> None:
+        """Audit a refused upload: a team's (``actor``) always, an unknown token's (None) within
+        :data:`ANONYMOUS_AUDITS` a minute per address; a suite id not served by its ``repr``."""
+        detail = {"error": err.code, "message": err.message, "problems": err.problems[:5]}
+        if actor is None:
+            write, dropped = self.anonymous.take(remote)
+            if not write:
+                return
+            if dropped:
+                detail["left_out_before"] = dropped
+        target = f"suite {suite_id}" if suite_id in self.suites else f"suite {suite_id!r}"
         with Session(self.engine) as s, s.begin():
-            accounts.audit(s, actor, "upload", f"suite {suite_id}"[:200], "refused",
-                           {"error": err.code, "message": err.message, "problems": err.problems[:5]}, remote)
+            accounts.audit(s, actor or "unknown token", "upload", target[:200], "refused", detail, remote)
 
     def accept(self, tok_id: int, suite_id: str, method: str, version: str, public: bool, data: bytes,
                remote: str) -> dict:
-        """Check an upload and, within the team's limits, store it queued (one transaction)."""
+        """Check an upload and, within the team's limits, store it queued (one transaction).
+
+        The limits are counted first, without a lock (a team over them is refused before its upload is unpacked
+        and checked), then again under the team's lock at the insert, which is what holds them under concurrent
+        uploads."""
+        with Session(self.engine) as s:
+            over = _over_limits(s, s.get(Team, s.get(Token, tok_id).team_id))
+        if over is not None:
+            raise over
         predictions = check(data, self.ids[suite_id], self.limits)
         archive, digest = canonical_zip(predictions)
         with Session(self.engine) as s, s.begin():
-            tok = s.get(accounts.Token, tok_id)
+            tok = s.get(Token, tok_id)
             # lock the team (its row in PostgreSQL, the database in SQLite) before counting: limits hold under
             # concurrent uploads
             s.execute(update(Team).where(Team.id == tok.team_id).values(name=Team.name))
             team = s.get(Team, tok.team_id)
-            day = now().replace(hour=0, minute=0, second=0, microsecond=0)
-            total = s.scalar(select(func.count()).select_from(Submission).where(Submission.team_id == team.id))
-            today = s.scalar(select(func.count()).select_from(Submission).where(Submission.team_id == team.id,
-                                                                               Submission.created_at >= day))
-            if team.total_limit is not None and total >= team.total_limit:
-                raise UploadError(429, "total_limit", f"team {team.name} has used all its {team.total_limit} "
-                                                      "submissions")
-            if team.daily_limit is not None and today >= team.daily_limit:
-                tomorrow = (day + dt.timedelta(days=1)).isoformat() + "Z"
-                raise UploadError(429, "daily_limit", f"team {team.name} has used its {team.daily_limit} "
-                                                      f"submissions of today (UTC); the next one from {tomorrow}")
+            over = _over_limits(s, team)
+            if over is not None:
+                raise over
             sub = Submission(public_id=secrets.token_hex(12), suite_id=suite_id, team_id=team.id, token_id=tok.id,
                              method=method, version=version, public=public, files=len(predictions),
                              archive_sha256=digest, archive=archive, reason="", worker="", attempts=0)
@@ -229,7 +293,7 @@ def create_app(url: str, suites: dict, limits: Limits = Limits()) -> Starlette:
         sid = request.path_params["suite"]
         remote = request.client.host if request.client else ""
         who = await run_in_threadpool(srv.token_of, request.headers.get("authorization"))
-        actor = f"team {who[1]}" if who else "unknown token"
+        actor = f"team {who[1]}" if who else None
         try:
             if who is None:
                 raise UploadError(401, "bad_token", "a valid API token is needed (Authorization: Bearer cbt_...)")

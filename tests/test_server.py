@@ -9,8 +9,8 @@ import json
 import time
 
 import pytest
-from server_fixtures import hidden_suite, write_predictions  # noqa: F401  (a fixture)
-from server_helpers import Server, colonbench, prediction, sample_ids, zip_of
+from server_fixtures import write_predictions
+from server_helpers import Server, colonbench, one_utc_day, prediction, sample_ids, zip_of
 
 pytestmark = pytest.mark.slow
 
@@ -55,9 +55,9 @@ def test_the_client_uploads_and_reads_the_scored_row(server, hidden_suite, tmp_p
     status, board = server.json("GET", f"/api/v1/suites/{sid}/leaderboard")
     row = next(r for r in board["rows"] if r["id"] == got["id"])
     assert status == 200 and row["method"] == "mine" and row["version"] == "1.0" and row["team"] == "alpha"
-    assert row["signature"] == signature
+    assert "signature" not in row       # a digest of the truth: never published
     status, page = server.get(f"/suites/{sid}")
-    assert status == 200 and b"mine" in page and b"alpha" in page
+    assert status == 200 and b"mine" in page and b"alpha" in page and signature.encode() not in page
     # the audit log has the token's creation and the upload
     lines = server.rows("select actor, action, outcome from audit_log")
     assert ("admin", "token.create", "ok") in lines and ("team alpha", "upload", "accepted") in lines
@@ -82,8 +82,11 @@ def test_the_token_is_never_taken_on_the_command_line(server, hidden_suite, tmp_
     sid, _, public, _ = hidden_suite
     done = colonbench("submit", "--server", server.url, "--suite", sid, tmp_path, env={"COLONBENCH_TOKEN": ""})
     assert done.returncode == 2 and "COLONBENCH_TOKEN" in done.stderr and "Traceback" not in done.stderr
-    done = colonbench("submit", "--server", server.url, "--suite", sid, tmp_path, "--token", "cbt_x")
-    assert done.returncode == 2
+    secret = "cbt_" + "7e57" * 16
+    for given in (["--token", secret], [f"--token={secret}"]):
+        done = colonbench("submit", "--server", server.url, "--suite", sid, tmp_path, *given)
+        assert done.returncode == 2 and "never the command line" in done.stderr
+        assert secret not in done.stdout + done.stderr
 
 
 def test_wrong_revoked_and_expired_tokens_are_refused(server, hidden_suite):
@@ -118,17 +121,26 @@ def test_another_teams_submission_is_not_found(server, hidden_suite):
 
 def test_daily_and_total_limits_hold(server, hidden_suite):
     sid, _, public, _ = hidden_suite
-    server.admin("team", "set", "limited", "--daily", 2)
-    token = server.token("limited")
-    assert [server.upload(sid, _all(public), token)[0] for _ in range(3)] == [202, 202, 429]
+
+    def daily(k):
+        server.admin("team", "set", f"limited{k}", "--daily", 2)
+        token = server.token(f"limited{k}")
+        statuses = [server.upload(sid, _all(public), token)[0] for _ in range(3)]
+        # over its limit, an upload is refused before the server unpacks and checks it
+        return statuses, server.upload(sid, b"not even a zip", token)
+
+    statuses, (status, body) = one_utc_day(daily)
+    assert statuses == [202, 202, 429] and (status, body["error"]) == (429, "daily_limit")
     server.admin("team", "set", "capped", "--total", 1)
     token = server.token("capped")
     assert server.upload(sid, _all(public), token)[0] == 202
     status, body = server.upload(sid, _all(public), token)
     assert status == 429 and body["error"] == "total_limit"
+    status, body = server.upload(sid, b"not even a zip", token)
+    assert status == 429 and body["error"] == "total_limit"
     counts = dict(server.rows("select t.name, count(*) from submissions s join teams t on t.id = s.team_id "
                               "group by t.name"))
-    assert counts["limited"] == 2 and counts["capped"] == 1
+    assert counts[next(t for t in ("limited1", "limited0") if t in counts)] == 2 and counts["capped"] == 1
     server.wait_final()
 
 
@@ -136,14 +148,19 @@ def test_concurrent_uploads_of_one_team_keep_its_limit(server, hidden_suite):
     from concurrent.futures import ThreadPoolExecutor
 
     sid, _, public, _ = hidden_suite
-    server.admin("team", "set", "racing", "--daily", 3)
-    token = server.token("racing")
     data = _all(public)
-    with ThreadPoolExecutor(8) as pool:
-        statuses = sorted(pool.map(lambda _: server.upload(sid, data, token)[0], range(8)))
+
+    def race(k):
+        server.admin("team", "set", f"racing{k}", "--daily", 3)
+        token = server.token(f"racing{k}")
+        with ThreadPoolExecutor(8) as pool:
+            statuses = sorted(pool.map(lambda _: server.upload(sid, data, token)[0], range(8)))
+        return k, statuses
+
+    k, statuses = one_utc_day(race)
     assert statuses == [202] * 3 + [429] * 5
     assert server.rows("select count(*) from submissions s join teams t on t.id = s.team_id "
-                       "where t.name = 'racing'") == [(3,)]
+                       f"where t.name = 'racing{k}'") == [(3,)]
     server.wait_final()
 
 
@@ -171,6 +188,8 @@ def test_no_route_serves_the_truth(server, hidden_suite):
     truths = {f"{s['coverage']:.6f}"[:8] for s in signature["samples"]}
     (rows_json,) = server.rows("select rows_json from results")[0]
     truths |= {repr(r["true_coverage"])[:10] for r in json.loads(rows_json)}
+    built = json.loads((private / sid / "built-suite.json").read_text())
+    truths |= {built["signature"], built["sha256"].removeprefix("cb1-")}     # digests of the truth
     routes = ["/", f"/suites/{sid}", "/api/v1/health", "/api/v1/suites", f"/api/v1/suites/{sid}/leaderboard",
               "/api/v1/submissions", f"/api/v1/submissions/{made['id']}", f"/suites/{sid}/signature.json.gz",
               f"/{sid}/manifest.yaml", "/static/../../etc/passwd", f"/api/v1/suites/{sid}/truth"]
@@ -193,6 +212,8 @@ def test_the_servers_workers_stop_with_it(hidden_suite, tmp_path, how):
     srv = Server(private, tmp_path / "s.db", workers=2)
     workers = psutil.Process(srv.proc.pid).children()
     assert len(workers) == 2
+    # the database URL (which may hold a password) reaches them by the environment, not in their argv
+    assert all(srv.db not in " ".join(p.cmdline()) for p in workers)
     if how == "SIGKILL":
         srv.proc.kill()
         srv.proc.wait(timeout=30)

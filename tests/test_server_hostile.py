@@ -9,7 +9,6 @@ import os
 import zipfile
 
 import pytest
-from server_fixtures import hidden_suite  # noqa: F401  (a fixture)
 from server_helpers import Server, prediction, sample_ids, zip_of
 
 pytestmark = pytest.mark.slow
@@ -73,29 +72,48 @@ def test_a_hostile_upload_is_refused_and_nothing_is_stored(server, hidden_suite,
     sid, _, public, _ = hidden_suite
     data, status, code, says = _cases(public)[case]
     before = server.rows("select count(*) from submissions")
+    results = server.rows("select count(*) from results")
     refused = server.rows("select count(*) from audit_log where outcome = 'refused'")[0][0]
     got, body = server.upload(sid, data, server.tok)
     assert (got, body["error"]) == (status, code), body
     assert says in json.dumps(body), body
     assert server.rows("select count(*) from submissions") == before
-    assert server.rows("select count(*) from results") == [(0,)]
+    assert server.rows("select count(*) from results") == results
     assert server.rows("select count(*) from audit_log where outcome = 'refused'")[0][0] == refused + 1
 
 
 def test_a_lying_content_length_is_refused(server, hidden_suite):
     sid, _, public, _ = hidden_suite
+    before = server.rows("select count(*) from submissions")
     status, raw = server.request("POST", f"/api/v1/suites/{sid}/submissions?method=m", body=zip_of(_good(public)),
                                  token=server.tok, headers={"Content-Length": str(2 ** 30)})
     assert status in (400, 413)
+    assert server.rows("select count(*) from submissions") == before
+
+
+@pytest.mark.parametrize("with_token", [True, False])
+def test_escape_codes_in_the_path_never_reach_the_audit_log_raw(server, hidden_suite, with_token):
+    """The suite id of a refused upload is audited (before the token or the suite is checked): escaped, so that
+    reading the log (serve-admin audit) cannot drive the reader's terminal."""
+    _, _, public, _ = hidden_suite
+    status, _ = server.request("POST", "/api/v1/suites/%1b%5b2J%1b%5d0%3bowned%07x/submissions?method=m",
+                               body=zip_of(_good(public)), token=server.tok if with_token else None)
+    assert status == (404 if with_token else 401)
+    for row in server.rows("select actor, action, target, outcome, detail, remote from audit_log"):
+        assert not any(ord(c) < 32 or 127 <= ord(c) < 160 for v in row for c in str(v)), row
+    assert any("\\x1b[2J" in t for (t,) in server.rows("select target from audit_log"))
+    shown = server.admin("audit", "--last", "100000")
+    assert "\x1b" not in shown and "\x07" not in shown and "\\x1b[2J" in shown
 
 
 def test_sql_metacharacters_are_text_in_every_field(server, hidden_suite):
     sid, _, public, _ = hidden_suite
+    before = server.rows("select count(*) from submissions")[0][0]
     status, made = server.upload(sid, zip_of(_good(public)), server.tok, method=SQL, version=SQL, public=True)
     assert status == 202, made
     assert (made["method"], made["version"]) == (SQL, SQL)
     assert server.rows(f"select count(*) from submissions where method = '{SQL.replace(chr(39), chr(39) * 2)}'") \
-        == [(1,)]
+        == [(1,)]       # this test's upload alone has this method
     assert server.rows("select name from sqlite_master where name = 'submissions'") == [("submissions",)]
     # the suite, the submission id and the token in the path and header
     for path in [f"/api/v1/suites/{SQL}/leaderboard", f"/api/v1/submissions/{SQL}", f"/suites/{SQL}",
@@ -115,7 +133,7 @@ def test_sql_metacharacters_are_text_in_every_field(server, hidden_suite):
     server.token("labelled", "--label", SQL)
     assert SQL in server.admin("token", "list")
     server.wait_final()
-    assert server.rows("select count(*) from submissions") == [(1,)]
+    assert server.rows("select count(*) from submissions") == [(before + 1,)]
 
 
 @pytest.mark.parametrize("query, says", [("method=", "method"), ("method=" + "m" * 101, "method"),
