@@ -1,7 +1,11 @@
 """Hidden suites: inputs published, truth kept where only the evaluation server reads it.
 
-A hidden suite is a generated segment suite made from a procedural manifest (a named suite's, or any segment
-manifest) with its root seed replaced by a **secret seed**. It is a suite built on this machine
+A hidden suite is a segment suite whose truth only the server holds. :func:`build` generates one from a segment
+manifest (a named suite's, or any segment manifest file, procedural or naming real meshes: a user's private
+colon meshes, each checked against the sha256 the manifest records and never copied) with its root seed replaced
+by a **secret seed**; :func:`build_c3vd` builds one from a private C3VD download through the C3VD importer
+(:mod:`colonbench.benchmark.c3vd_suite`), whose truth cannot be made without the download. It is a suite built
+on this machine
 (:mod:`colonbench.benchmark.local_suites`): its folder under a private data root holds the shards (inputs and
 truth), the manifest with the secret seed, the lock, the per-sample signature and ``built-suite.json`` (marked
 ``"hidden": true``); ``colonbench score`` and the server's worker score it as any built suite.
@@ -39,6 +43,8 @@ INPUTS_FILE = "inputs.sha256.json"
 IMPORTER = "hidden"
 IMPORTER_VERSION = 1
 NOISE_MM = (0.0, 0.5)
+#: The files a manifest's mesh entry names (each with its ``<key>_sha256``).
+MESH_FILES = ("mesh", "centerline")
 
 
 def new_seed() -> int:
@@ -92,16 +98,59 @@ def _manifest(source) -> tuple[dict, str]:
         raise InputError(f"{path}: not a colonbench dataset manifest")
     if raw.get("task", "segments") != "segments":
         raise InputError(f"{path}: a {raw.get('task')} manifest; hidden suites are built from segment manifests")
-    if raw.get("meshes"):
-        raise InputError(f"{path}: names real meshes; hidden suites are built from procedural manifests only")
     if "test" not in raw["splits"]:
         raise InputError(f"{path}: has no test split, which a hidden suite is made of")
+    if raw.get("meshes"):
+        raw = {**raw, "meshes": _meshes_at(raw["meshes"], path)}
     return raw, str(raw.get("name", path.stem))
+
+
+def _meshes_at(meshes, manifest) -> dict:
+    """A manifest's ``meshes`` with each mesh and centerline path made absolute (they are relative to the
+    manifest's folder, and the manifest is copied into the private folder), each file checked against the sha256
+    the manifest records.
+
+    Raises
+    ------
+    InputError
+        An entry without its paths, a file missing, or one whose sha256 is not the recorded one (named).
+    """
+    base = Path(manifest).resolve().parent
+    if not isinstance(meshes, dict):
+        raise InputError(f"{manifest}: meshes must map a name to {{id, mesh, mesh_sha256, centerline, "
+                         "centerline_sha256}")
+    out = {}
+    for name, entry in meshes.items():
+        if not isinstance(entry, dict) or any(k not in entry for k in MESH_FILES + tuple(f"{k}_sha256"
+                                                                                         for k in MESH_FILES)):
+            raise InputError(f"{manifest}: meshes.{name} must give id, mesh, mesh_sha256, centerline and "
+                             "centerline_sha256")
+        entry = dict(entry)
+        for key in MESH_FILES:
+            file = base / str(entry[key])
+            if not file.is_file():
+                raise InputError(f"{manifest}: meshes.{name}.{key}: {file} is not a file (paths are relative to "
+                                 "the manifest's folder)")
+            if sha256_file(file) != str(entry[f"{key}_sha256"]):
+                raise InputError(f"{manifest}: meshes.{name}.{key}: the sha256 of {file} is not the manifest's "
+                                 f"{key}_sha256 ({entry[f'{key}_sha256']}); it is not the file the manifest names")
+            entry[key] = str(file.resolve())
+        out[name] = entry
+    return out
+
+
+def _without_paths(manifest: dict) -> dict:
+    """The manifest without its meshes' paths (their sha256 stay): what a suite's id is made of, so that it does
+    not depend on where the meshes lie."""
+    if not manifest.get("meshes"):
+        return manifest
+    return {**manifest, "meshes": {n: {k: v for k, v in m.items() if k not in MESH_FILES}
+                                   for n, m in manifest["meshes"].items()}}
 
 
 def suite_id(name: str, manifest: dict, seed: int) -> str:
     """A hidden suite's id: ``<name>-<12 hex>`` of the seed and the manifest without its seed and name."""
-    rest = {k: v for k, v in manifest.items() if k not in ("seed", "name")}
+    rest = {k: v for k, v in _without_paths(manifest).items() if k not in ("seed", "name")}
     return f"{name}-{json_digest({'hidden': IMPORTER_VERSION, 'seed': int(seed), 'manifest': rest})[:12]}"
 
 
@@ -111,7 +160,9 @@ def build(source, root, seed: int, name: str | None = None, workers: int = 1, pr
     Parameters
     ----------
     source : str or path
-        A named segment suite (``demo-v1``) or a procedural segment manifest file.
+        A named segment suite (``demo-v1``) or a segment manifest file, procedural or naming real meshes (their
+        paths relative to the manifest's folder, each checked against its recorded sha256; the private
+        ``manifest.yaml`` names them by absolute path, and they are never copied).
     root : path
         The private suite data root (only the server reads it).
     seed : int
@@ -146,6 +197,7 @@ def build(source, root, seed: int, name: str | None = None, workers: int = 1, pr
     if target.exists():
         raise InputError(f"{target}: exists and is not a built suite; remove it and build again")
     noise_seed = int(json_digest({"noise": int(seed)})[:15], 16)
+    meshes = {n: {f"{k}_sha256": m[f"{k}_sha256"] for k in MESH_FILES} for n, m in (raw.get("meshes") or {}).items()}
     manifest = {**raw, "name": sid, "seed": int(seed),
                 "description": f"hidden suite {sid}: {manifest_name}'s manifest with a secret seed (never publish "
                                "this file)"}
@@ -164,19 +216,62 @@ def build(source, root, seed: int, name: str | None = None, workers: int = 1, pr
         verification.write(published, tmp / local_suites.SIGNATURE_FILE)
         entry = {"format": local_suites.FORMAT, "format_version": local_suites.FORMAT_VERSION, "id": sid,
                  "name": name, "version": IMPORTER_VERSION, "task": "segments", "hidden": True,
-                 "tests": f"a hidden test set: {len(records)} segments made from {manifest_name}'s manifest with a "
-                          "secret seed; its truth is kept on the evaluation server",
+                 "tests": f"a hidden test set: {len(records)} segments made from {manifest_name}'s manifest"
+                          + (f" (real meshes: {', '.join(meshes)})" if meshes else "")
+                          + " with a secret seed; its truth is kept on the evaluation server",
                  "samples": len(records), "sha256": sha256, "signature": verification.digest(published),
                  "noise_mm": list(NOISE_MM), "noise_seed": noise_seed,
                  "build_seconds": round(time.perf_counter() - t0, 1),
                  "importer": {"name": IMPORTER, "version": IMPORTER_VERSION},
-                 "options": {"manifest": manifest_name, "split": "test"}, "source": {}}
+                 "options": {"manifest": manifest_name, "split": "test"},
+                 "source": {"meshes": meshes} if meshes else {}}
         (tmp / local_suites.FILE).write_text(json.dumps(entry, indent=1) + "\n")
         os.replace(tmp, target)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
     return local_suites.load(target), True
+
+
+def build_c3vd(source, root, frames_every=None, width_px=None, workers: int = 1, intrinsics=None,
+               progress: bool = True):
+    """Build a C3VD download's segment suite into the private root through the C3VD importer
+    (:func:`colonbench.benchmark.c3vd_suite.build`) and mark it hidden.
+
+    Its id is the importer's (``c3vd-<12 hex>`` of the download's files and the options): its truth cannot be made
+    again without the download, so keep the download as private as the folder. Its noise seed is the importer's
+    fixed one; neither it nor the signature is published (:func:`seal_public`).
+
+    Parameters
+    ----------
+    source : path
+        The download's folder.
+    root : path
+        The private suite data root (only the server reads it).
+    frames_every, width_px, workers, intrinsics, progress
+        As :func:`colonbench.benchmark.c3vd_suite.build`.
+
+    Returns
+    -------
+    (LocalSuite, bool)
+        The suite, and whether it was built now (False: it was already there, now marked hidden).
+
+    Raises
+    ------
+    InputError
+        As :func:`colonbench.benchmark.c3vd_suite.build`; nothing is left in the root.
+    """
+    from colonbench.benchmark import c3vd_suite, local_suites
+
+    suite, new = c3vd_suite.build(source, root, frames_every=frames_every, width_px=width_px, workers=workers,
+                                  intrinsics=intrinsics, progress=progress)
+    folder = Path(suite.folder)
+    entry = local_suites.read_entry(folder)
+    if not entry.get("hidden"):
+        entry["hidden"] = True
+        entry["tests"] = f"a hidden test set: {entry['tests']}; its truth is kept on the evaluation server"
+        (folder / local_suites.FILE).write_text(json.dumps(entry, indent=1) + "\n")
+    return local_suites.load(folder), new
 
 
 def is_hidden(suite) -> bool:

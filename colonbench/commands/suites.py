@@ -162,8 +162,8 @@ def _build(args):
 
 
 def _build_hidden(args):
-    """``suites build hidden``: a suite generated from a manifest with a secret seed, truth under --data, inputs
-    exported to --publish (colonbench.server.hidden)."""
+    """``suites build hidden``: a suite generated from a manifest with a secret seed, or built from a C3VD
+    download (--from a folder), truth under --data, inputs exported to --publish (colonbench.server.hidden)."""
     from pathlib import Path
 
     from colonbench.errors import InputError
@@ -182,13 +182,25 @@ def _build_hidden(args):
     publish = Path(args.publish)
     if publish.exists() and any(publish.iterdir()):
         raise InputError(f"{publish} is not empty: publish into a new or empty folder")
-    seed = hidden.read_seed(args.seed_file) if args.seed_file else hidden.new_seed()
-    suite, new = hidden.build(args.source_dir, data, seed, name=args.name, workers=args.workers,
-                              progress=not args.quiet)
+    if Path(args.source_dir).is_dir():     # a C3VD download, through its importer
+        if args.seed_file or args.name:
+            raise InputError(f"--from {args.source_dir} is a folder, read as a C3VD download: its suite has the "
+                             "importer's id and no seed (--seed-file and --name are for manifests)")
+        suite, new = hidden.build_c3vd(args.source_dir, data, frames_every=args.frames_every,
+                                       width_px=args.width_px, workers=args.workers, intrinsics=args.intrinsics,
+                                       progress=not args.quiet)
+        keep = "it and the download are all the truth there is"
+    else:
+        if args.frames_every or args.width_px or args.intrinsics:
+            raise InputError("--frames-every, --width-px and --intrinsics are for a C3VD download (--from DIR)")
+        seed = hidden.read_seed(args.seed_file) if args.seed_file else hidden.new_seed()
+        suite, new = hidden.build(args.source_dir, data, seed, name=args.name, workers=args.workers,
+                                  progress=not args.quiet)
+        keep = "it holds the secret seed"
     export_suite(suite.id, publish, data=data, progress=not args.quiet)
     inputs = hidden.seal_public(publish, suite)
     print(f"{'built' if new else 'found'} hidden suite {suite.id}: {suite.samples} segments, truth in {suite.folder} "
-          f"(keep it private: it holds the secret seed)\npublished inputs in {publish}: "
+          f"(keep it private: {keep})\npublished inputs in {publish}: "
           f"{len(inputs['files'])} files, inputs sha256 {inputs['inputs_sha256']}\nserve it: colonbench serve "
           f"--suites {data} --db sqlite:///server.db")
     return 0
@@ -260,15 +272,16 @@ def add_parsers(sub) -> None:
                                        "into the suite cache under ids made from the download's file digests; a "
                                        "refused download leaves nothing behind (docs/benchmark.md, 'Real "
                                        "trajectories: C3VD'). 'suites build hidden' generates a segment suite "
-                                       "from a manifest with a secret seed: its truth into --data, which only "
-                                       "the evaluation server reads, its inputs (as export writes them) into "
-                                       "--publish (docs/server.md).")
+                                       "from a manifest with a secret seed, or builds a C3VD download's (--from "
+                                       "its folder): its truth into --data, which only the evaluation server "
+                                       "reads, its inputs (as export writes them) into --publish "
+                                       "(docs/server.md).")
     b.add_argument("dataset", type=_dataset, metavar="DATASET",
                    help=f"the dataset's layout: {', '.join(BUILDERS)} (C3VD and C3VDv2; hidden: a generated suite "
                         "with a secret seed, its truth kept for the evaluation server, docs/server.md)")
     b.add_argument("--from", dest="source_dir", required=True, metavar="DIR",
-                   help="the download's folder; hidden: a named segment suite (demo-v1) or a procedural segment "
-                        "manifest file")
+                   help="the download's folder; hidden: a named segment suite (demo-v1), a segment manifest file "
+                        "(procedural or naming your meshes), or a C3VD download's folder")
     b.add_argument("--publish", metavar="DIR", help="hidden: the folder of the published inputs (as colonbench "
                                                     "export writes them, without truth or seeds)")
     b.add_argument("--seed-file", metavar="FILE", help="hidden: a file holding the secret seed, an integer of at "
