@@ -45,7 +45,10 @@ def test_train_save_load_predict_round_trip(tiny_run):
 
     with torch.no_grad():
         eager = np.clip(net(torch.from_numpy(h_in[None, None]))[0, 0].numpy(), 0, 1)
-    np.testing.assert_allclose(pred, eager, atol=1e-6)      # the first cloud: the eager network
+    # every cloud, the first too, runs the network made fast for inference (decision 0321), whose float32 sums differ
+    # from the eager network's in their last bits: up to about 1e-5, and by how much depends on the CPU's kernels
+    # (ATEN_CPU_CAPABILITY=default moved one voxel by 1.1e-6, past the 1e-6 this compared with)
+    np.testing.assert_allclose(pred, eager, atol=1e-5)
     _, _, again = method.predict(item["partial_points"].astype(float) + 1e-9)   # not the cached prediction
     assert 64 in method.predictor._forward                     # from the second on: made fast for inference
     np.testing.assert_allclose(again, eager, atol=1e-4)
