@@ -200,10 +200,15 @@ def suite_state(suite: dict) -> str:
     return f"verified against its signature `{suite['signature']}`, {how}{built}"
 
 
+def marks(record: dict) -> str:
+    """The marks after a method's name, from its record: * a reference, † the shipped results, ‡ a submitted result
+    (the Markdown tables and the page alike)."""
+    return (" *" if record.get("reference") else "") + {"shipped": " †", "submitted": " ‡"}.get(source(record), "")
+
+
 def _name(r, meta: dict) -> str:
-    """A row's method with its marks: * a reference, † the shipped results, ‡ a submitted result."""
-    return r["method"] + (" *" if r["reference"] else "") + {"shipped": " †", "submitted": " ‡"}.get(
-        source(meta["methods"].get(r["method"], {})), "")
+    """A row's method with its marks (:func:`marks`; a row's own ``reference`` flag)."""
+    return r["method"] + marks({**meta["methods"].get(r["method"], {}), "reference": r["reference"]})
 
 
 def markdown(meta: dict, tab: pd.DataFrame, notes=()) -> str:

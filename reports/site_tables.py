@@ -14,8 +14,8 @@ from pathlib import Path
 
 import pandas as pd
 
-from colonbench.benchmark.submitted import is_submitted
 from colonbench.benchmark.summary import REVIEW_OFF
+from colonbench.reports import leaderboard
 from colonbench.reports.webpage import esc, fmt, interval_cell, slug, table
 
 #: Precision / recall statistics, shown in their own table rather than the main one.
@@ -39,19 +39,16 @@ LABELS = {"coverage_undefined": "undefined", "coverage_mae": "MAE [95 % CI]", "s
 EVERY_METHODS = 8
 
 
-def _is_shipped(rec: dict) -> bool:
-    return str(rec.get("run", "")).startswith("shipped")
-
-
 def source(rec: dict) -> str:
-    """``shipped``, ``submitted`` or ``mine``: where a method's rows came from."""
-    return "shipped" if _is_shipped(rec) else "submitted" if is_submitted(rec) else "mine"
+    """``shipped``, ``submitted`` or ``mine``: where a method's rows came from (:func:`leaderboard.source
+    <colonbench.reports.leaderboard.source>`, a run given here read as ``mine``)."""
+    got = leaderboard.source(rec)
+    return got if got in ("shipped", "submitted") else "mine"
 
 
 def marks(m: str, methods: dict) -> str:
-    """A method's marks after its name: * a reference, † shipped, ‡ submitted."""
-    rec = methods.get(m, {})
-    return (" *" if rec.get("reference") else "") + {"shipped": " †", "submitted": " ‡"}.get(source(rec), "")
+    """A method's marks after its name (:func:`leaderboard.marks <colonbench.reports.leaderboard.marks>`)."""
+    return leaderboard.marks(methods.get(m, {}))
 
 
 def method_cell(m: str, methods: dict, root: str) -> tuple[str, str]:
