@@ -26,7 +26,8 @@ def split(first, count, per_length, permutations, noise, mix=None, meshes=None):
 
 #: The real colons the project carries (data_manifests/meshes/, CC BY 4.0, see its README), by manifest name.
 REAL = {name: {"id": 900000 + int(name[3:]), "mesh": f"meshes/{name}_large_intestine_mm.ply",
-               "centerline": f"meshes/{name}_path_mm.npy"} for name in ("gca00090", "gca00080", "gca00060", "gca00020")}
+               "centerline": f"meshes/{name}_path_mm.npy"} for name in ("gca00090", "gca00080", "gca00060", "gca00020",
+                                                                                  "gca00070")}
 
 
 def meshes(*names):
@@ -169,17 +170,25 @@ dump("calibration-real", "Real segments of the interval calibration (scripts/cal
                                                     "video": 0.1}, meshes=["gca00090", "gca00080"])},
      WIDE, axes="tube", mesh_names=["gca00090", "gca00080"])
 
-#: The real validation and calibration colon (issue 63): gca00020, which no manifest trains on and no suite is made
-#: of. Every choice of model, step or calibration is judged on data that includes it.
-dump("validation-real", "The real validation and calibration colon gca00020 (CT with the colon inflated): every usable "
+#: Colons like the paper's in the interval calibration (issue 70, decision 0325): unseen colons the network's own
+#: generator makes, so that the intervals are as sure as they should be where the method is at home.
+dump("calibration-paper", "Paper-like colons of the interval calibration (scripts/calibrate_intervals.py): 24 of "
+     "paper.yaml's validation colons (no manifest trains on them; not train-cpu.yaml's), one segment per length, two "
+     "hole draws, the paper's camera and sphere holes and a fifth video partials. Validation split only.", 20210901,
+     {"validation": split(400, 24, 1, 2, CLEAN, {"camera": 0.4, "spheres": 0.4, "video": 0.2})})
+
+#: The real validation and calibration colons (issues 63 and 70): gca00020 and gca00070, which no manifest trains on
+#: and no suite is made of. Every choice of model, step or calibration is judged on data that includes them.
+dump("validation-real", "The real validation and calibration colons gca00020 (CT with the colon inflated) and gca00070 "
+     "(Visible Human male, a coarse mesh): every usable "
      "segment of 40, 50, 55, 60 and 70 mm (the suites' lengths), two hole draws each, with the suites' hole models "
      "(camera, spheres, both, an unseen end, video partials) at 2 points/mm^2 as real-test.yaml's; evaluated at 0 and "
-     "0.5 mm noise as the suites are. Validation split only: choose and calibrate on it, never train or test on it.",
+     "0.5 mm noise as the suites are. Validation split only: choose and calibrate on them, never train or test on them.",
      20261130, {"validation": split(0, 0, None, 2, CLEAN, {"camera": 0.25, "spheres": 0.25, "camera+spheres": 0.1,
                                                           "camera+end": 0.125, "spheres+end": 0.125, "video": 0.15},
-                                    meshes=["gca00020"])},
+                                    meshes=["gca00020", "gca00070"])},
      {"segments": {"lengths_mm": [40.0, 50.0, 55.0, 60.0, 70.0], "end_margin_mm": 10.0}}, axes="tube",
-     mesh_names=["gca00020"])
+     mesh_names=["gca00020", "gca00070"])
 
 # ------------------------------------------------------------------ whole-colon benchmark (issue 12)
 def whole_colons(first, count, permutations, meshes):
@@ -205,10 +214,11 @@ dump("colon-val", "Whole-colon validation, where the map's settings are chosen (
 
 #: The real validation colon mapped whole (issue 63): where the map's figures on a real colon are judged and its
 #: segments' intervals calibrated, never colon-test.yaml's gca00060.
-dump("colon-val-real", "Whole-colon validation on the real validation colon gca00020 (colonbench evaluate --task colon "
-     "--split validation): two whole partial reconstructions (withdrawal-camera or sphere holes, 2 points/mm^2, each "
-     "with its withdrawal trajectory), with their exact per-face truth. No manifest trains on gca00020.",
-     20261130, {"validation": whole_colons(0, 0, 2, ["gca00020"])}, mesh_names=["gca00020"], task="colon")
+dump("colon-val-real", "Whole-colon validation on the real validation colons gca00020 and gca00070 (colonbench evaluate "
+     "--task colon --split validation): two whole partial reconstructions of each (withdrawal-camera or sphere holes, "
+     "2 points/mm^2, each with its withdrawal trajectory), with their exact per-face truth. No manifest trains on them.",
+     20261130, {"validation": whole_colons(0, 0, 2, ["gca00020", "gca00070"])}, mesh_names=["gca00020", "gca00070"],
+     task="colon")
 
 #: Whole-colon training data of the context model (issue 12): its context samples are cut from these
 #: reconstructions (colonbench pack --context): paper.yaml's train colons and the real colon gca00090, and
