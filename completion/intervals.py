@@ -56,6 +56,15 @@ SCALE_FEATURES = {
     "scaled": ("one", "estimate", "length", "span_ratio", "no_rim", "one_rim", "doubtful"),
     "scaled2": ("one", "estimate", "length", "span_ratio", "no_rim", "one_rim", "doubtful"),
     "scaled2-gaps": ("one", "estimate", "length", "span_ratio", "no_rim", "one_rim", "doubtful", "gap_share"),
+    "scaled-colon": ("one", "estimate", "length", "span_ratio", "no_rim", "one_rim", "doubtful"),
+    "scaled-colon-novel": ("one", "estimate", "length", "span_ratio", "no_rim", "one_rim", "doubtful", "spread",
+                           "radius_ratio", "line_extent"),
+    "scaled-colon-novel-shift": ("one", "estimate", "length", "span_ratio", "no_rim", "one_rim", "doubtful", "spread",
+                                 "radius_ratio", "line_extent"),
+    "scaled2-colon-novel": ("one", "estimate", "length", "span_ratio", "no_rim", "one_rim", "doubtful", "spread",
+                            "radius_ratio", "line_extent"),
+    "scaled2-colon-novel-shift": ("one", "estimate", "length", "span_ratio", "no_rim", "one_rim", "doubtful",
+                                  "spread", "radius_ratio", "line_extent"),
 }
 #: Added to ``|true - estimated|`` before its log is fitted: a floor of the scale (fractions).
 SCALE_FLOOR = 0.005
@@ -67,13 +76,16 @@ def features(coverage: float, signals: dict, names) -> np.ndarray:
 
     ``one``: 1; ``estimate``: the coverage; ``length``: the line between the planes / 60 mm; ``span_ratio``: the span
     between the planes / that line; ``no_rim``, ``one_rim``: how many cut rims were found; ``doubtful``: a doubtful
-    rim; ``gap_share``: the area share of the wall-gap patches."""
+    rim; ``gap_share``: the area share of the wall-gap patches; ``spread``: the network's disagreement with itself
+    times 10, ``radius_ratio``: the lumen's radius / the line, ``line_extent``: the line / the cloud's extent
+    (:mod:`colonbench.completion.novelty`)."""
     g = lambda k: float(signals.get(k, 0.0) or 0.0)          # noqa: E731
     length = g("length_mm")
     rims = int(g("rims"))
     value = {"one": 1.0, "estimate": float(coverage), "length": length / 60.0,
              "span_ratio": g("span_mm") / max(length, 1.0), "no_rim": float(rims == 0), "one_rim": float(rims == 1),
-             "doubtful": float(g("rims_doubtful") > 0), "gap_share": g("gap_share")}
+             "doubtful": float(g("rims_doubtful") > 0), "gap_share": g("gap_share"), "spread": 10.0 * g("spread"),
+             "radius_ratio": g("radius_mm") / max(length, 1.0), "line_extent": length / g("extent_mm") if g("extent_mm") > 0 else 0.0}
     out = np.array([value[n] for n in names], float)
     return np.where(np.isfinite(out), out, 0.0)
 
@@ -153,6 +165,10 @@ class Intervals:
     known : dict
         ``{"low", "high", "n"}`` of segments whose extent is known (``signals["extent"] == "known"``: a length
         given to :func:`known_length`, or planes the caller clips at, as ``colonbench map`` does).
+    review_known : float
+        The review width of :attr:`known`'s intervals (fraction; 0: :attr:`review_width`), chosen as
+        :attr:`review_width` is on intervals of known extent (decision record 0325): a map's segment is flagged
+        when its interval is wider than its calibration's.
     """
 
     scheme: str
@@ -162,6 +178,7 @@ class Intervals:
     source: dict = field(default_factory=dict)
     known: dict = field(default_factory=dict)
     map: dict = field(default_factory=dict)
+    review_known: float = 0.0
 
     def quantiles(self, coverage: float, signals: dict) -> tuple[float, float]:
         """The residual quantiles of an estimate's group (the coarser scheme's group where its own had too few
@@ -202,11 +219,13 @@ class Intervals:
                 f"the intervals were calibrated on ({longest:.0f} mm): longer than one segment, outside what the "
                 "method and its interval were tested on (cut the reconstruction into segments: colonbench map does)"
                 if longest and line > LONG_SHARE * longest else "")
-        if width <= self.review_width:      # sure enough: the notes (the rims', a known length's) are reasons only
+        known = est.signals.get("extent") == "known" and self.review_known > 0
+        review_width = self.review_known if known else self.review_width
+        if width <= review_width:           # sure enough: the notes (the rims', a known length's) are reasons only
             est.review.clear()              # where it is not
             est.review.extend([long] if long else [])
             return
-        est.review.append(f"interval {100 * width:.0f} points wide (more than {100 * self.review_width:.0f})")
+        est.review.append(f"interval {100 * width:.0f} points wide (more than {100 * review_width:.0f})")
         est.review.extend([long] if long else [])
         if int(est.signals.get("rims", 0)) == 0 and est.signals.get("extent") != "known":
             est.review.append("no cut rim at either end: the segment's ends are the line's own, it may go on unseen")
@@ -228,6 +247,8 @@ class Intervals:
         out = asdict(self)
         if not out["map"]:                 # no map part (the map's segments get the known extent): as before it existed
             del out["map"]
+        if not out["review_known"]:        # no review width of its own for the known extent: as before it existed
+            del out["review_known"]
         return out
 
 
@@ -249,29 +270,72 @@ def _scale(group: dict, coverage: float, signals: dict) -> tuple[float, float]:
             group["high"] * _scale_of(group, coverage, signals, "high"))
 
 
-def _log_fit(x: np.ndarray, magnitude: np.ndarray) -> tuple[list, np.ndarray]:
-    """Least-squares weights of ``log(magnitude + SCALE_FLOOR)`` on ``x``, and the scales they give."""
-    w, *_ = np.linalg.lstsq(x, np.log(magnitude + SCALE_FLOOR), rcond=None)
+def _log_fit(x: np.ndarray, magnitude: np.ndarray, weights: np.ndarray | None = None) -> tuple[list, np.ndarray]:
+    """(Weighted) least-squares weights of ``log(magnitude + SCALE_FLOOR)`` on ``x``, and the scales they give."""
+    root = np.sqrt(weights)[:, None] if weights is not None else 1.0
+    w, *_ = np.linalg.lstsq(x * root, np.log(magnitude + SCALE_FLOOR) * np.ravel(root), rcond=None)
     return [float(v) for v in w], np.exp(np.clip(x @ w, -20, 5))
 
 
-def _fit_group(residual: np.ndarray, x: np.ndarray | None, names, level: float, two_sided: bool = False) -> dict:
+def weighted_quantiles(values, weights, level: float = LEVEL) -> tuple[float, float]:
+    """:func:`conformal_quantiles` of values carrying weights (colons as the unit, decision record 0325): the low and
+    high quantiles of their weighted distribution at the split-conformal ranks of the effective sample size
+    ``(sum w)^2 / sum w^2`` (with equal weights: the unweighted ranks' quantiles)."""
+    v, w = np.asarray(values, float), np.asarray(weights, float)
+    order = np.argsort(v, kind="stable")
+    v, w = v[order], w[order] / w.sum()
+    n = 1.0 / float(np.sum(w ** 2))
+    a = (1.0 - level) / 2.0
+    lo, hi = math.floor((n + 1) * a + 1e-9) / n, math.ceil((n + 1) * (1.0 - a) - 1e-9) / n
+    cum = np.cumsum(w)
+    low = float(v[min(np.searchsorted(cum, lo - 1e-9), len(v) - 1)]) if lo > 0 else -1.0
+    high = float(v[min(np.searchsorted(cum, hi - 1e-9), len(v) - 1)]) if hi <= 1.0 + 1e-9 else 1.0
+    return low, high
+
+
+def _weighted_median(values, weights, q: float = 0.5) -> float:
+    v, w = np.asarray(values, float), np.asarray(weights, float)
+    order = np.argsort(v, kind="stable")
+    cum = np.cumsum(w[order]) / w.sum()
+    return float(v[order][min(np.searchsorted(cum, q - 1e-12), len(v) - 1)])
+
+
+def _quantiles(z: np.ndarray, level: float, weights, colons) -> tuple[float, float, dict]:
+    """The low and high quantiles of scaled residuals ``z``: split-conformal (no weights), weighted, or (``colons``
+    given too) those of ``z`` less its colon's median, widened by the colons' medians' quartiles (the colon-level
+    shift term, decision record 0325); and what the shift term recorded."""
+    if weights is None:
+        return (*conformal_quantiles(z, level), {})
+    if colons is None:
+        return (*weighted_quantiles(z, weights, level), {})
+    colons = np.asarray(colons)
+    names, index = np.unique(colons, return_inverse=True)
+    medians = np.array([_weighted_median(z[index == k], weights[index == k]) for k in range(len(names))])
+    colon_weight = np.bincount(index, weights=weights)
+    q1, q3 = _weighted_median(medians, colon_weight, 0.25), _weighted_median(medians, colon_weight, 0.75)
+    low, high = weighted_quantiles(z - medians[index], weights, level)
+    return low + q1, high + q3, {"shift_low": q1, "shift_high": q3}
+
+
+def _fit_group(residual: np.ndarray, x: np.ndarray | None, names, level: float, two_sided: bool = False,
+               weights: np.ndarray | None = None, colons=None) -> dict:
     """A group's quantiles: of the residuals, or (``x``: its features) of the residuals over their fitted scale;
     ``two_sided``: a scale of the residuals below 0 for the low end and one of those above for the high end, each
-    end's quantile taken of the residuals over its own scale."""
+    end's quantile taken of the residuals over its own scale. ``weights``: each residual's weight in the scale's
+    fit and the quantiles (:func:`weighted_quantiles`); ``colons``: each residual's colon, for the shift term."""
     if x is None:
-        low, high = conformal_quantiles(residual, level)
+        low, high, _ = _quantiles(residual, level, weights, colons)
         return {"low": low, "high": high, "n": int(len(residual))}
     out = {"n": int(len(residual)), "features": list(names),
            "ranges": [[float(v) for v in r] for r in np.stack([x.min(axis=0), x.max(axis=0)], axis=1)]}
     if not two_sided:
-        out["weights"], s = _log_fit(x, np.abs(residual))
-        out["low"], out["high"] = conformal_quantiles(residual / s, level)
-        return out
-    out["weights_low"], s_low = _log_fit(x, np.maximum(-residual, 0.0))
-    out["weights_high"], s_high = _log_fit(x, np.maximum(residual, 0.0))
-    out["low"] = conformal_quantiles(residual / s_low, level)[0]
-    out["high"] = conformal_quantiles(residual / s_high, level)[1]
+        out["weights"], s = _log_fit(x, np.abs(residual), weights)
+        out["low"], out["high"], shift = _quantiles(residual / s, level, weights, colons)
+        return {**out, **shift}
+    out["weights_low"], s_low = _log_fit(x, np.maximum(-residual, 0.0), weights)
+    out["weights_high"], s_high = _log_fit(x, np.maximum(residual, 0.0), weights)
+    out["low"] = _quantiles(residual / s_low, level, weights, colons)[0]
+    out["high"] = _quantiles(residual / s_high, level, weights, colons)[1]
     return out
 
 
@@ -294,15 +358,29 @@ def known_length(est, length_mm: float) -> None:
                           "unobserved")
 
 
+def _unit_weights(scheme: str, weights, colons) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """The weights and colons a scheme fits with: a ``-colon`` scheme needs weights (the colon as the unit), a
+    ``-shift`` one the colons too; any other scheme counts every segment once."""
+    if "-colon" not in scheme:
+        return None, None
+    if weights is None:
+        raise ValueError(f"interval scheme {scheme!r} weighs colons: give each segment's weight")
+    if scheme.endswith("-shift") and colons is None:
+        raise ValueError(f"interval scheme {scheme!r} has a colon-level shift term: give each segment's colon")
+    return np.asarray(weights, float), (np.asarray(colons) if scheme.endswith("-shift") else None)
+
+
 def fit(true, estimated, signals: list, scheme: str, review_width: float, level: float = LEVEL,
-        source=None) -> Intervals:
+        source=None, weights=None, colons=None) -> Intervals:
     """Calibrate intervals on segments' true and estimated coverages (fractions, (n,)) and their signals (n dicts);
-    add :attr:`Intervals.known` with :func:`fit_known`."""
+    add :attr:`Intervals.known` with :func:`fit_known`. ``weights`` ((n,)) and ``colons`` ((n,)): each segment's
+    weight and colon, for the schemes that take the colon as the unit (``scaled-colon...``)."""
     true, estimated = np.asarray(true, float), np.asarray(estimated, float)
     residual = true - estimated
     scaled = _scaled(scheme)
     names = SCALE_FEATURES[scaled] if scaled else ()
     x = np.array([features(c, sig, names) for c, sig in zip(estimated, signals)]) if scaled else None
+    weights, colons = _unit_weights(scheme, weights, colons)
     groups = {}
     for sch in dict.fromkeys(("marginal", scheme.split("+")[0], scheme)):
         keys = np.array([group_key(c, sig, sch) for c, sig in zip(estimated, signals)])
@@ -310,18 +388,20 @@ def fit(true, estimated, signals: list, scheme: str, review_width: float, level:
             sel = keys == key
             if sel.sum() >= MIN_GROUP and str(key) not in groups:
                 groups[str(key)] = _fit_group(residual[sel], x[sel] if scaled else None, names, level,
-                                              _two_sided(scaled))
+                                              _two_sided(scaled), None if weights is None else weights[sel],
+                                              None if colons is None else colons[sel])
     return Intervals(scheme, level, groups, review_width, dict(source or {}))
 
 
-def fit_known(cal: Intervals, true, estimated, signals: list | None = None) -> None:
+def fit_known(cal: Intervals, true, estimated, signals: list | None = None, weights=None, colons=None) -> None:
     """Calibrate :attr:`Intervals.known` on segments estimated with their lengths known (:func:`known_length`),
-    scaled as the calibration's scheme is (``signals``: the estimates' signals, needed then)."""
+    scaled and weighted as the calibration's scheme is (``signals``: the estimates' signals, needed then)."""
     residual = np.asarray(true, float) - np.asarray(estimated, float)
     scaled = _scaled(cal.scheme)
     names = SCALE_FEATURES[scaled] if scaled else ()
     x = np.array([features(c, sig, names) for c, sig in zip(estimated, signals)]) if scaled else None
-    cal.known = _fit_group(residual, x, names, cal.level, _two_sided(scaled))
+    weights, colons = _unit_weights(cal.scheme, weights, colons)
+    cal.known = _fit_group(residual, x, names, cal.level, _two_sided(scaled), weights, colons)
 
 
 def path_for(model: Path) -> Path:

@@ -21,14 +21,15 @@ import hashlib
 import time
 from collections import OrderedDict
 from dataclasses import dataclass
-from importlib import resources
 from pathlib import Path
 
 import numpy as np
 
+from colonbench.completion import novelty, screening
 from colonbench.completion.gaps import GAP_VALLEY, reach_planes
 from colonbench.completion.heatmap_centerline import END_LEVEL, extract_centerline
 from colonbench.completion.intervals import known_length, load as load_intervals
+from colonbench.completion.modelfile import DEFAULT_MODEL, model_path, shipped_model, shipped_models  # noqa: F401
 from colonbench.completion.planes import line_between
 from colonbench.completion.steps import STEPS_VERSION, complete
 from colonbench.completion.symmetry import averaged, check_tta
@@ -58,31 +59,6 @@ CENTERLINE_SPACING_MM = 0.5
 THIN_ABOVE = 3.0
 #: The density a dense cloud is thinned to, points/mm^2: the paper's (and the held-out data's).
 THIN_TO = 2.0
-
-
-#: The shipped model (``completion/models/small.safetensors`` in the package); only the current one ships.
-DEFAULT_MODEL = "small"
-
-
-def shipped_model(name: str = DEFAULT_MODEL) -> Path:
-    """Path of a model that ships in the package: ``colonbench/completion/models/<name>.safetensors``."""
-    return Path(str(resources.files("colonbench.completion").joinpath(f"models/{name}.safetensors")))
-
-
-def shipped_models() -> list[str]:
-    """Names of the models that ship in the package."""
-    folder = resources.files("colonbench.completion").joinpath("models")
-    return sorted(p.name[: -len(".safetensors")] for p in folder.iterdir() if p.name.endswith(".safetensors"))
-
-
-def model_path(model=None) -> Path:
-    """A model file: ``None`` is the default shipped model, a shipped model's name its file, else a path."""
-    if model is None:
-        return shipped_model()
-    path = Path(model)
-    if not path.exists() and path.suffix != ".safetensors" and str(model) in shipped_models():
-        return shipped_model(str(model))
-    return path
 
 
 def check_cloud(points, what: str = "point cloud") -> np.ndarray:
@@ -192,6 +168,16 @@ class Prediction:
     heatmap: np.ndarray
     seconds: dict
     _centerline: np.ndarray | None = None
+    _rerun: tuple | None = None              # (network, input tensor): for :attr:`spread`
+    _spread: float | None = None
+
+    @property
+    def spread(self) -> float:
+        """The network's disagreement with itself on this cloud (:func:`colonbench.completion.novelty.spread`;
+        one more network pass, on first use)."""
+        if self._spread is None:
+            self._spread = novelty.spread(*self._rerun, self.heatmap) if self._rerun is not None else 0.0
+        return self._spread
 
     @property
     def centerline_vox(self) -> np.ndarray:
@@ -241,6 +227,7 @@ class Predictor:
         self.path = path
         self.version = f"{path.stem}@{self.meta.get('steps', '?')}" + (f",tta={self.tta}" if self.tta > 1 else "")
         self.grid_options = self.meta.get("grid_options", {})
+        self.pool = screening.pool_of(self.meta)        # a screening model runs on the grid pooled (0326)
         self._cache: OrderedDict[bytes, Prediction] = OrderedDict()
 
     @property
@@ -272,7 +259,7 @@ class Predictor:
         if slab is None:
             grid = fit_grid(pts, **self.grid_options)
             h_in, _ = input_from_points(grid, pts)
-            x_np = h_in[None, None]
+            x_np = (h_in if self.pool == 1 else screening.pooled_input(grid, pts, self.pool))[None, None]
         else:
             from colonbench.slab import context_grid, slab_occupancy
 
@@ -282,14 +269,17 @@ class Predictor:
         # every cloud runs the network made fast for inference (set up once per grid size, about 1 s): its sums
         # differ from the eager network's in the last bits, which the steps after it can turn into a whole vertex
         # or voxel, so a cloud's estimate must not depend on whether it came first in its process
-        if grid.size not in self._forward:
+        size = x_np.shape[-1]
+        if size not in self._forward:
             from colonbench.completion.network import for_inference
 
-            self._forward[grid.size] = for_inference(self.net, grid.size, self.device)
+            self._forward[size] = for_inference(self.net, size, self.device)
         with torch.inference_mode():
             x = torch.from_numpy(x_np).to(self.device)
-            pred = averaged(self._forward.get(grid.size, self.net), x, self.tta)[0, 0].float().cpu().numpy()
-        out = Prediction(grid, h_in, np.clip(pred, 0.0, 1.0), {"network": time.perf_counter() - t})
+            pred = averaged(self._forward.get(size, self.net), x, self.tta)
+            pred = screening.upsampled(pred, self.pool, grid.size)[0, 0].float().cpu().numpy()
+        out = Prediction(grid, h_in, np.clip(pred, 0.0, 1.0), {"network": time.perf_counter() - t},
+                         _rerun=(self._forward.get(size, self.net), x) if self.pool == 1 else None)
         self._cache[key] = out
         while len(self._cache) > self.CACHE:
             self._cache.popitem(last=False)
@@ -431,6 +421,7 @@ class CompletionMethod:
         est = from_heatmap(p.heatmap, p.grid, pts, self.name, self.hole_distance, centerline_vox=cl,
                            cut_rims=self.cut_rims, shell_level=self.shell_level, gaps=self.gaps)
         est.seconds = {"check": t1 - t0, **shared, **{k: v for k, v in est.seconds.items() if k != "centerline"}}
+        est.signals.update(spread=round(p.spread, 5), **novelty.shape(pts, est.centerline))
         if length_mm is not None:
             known_length(est, length_mm)
         if self.intervals is not None:

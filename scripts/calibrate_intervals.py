@@ -37,14 +37,20 @@ from colonbench.shards.schema import sha256_file
 
 ROOT = Path(__file__).resolve().parents[1] / "data_manifests"
 #: The calibration's datasets: manifest name -> the set its segments belong to (``train_real``: reported only).
-MANIFESTS = {"calibration": "V_wide", "validation-real": "V_real", "calibration-real": "train_real"}
-CALIBRATED = ("V_wide", "V_real")
-SCHEMES = ("length+band", "scaled", "scaled2", "scaled2-gaps")
+MANIFESTS = {"calibration": "V_wide", "calibration-paper": "V_paper", "validation-real": "V_real",
+             "calibration-real": "train_real"}
+CALIBRATED = ("V_wide", "V_paper", "V_real")
+#: Decision record 0325's candidates.
+SCHEMES = ("scaled", "scaled-colon", "scaled-colon-novel", "scaled-colon-novel-shift", "scaled2-colon-novel",
+           "scaled2-colon-novel-shift")
 NOISE_MM = (0.0, 0.5)
 #: The signals an estimate's interval may be scaled by, as columns of the estimates' table.
-SIGNALS = ("rims", "rims_doubtful", "gap_share", "length_mm", "span_mm")
-#: The review rule (decision record 0156): flag at least this share of the estimates off by more than BIG.
-REVIEW_RECALL, BIG = 0.8, 0.15
+SIGNALS = ("rims", "rims_doubtful", "gap_share", "length_mm", "span_mm", "spread", "radius_mm", "extent_mm")
+#: The review rule (decision record 0325): flag at least this share of the estimates off by more than BIG in each
+#: real colon held out and in V_wide.
+REVIEW_RECALL, BIG = 0.75, 0.15
+#: The real calibration colons by id (colon_id = 900000 + the atlas number).
+REAL_NAMES = {900020: "gca00020", 900070: "gca00070"}
 #: Colon ids of real meshes start here (data_manifests: 900000 + the atlas number).
 REAL_IDS = 900000
 
@@ -104,6 +110,15 @@ def known_estimates(df: pd.DataFrame) -> np.ndarray:
     return np.where(share < intervals.SHORT_SHARE, df["estimate"] * share, df["estimate"]).astype(float)
 
 
+def unit_weights(df: pd.DataFrame) -> np.ndarray:
+    """Each estimate's weight with the colon as the unit (decision record 0325): every set of ``df`` weighs the
+    same, every colon of a set the same, every estimate of a colon the same; they sum to 1."""
+    n_sets = df["set"].nunique()
+    colons_in_set = df.groupby("set")["colon"].transform("nunique")
+    per_colon = df.groupby("colon")["colon"].transform("size")
+    return (1.0 / (n_sets * colons_in_set * per_colon)).to_numpy(float)
+
+
 def by_colon(df: pd.DataFrame, scheme: str, level: float, known: bool = False) -> pd.DataFrame:
     """``df`` with each row's interval (``low``, ``high``) from a calibration fitted on the other colons
     (leave-one-colon-out); ``known``: the known-length interval around the length-scaled estimate."""
@@ -112,15 +127,17 @@ def by_colon(df: pd.DataFrame, scheme: str, level: float, known: bool = False) -
     out["estimate_used"] = est
     sig = signals(df)
     low, high = np.empty(len(df)), np.empty(len(df))
-    colons = df["colon_id"].to_numpy()
+    colons = df["colon"].to_numpy()
     for colon in np.unique(colons):
         fit_on, test_on = np.flatnonzero(colons != colon), np.flatnonzero(colons == colon)
-        sig_fit = [sig[k] for k in fit_on]
+        sig_fit, part = [sig[k] for k in fit_on], df.iloc[fit_on]
+        w, c = unit_weights(part), colons[fit_on]
         if known:
             cal = intervals.Intervals(scheme, level, {}, 1.0)
-            intervals.fit_known(cal, df["true"].to_numpy(float)[fit_on], est[fit_on], sig_fit)
+            intervals.fit_known(cal, df["true"].to_numpy(float)[fit_on], est[fit_on], sig_fit, w, c)
         else:
-            cal = intervals.fit(df["true"].to_numpy(float)[fit_on], est[fit_on], sig_fit, scheme, 1.0, level)
+            cal = intervals.fit(df["true"].to_numpy(float)[fit_on], est[fit_on], sig_fit, scheme, 1.0, level,
+                                weights=w, colons=c)
         for k in test_on:
             s = {**sig[k], "extent": "known"} if known else sig[k]
             low[k], high[k] = cal.interval(est[k], s)
@@ -131,26 +148,32 @@ def by_colon(df: pd.DataFrame, scheme: str, level: float, known: bool = False) -
 
 
 def cells(held: pd.DataFrame) -> pd.DataFrame:
-    """Truth inside (%), mean width (points) and count per set and noise level of held-out intervals."""
-    return held.groupby(["set", "noise_mm"]).agg(n=("inside", "size"), inside=("inside", "mean"),
-                                                 width=("width", "mean")).assign(
+    """Truth inside (%), mean width (points) and count per cell (a set, or a real colon held out) and noise level of
+    held-out intervals."""
+    return held.groupby(["cell", "noise_mm"]).agg(n=("inside", "size"), inside=("inside", "mean"),
+                                                  width=("width", "mean")).assign(
         inside=lambda d: (100 * d["inside"]).round(1), width=lambda d: (100 * d["width"]).round(1))
 
 
+def real_width(held: pd.DataFrame) -> float:
+    """Mean held-out width (points) over the real colons, each colon counted once."""
+    real = held[held["set"] == "V_real"]
+    return round(100 * float(real.groupby("cell")["width"].mean().mean()), 2) if len(real) else float("nan")
+
+
 def choose(held: dict, level: float) -> tuple[str, dict]:
-    """0156's rule on held-out intervals per scheme: of the schemes within 85-95 % in every cell of the calibrated
-    sets, the narrowest on ``V_real``; else the one whose worst cell lies closest to ``level``. Also the summary."""
+    """0325's rule on held-out intervals per scheme: of the schemes within 85-95 % in every cell (each calibrated set,
+    each real colon on its own, each noise level), the narrowest over the real colons; else the one whose worst cell
+    lies closest to ``level``. Also the summary."""
     summary, ok = {}, {}
     for scheme, h in held.items():
         c = cells(h[h["set"].isin(CALIBRATED)])
         worst = float((c["inside"] / 100 - level).abs().max())
-        real = h[h["set"] == "V_real"]
         ok[scheme] = bool(((c["inside"] >= 85) & (c["inside"] <= 95)).all())
         summary[scheme] = {"cells": {f"{s} {n:g} mm": {"n": int(r["n"]), "inside": float(r["inside"]),
                                                        "width": float(r["width"])} for (s, n), r in c.iterrows()},
-                           "ok": ok[scheme], "worst_off": round(100 * worst, 1),
-                           "real_width": round(100 * float(real["width"].mean()), 2)}
-        print(f"\n{scheme}: every cell within 85-95 %: {ok[scheme]}; V_real mean width "
+                           "ok": ok[scheme], "worst_off": round(100 * worst, 1), "real_width": real_width(h)}
+        print(f"\n{scheme}: every cell within 85-95 %: {ok[scheme]}; real colons' mean width "
               f"{summary[scheme]['real_width']} points\n{c.to_string()}")
     passing = [s for s in held if ok[s]]
     if passing:
@@ -158,16 +181,21 @@ def choose(held: dict, level: float) -> tuple[str, dict]:
     return min(held, key=lambda s: summary[s]["worst_off"]), summary
 
 
+def review_cells(held: pd.DataFrame) -> list[str]:
+    """The cells the review width must catch in: each real colon held out, and V_wide."""
+    return sorted(c for c in held["cell"].unique() if c.startswith("V_real ")) + ["V_wide"]
+
+
 def review_width(held: pd.DataFrame) -> tuple[float, dict]:
-    """0156's review width: the largest at which the held-out intervals flag at least :data:`REVIEW_RECALL` of the
-    estimates off by more than :data:`BIG` in each calibrated set (else the one closest in the worse set); with
-    each set's recall and precision there."""
+    """0325's review width: the largest at which the held-out intervals flag at least :data:`REVIEW_RECALL` of the
+    estimates off by more than :data:`BIG` in each of :func:`review_cells` (else the one closest in the worst);
+    with each cell's recall and precision there."""
     big = (held["true"] - held["estimate_used"]).abs() > BIG
-    sets = [held["set"] == s for s in CALIBRATED]
+    sets = {name: held["cell"] == name for name in review_cells(held)}
     best, best_recall = 0.0, -1.0
     for w in np.unique(np.round(held["width"], 4))[::-1]:
         flag = held["width"] > w - 1e-12
-        recall = min(float((flag & big & s).sum() / max((big & s).sum(), 1)) for s in sets)
+        recall = min(float((flag & big & s).sum() / max((big & s).sum(), 1)) for s in sets.values())
         if recall >= REVIEW_RECALL:
             best = float(w)
             break
@@ -175,43 +203,58 @@ def review_width(held: pd.DataFrame) -> tuple[float, dict]:
             best, best_recall = float(w), recall
     flag = held["width"] > best - 1e-12
     report = {}
-    for name, s in zip(CALIBRATED, sets):
+    for name, s in {**sets, **{c: held["cell"] == c for c in held["cell"].unique() if c not in sets}}.items():
         report[name] = {"recall": round(float((flag & big & s).sum() / max((big & s).sum(), 1)), 3),
                         "precision": round(float((flag & big & s).sum() / max((flag & s).sum(), 1)), 3),
-                        "flagged": round(float((flag & s).mean()), 3)}
+                        "flagged": round(float((flag & s).sum() / max(s.sum(), 1)), 3), "off": int((big & s).sum())}
     return best - 1e-6, report
+
+
+def with_units(df: pd.DataFrame) -> pd.DataFrame:
+    """``df`` with ``colon`` (a set's colon: the unit held out) and ``cell`` (its set, a real colon on its own)."""
+    real = df["set"] == "V_real"
+    names = df["colon_id"].map(lambda c: REAL_NAMES.get(int(c), str(int(c))))
+    return df.assign(colon=df["set"] + ":" + df["colon_id"].astype(int).astype(str),
+                     cell=np.where(real, "V_real " + names, df["set"]))
 
 
 def calibrate(df: pd.DataFrame, level: float, source: dict) -> intervals.Intervals:
     """Choose, fit and describe the calibration from the estimates' table (columns of :func:`estimates` and ``set``,
     :data:`MANIFESTS`' values); prints every figure it chooses by."""
+    df = with_units(df)
     cal_df = df[df["set"].isin(CALIBRATED)].reset_index(drop=True)
     print("estimates per set:", df["set"].value_counts().to_dict())
-    for name, g in df.groupby("set"):
-        print(f"{name}: {g['colon_id'].nunique()} colons, MAE {100 * (g['estimate'] - g['true']).abs().mean():.2f} "
-              "points")
+    for name, g in df.groupby("cell"):
+        print(f"{name}: {g['colon_id'].nunique()} colons, {len(g)} estimates, MAE "
+              f"{100 * (g['estimate'] - g['true']).abs().mean():.2f} points, bias "
+              f"{100 * (g['estimate'] - g['true']).mean():+.2f}")
     held = {scheme: by_colon(cal_df, scheme, level) for scheme in SCHEMES}
     best, summary = choose(held, level)
     width, review = review_width(held[best])
     print(f"\nchosen: {best}; review width {100 * width:.1f} points: " + "; ".join(
-        f"{k} recall {100 * v['recall']:.0f} %, precision {100 * v['precision']:.0f} %, flagged "
+        f"{k} recall {100 * v['recall']:.0f} % of {v['off']}, precision {100 * v['precision']:.0f} %, flagged "
         f"{100 * v['flagged']:.0f} %" for k, v in review.items()))
     known_held = by_colon(cal_df, best, level, known=True)
-    print(f"\nknown length, held out:\n{cells(known_held).to_string()}")
-    cal = intervals.fit(cal_df["true"], cal_df["estimate"], signals(cal_df), best, width, level)
-    intervals.fit_known(cal, cal_df["true"], known_estimates(cal_df), signals(cal_df))
+    known_width, known_review = review_width(known_held)
+    print(f"\nknown length, held out:\n{cells(known_held).to_string()}\nits review width {100 * known_width:.1f} "
+          "points: " + "; ".join(f"{k} recall {100 * v['recall']:.0f} % of {v['off']}, precision "
+                                 f"{100 * v['precision']:.0f} %" for k, v in known_review.items()))
+    w, c = unit_weights(cal_df), cal_df["colon"].to_numpy()
+    cal = intervals.fit(cal_df["true"], cal_df["estimate"], signals(cal_df), best, width, level, weights=w, colons=c)
+    intervals.fit_known(cal, cal_df["true"], known_estimates(cal_df), signals(cal_df), w, c)
+    cal.review_known = known_width
     reported = df[df["set"] == "train_real"]
     if len(reported):                    # never calibrated on: the calibration's intervals, held out by construction
         lo_hi = np.array([cal.interval(c, s) for c, s in zip(reported["estimate"], signals(reported))])
         inside = (lo_hi[:, 0] - 1e-12 <= reported["true"]) & (reported["true"] <= lo_hi[:, 1] + 1e-12)
         print(f"\nthe real training colons (not calibrated on): truth inside {100 * inside.mean():.1f} %, mean width "
               f"{100 * (lo_hi[:, 1] - lo_hi[:, 0]).mean():.1f} points")
-    cal.source = {**source, "held_out": "leave-one-colon-out over the colons of V_wide and V_real",
+    cal.source = {**source, "held_out": "leave-one-colon-out over the colons of " + ", ".join(CALIBRATED),
                   "colons": {s: sorted(int(c) for c in cal_df.loc[cal_df["set"] == s, "colon_id"].unique())
                              for s in CALIBRATED},
                   "not_calibrated_on": "the real training colons (calibration-real.yaml and calibration.yaml's real "
                                        "segments): the network saw them",
-                  "schemes": summary, "review": review,
+                  "schemes": summary, "review": review, "known_review": known_review,
                   "known_held_out": {f"{s} {n:g} mm": {"inside": float(r["inside"]), "width": float(r["width"])}
                                      for (s, n), r in cells(known_held).iterrows()}}
     digest = hashlib.sha256(json.dumps(cal.to_json(), sort_keys=True).encode()).hexdigest()[:8]
@@ -223,7 +266,7 @@ def table(data: list[tuple[str, Path]], method: CompletionMethod, path: Path) ->
     """Every calibration dataset's estimates, each row with its ``set``."""
     parts = []
     for name, folder in data:
-        cache = folder / f"completion-estimates-{sha256_file(path)[:12]}-{steps_version()}-signals.csv"
+        cache = folder / f"completion-estimates-{sha256_file(path)[:12]}-{steps_version()}-signals2.csv"
         part = estimates(folder, method, cache).assign(manifest=name, set=MANIFESTS[name])
         if name == "calibration":         # its segments of the real training colons: seen by the network
             part.loc[part["colon_id"] >= REAL_IDS, "set"] = "train_real"

@@ -7,11 +7,12 @@ Maps ``<data>/colon-val`` and ``<data>/colon-val-real`` (the two manifests' vali
 missing) with completion as the whole-colon benchmark maps them (``colonbench evaluate --task colon --split
 validation``: both tracks, 0 and 0.5 mm noise; each run kept in its dataset folder per model, manifest, steps and
 calibration, and read again by the next call), keeps colon-val's procedural colons (``M_proc``: its maps of the real
-training colons are left out) and gca00020's maps (``M_real``), and measures three candidate intervals for a map's
+training colons are left out) and the real validation colons' maps (``M_real``: gca00020, gca00070), and measures three candidate intervals for a map's
 segments leave-one-colon-out: ``known``, the known-extent interval the map's segments get from the model's
 calibration file, and split-conformal quantiles of ``true - map coverage`` per ``track`` and per ``track+band`` (the
-map's coverage below 0.8). Of those within 85-95 % in each cell (set and track, noise levels pooled), the narrowest
-on ``M_real`` (else the one whose worst cell lies closest to 90 %). With ``--write``, a chosen map candidate is
+map's coverage below 0.8). Of those within 85-95 % in each cell (M_proc and each real colon, each track, noise levels
+pooled), the narrowest on ``M_real`` (else the one whose worst cell lies closest to 90 %). Prints how the map's own
+``review`` flags did per cell: the share of the segments off by more than 15 points it flags, and of its flags right. With ``--write``, a chosen map candidate is
 fitted on all the maps and written into the model's calibration file (``map``), which ``colonbench map`` then uses.
 """
 
@@ -97,6 +98,19 @@ def by_colon(seg: pd.DataFrame, scheme: str, level: float) -> pd.DataFrame:
     out = seg.assign(low=lohi[:, 0], high=lohi[:, 1], width=lohi[:, 1] - lohi[:, 0])
     out["inside"] = (out["low"] - 1e-12 <= out["true"]) & (out["true"] <= out["high"] + 1e-12)
     out["track_kind"] = np.where(out["context_mm"] > 0, "context", "segment-only")
+    out["cell"] = np.where(out["set"] == "M_real", out["colon"].astype(str), out["set"])
+    return out
+
+
+def flags(seg: pd.DataFrame) -> pd.DataFrame:
+    """How the map's own ``review`` did per cell (a real colon, or M_proc) and track: segments, those off by more
+    than 15 points, the share of them flagged (recall, %) and the share of flags on them (precision, %)."""
+    seg = seg.assign(off=(seg["estimate"] - seg["true"]).abs() > 0.15, flag=seg["review"].fillna(0) > 0)
+    out = seg.groupby(["cell", "track_kind"]).apply(lambda g: pd.Series({
+        "n": len(g), "off": int(g["off"].sum()), "flagged": int(g["flag"].sum()),
+        "recall": round(100 * (g["off"] & g["flag"]).sum() / max(g["off"].sum(), 1), 1),
+        "precision": round(100 * (g["off"] & g["flag"]).sum() / max(g["flag"].sum(), 1), 1)}),
+        include_groups=False)
     return out
 
 
@@ -124,8 +138,8 @@ def main() -> None:
     summary = {}
     for scheme in SCHEMES:
         held = by_colon(seg, scheme, cal.level)
-        cells = held.groupby(["set", "track_kind"]).agg(n=("inside", "size"), inside=("inside", "mean"),
-                                                         width=("width", "mean"))
+        cells = held.groupby(["cell", "track_kind"]).agg(n=("inside", "size"), inside=("inside", "mean"),
+                                                          width=("width", "mean"))
         ok = bool(((cells["inside"] >= 0.85) & (cells["inside"] <= 0.95)).all())
         summary[scheme] = {"ok": ok, "worst": float((cells["inside"] - cal.level).abs().max()),
                            "real_width": float(held.loc[held["set"] == "M_real", "width"].mean())}
@@ -133,6 +147,9 @@ def main() -> None:
               f"{100 * summary[scheme]['real_width']:.1f} points")
         print(cells.assign(inside=lambda d: (100 * d["inside"]).round(1), width=lambda d: (100 * d["width"]).round(1))
               .to_string())
+        if scheme == "known":
+            print(f"the map's review flags (a segment's interval wider than its calibration's):\n"
+                  f"{flags(held).to_string()}")
     passing = [s for s in SCHEMES if summary[s]["ok"]]
     best = min(passing, key=lambda s: summary[s]["real_width"]) if passing else \
         min(SCHEMES, key=lambda s: summary[s]["worst"])

@@ -198,7 +198,7 @@ def test_the_calibration_is_measured_leaving_each_colon_out(monkeypatch):
         return real_fit(true, estimated, signals, *args, **kwargs)
 
     monkeypatch.setattr(script.intervals, "fit", recording_fit)
-    held = script.by_colon(df, "length+band", 0.9)
+    held = script.by_colon(script.with_units(df), "length+band", 0.9)
     assert fitted_on == [80, 80, 80]                       # each fit leaves one colon of 40 out
     # colon 7 (truths at the estimate) gets the interval of colons 3 and 900020: their 80 residuals, each of
     # linspace(-0.2, 0.2, 40) twice, have the 4th smallest (rank floor(81 * 0.05)) at the second step
@@ -207,7 +207,43 @@ def test_the_calibration_is_measured_leaving_each_colon_out(monkeypatch):
     # colons 3 and 900020 get it from one spread colon and one at zero: narrower than their own spread
     assert 0 < held.loc[held["colon_id"] == 3, "inside"].mean() < 1
     table = script.cells(held)
-    assert set(table.index.get_level_values("set")) == {"V_real", "V_wide"} and table["n"].sum() == 120
+    assert set(table.index.get_level_values("cell")) == {"V_real gca00020", "V_wide"} and table["n"].sum() == 120
+
+
+def test_the_colon_is_the_unit_of_a_colon_scheme():
+    """Weighted quantiles count a colon as one (decision record 0325): a colon of 200 segments at 0 and one of 5 at
+    +0.3, each weighing half, put the upper quartile's rank in the small colon; unweighted, the 5 are a tail."""
+    values = np.r_[np.zeros(200), np.full(5, 0.3)]
+    weights = np.r_[np.full(200, 0.5 / 200), np.full(5, 0.5 / 5)]
+    # effective size 1 / (200 (1/400)^2 + 5 (1/10)^2) = 19.05; ranks floor(20.05 * 0.25) = 5 and ceil(20.05 * 0.75)
+    # = 16 of 19.05: the cumulated weight reaches 0.262 among the zeros and 0.840 at the small colon's 4th segment
+    assert intervals.weighted_quantiles(values, weights, 0.5) == (0.0, 0.3)
+    assert intervals.conformal_quantiles(values, 0.5) == (0.0, 0.0)
+    # equal weights give the split-conformal ranks
+    r = np.linspace(-0.3, 0.3, 61)
+    assert intervals.weighted_quantiles(r, np.ones(61), 0.9) == pytest.approx(intervals.conformal_quantiles(r, 0.9))
+    # a scheme that weighs colons refuses to fit without the weights
+    with pytest.raises(ValueError, match="weight"):
+        intervals.fit([0.5] * 40, [0.5] * 40, [{}] * 40, "scaled-colon", 0.3)
+
+
+def test_the_shift_term_widens_by_the_colons_typical_shift():
+    """``-shift``: the quantiles are of the residuals less their colon's median, widened by the quartiles of the
+    colons' medians; four colons shifted by -0.2, 0, 0, +0.2, each with the same spread, give exactly that."""
+    spread = np.linspace(-0.05, 0.05, 41)
+    shifts = np.array([-0.2, 0.0, 0.0, 0.2])
+    residual = (shifts[:, None] + spread[None, :]).ravel()
+    colons = np.repeat(["a", "b", "c", "d"], 41)
+    weights = np.full(len(residual), 1 / len(residual))
+    group = intervals._fit_group(residual, None, (), 0.9, weights=weights, colons=colons)
+    low, high = intervals.weighted_quantiles(np.tile(spread, 4), weights, 0.9)
+    # the colons' medians' weighted quartiles: -0.2 (a quarter of the weight reaches it) and 0 (three quarters)
+    assert group["low"] == pytest.approx(low - 0.2) and group["high"] == pytest.approx(high + 0.0)
+    # the novelty signals enter a colon scheme's scale as features, a signal the estimate lacks counting 0
+    f = intervals.features(0.7, {"length_mm": 50.0, "radius_mm": 25.0, "extent_mm": 100.0, "spread": 0.02},
+                           intervals.SCALE_FEATURES["scaled-colon-novel"])
+    assert f[-3:] == pytest.approx([0.2, 0.5, 0.5])
+    assert intervals.features(0.7, {"length_mm": 50.0}, ("line_extent",))[0] == 0.0
 
 
 def test_a_map_segment_gets_the_interval_around_its_own_coverage():

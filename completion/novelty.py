@@ -1,0 +1,67 @@
+"""Signals of a cloud unlike the colons the network learned from, for the estimate's interval and its review.
+
+A colon unlike the training data is off as a whole (decision record 0325): its estimates share a shift that the
+rims, the estimate and the line's length do not show. Three signals the estimate can see:
+
+``spread``
+    How much the network disagrees with itself: the mean ``|p - p'|`` of its heatmap ``p`` and the heatmap
+    ``p'`` it predicts for the same grid turned half a turn about the tube's axis and reversed (one of the grid's
+    symmetries, :mod:`colonbench.completion.symmetry`; nothing in a colon prefers either), over the voxels where
+    either says something (differs from the background's 0.5 by more than :data:`SAYS`). One more network pass.
+``radius_mm``
+    The lumen's width as the cloud shows it: the median distance (mm) of the cloud's points to the line between
+    the planes.
+``extent_mm``
+    The cloud's extent along its principal axis (mm): a line far longer than the cloud is long has wandered
+    through pockets of a wide lumen.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+#: A heatmap voxel whose value differs from 0.5 by more than this says surface (0) or line (1).
+SAYS = 0.2
+#: The symmetry of :data:`colonbench.completion.symmetry.SYMMETRIES` the spread compares against: a half turn
+#: about the tube's axis with the tube reversed.
+SECOND_VIEW = (2, 1, 0)
+
+
+def spread(forward, x, heatmap: np.ndarray) -> float:
+    """The network's disagreement with itself under :data:`SECOND_VIEW` (fraction of the heatmap's range).
+
+    Parameters
+    ----------
+    forward : callable
+        The network, ``(1, C, S, S, S)`` tensors to ``(1, 1, S, S, S)``.
+    x : (1, C, S, S, S) torch.Tensor
+        Its input.
+    heatmap : (S, S, S) float
+        Its prediction for ``x``, clipped to [0, 1].
+
+    Returns
+    -------
+    float
+        Mean ``|p - p'|`` over the voxels where either differs from 0.5 by more than :data:`SAYS`; 0 where none.
+    """
+    import torch
+
+    from colonbench.completion.symmetry import transform
+
+    with torch.inference_mode():
+        y = transform(forward(transform(x, SECOND_VIEW).contiguous()), SECOND_VIEW, inverse=True)
+    other = np.clip(y[0, 0].float().cpu().numpy(), 0.0, 1.0)
+    says = (np.abs(heatmap - 0.5) > SAYS) | (np.abs(other - 0.5) > SAYS)
+    return float(np.abs(heatmap - other)[says].mean()) if says.any() else 0.0
+
+
+def shape(points: np.ndarray, line: np.ndarray) -> dict:
+    """``radius_mm`` and ``extent_mm`` of a cloud (points, (n, 3) mm) around its line between the planes
+    ((m, 3) mm, resampled); ``radius_mm`` is 0 where the line is empty."""
+    pts = np.asarray(points, float)
+    centred = pts - pts.mean(axis=0)
+    axis = np.linalg.svd(centred[:: max(1, len(pts) // 4000)], full_matrices=False)[2][0]
+    along = centred @ axis
+    radius = float(np.median(cKDTree(line).query(pts)[0])) if len(line) else 0.0
+    return {"radius_mm": round(radius, 2), "extent_mm": round(float(along.max() - along.min()), 2)}
