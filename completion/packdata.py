@@ -94,9 +94,20 @@ def distance_to(occupied: torch.Tensor, method: str = "auto") -> torch.Tensor:
     return f.sqrt()
 
 
-def heatmaps(s0: torch.Tensor, s1: torch.Tensor, c: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-    """Input and target heatmaps, (n, S, S, S) float32, from the partial-surface, surface and centerline grids."""
-    return heatmaps_from_occupancy(s0, s1, c, distance=distance_to)
+def heatmaps(s0: torch.Tensor, s1: torch.Tensor, c: torch.Tensor, pool: int = 1) -> tuple[torch.Tensor, torch.Tensor]:
+    """Input and target heatmaps, (n, S, S, S) float32, from the partial-surface, surface and centerline grids;
+    ``pool``: grids pooled that many times (:func:`pooled`), their distances counted in the pack's own voxels."""
+    return heatmaps_from_occupancy(s0, s1, c, distance=lambda occ: pool * distance_to(occ) if pool > 1
+                                   else distance_to(occ))
+
+
+def pooled(occupied: torch.Tensor, pool: int) -> torch.Tensor:
+    """(n, S / pool, S / pool, S / pool) occupancy of (n, S, S, S) ones: a coarse voxel is occupied where any of its
+    ``pool^3`` fine voxels is (the screening set-up of decision record 0326)."""
+    if pool == 1:
+        return occupied
+    n, s = occupied.shape[0], occupied.shape[-1] // pool
+    return occupied.reshape(n, s, pool, s, pool, s, pool).any(dim=6).any(dim=4).any(dim=2)
 
 
 def flips(seed: int, epoch: int, index: int) -> tuple[int, ...]:
@@ -243,7 +254,7 @@ class PackSplit:
         Samples of each pack, in the order given.
     """
 
-    def __init__(self, pack_dir, split: str, device, cache: bool | None = None):
+    def __init__(self, pack_dir, split: str, device, cache: bool | None = None, pool: int = 1):
         dirs = [pack_dir] if isinstance(pack_dir, (str, os.PathLike)) else list(pack_dir)
         read = [read_pack(d, split) if is_pack(d) else read_shard_bits(d, split) for d in dirs]
         self.info = read[0][0]
@@ -256,16 +267,23 @@ class PackSplit:
                              "context pack; an in-context model trains on context packs only")
         self.grid_names = GRIDS + ((SLAB,) if all(with_slab) else ())
         self.in_channels = 2 if all(with_slab) else 1
-        self.size = int(self.info["grid_options"]["size"])
+        self.pool, self.stored = int(pool), int(self.info["grid_options"]["size"])
+        if self.pool < 1 or self.stored % self.pool:
+            raise InputError(f"pool {pool}: the pack's grid of {self.stored} voxels must split into whole blocks")
+        self.size = self.stored // self.pool
+        if self.pool > 1 and self.in_channels > 1:
+            raise InputError("pool: the screening set-up pools segment packs; an in-context model trains on the full "
+                             "grid")
         self.sizes = [len(bits[GRIDS[0]]) for _, bits in read]
         self.device = torch.device(device)
         self.bits = torch.from_numpy(np.concatenate([np.stack([bits[g] for g in self.grid_names], axis=1)
                                                      for _, bits in read])).to(self.device)
         self._shifts = torch.arange(7, -1, -1, dtype=torch.uint8, device=self.device)
         self._cache = None
-        if cache is None:
+        if cache is None:               # on a GPU where they fit, and always for pooled (screening) grids
             need = len(self.bits) * 2 * 4 * self.size ** 3
-            cache = self.device.type == "cuda" and need < 0.5 * torch.cuda.mem_get_info(self.device)[0]
+            cache = (self.device.type == "cuda" and need < 0.5 * torch.cuda.mem_get_info(self.device)[0]) or (
+                self.pool > 1 and need < 2 ** 31)
         if cache:
             parts = [self._make(np.arange(a, min(a + 64, len(self)))) for a in range(0, len(self), 64)]
             self._cache = (torch.cat([p[0] for p in parts]), torch.cat([p[1] for p in parts]))
@@ -277,12 +295,13 @@ class PackSplit:
         """(n, G, S, S, S) bool occupancies (``s0``, ``s1``, ``c``, and ``slab`` in a context pack) of samples
         ``indices``, on the device."""
         rows = self.bits[torch.as_tensor(np.asarray(indices, dtype=np.int64), device=self.device)]
-        return ((rows.unsqueeze(-1) >> self._shifts) & 1).bool().reshape(len(rows), len(self.grid_names),
-                                                                          *(self.size,) * 3)
+        grids = ((rows.unsqueeze(-1) >> self._shifts) & 1).bool().reshape(len(rows) * len(self.grid_names),
+                                                                           *(self.stored,) * 3)
+        return pooled(grids, self.pool).reshape(len(rows), len(self.grid_names), *(self.size,) * 3)
 
     def _make(self, indices) -> tuple[torch.Tensor, torch.Tensor]:
         grids = self.grids(indices)
-        h_in, h_t = heatmaps(grids[:, 0], grids[:, 1], grids[:, 2])
+        h_in, h_t = heatmaps(grids[:, 0], grids[:, 1], grids[:, 2], self.pool)
         x = h_in.unsqueeze(1)
         if self.in_channels == 2:  # the in-context model's second channel: the segment's slab (colonbench.slab)
             x = torch.cat([x, grids[:, 3:4].float()], dim=1)
@@ -306,7 +325,7 @@ class PackSplit:
             s0 = self.grids([indices[k] for k in todo])[:, 0]
             cut = torch.stack([erase_patches(s0[j], erase[k]) for j, k in enumerate(todo)])
             x = x.clone()
-            x[todo, :1] = input_heatmap(distance_to(cut)).unsqueeze(1)
+            x[todo, :1] = input_heatmap(self.pool * distance_to(cut)).unsqueeze(1)
         return x, y
 
 

@@ -95,6 +95,7 @@ class TrainConfig:
     repeat: tuple = ()
     precision: str = "fp32"
     hole_weight: float = 0.0
+    pool: int = 1
 
     def check(self):
         if self.network not in NETWORKS:
@@ -112,6 +113,8 @@ class TrainConfig:
             raise InputError("lr must be positive")
         if not self.hole_weight >= 0:
             raise InputError("hole_weight must be >= 0")
+        if self.pool not in (1, 2, 4):
+            raise InputError(f"pool must be 1, 2 or 4 (the pack's grid side divided by it), not {self.pool}")
         if self.seed < 0 or self.workers < 0:
             raise InputError("seed and workers must be >= 0")
         if self.precision not in PRECISIONS:
@@ -287,12 +290,15 @@ def train(data_dir, out_dir, config: TrainConfig | None = None, device: str = "a
                              "augmentations), "
                              "or on the dataset's shards")
         from colonbench.completion.packdata import PackSplit
-        train_ds, val_ds = PackSplit(data_dirs, "train", dev), PackSplit(data_dirs, "validation", dev)
+        train_ds, val_ds = (PackSplit(data_dirs, s, dev, pool=cfg.pool) for s in ("train", "validation"))
         grid_options = train_ds.info["grid_options"]
         sizes = train_ds.sizes
     else:
         from colonbench.shards.reader import ShardDataset, dataset_files
         aug = AugmentConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in cfg.augment.items()})
+        if cfg.pool > 1:
+            raise InputError(f"--pool pools the occupancy grids of a pack (or of format-2 shards held in memory): "
+                             f"make a pack of {data_dir} first (colonbench pack) and train on it")
         if cfg.erase > 0:
             raise InputError(("--erase takes patches out of the partial-surface occupancies held in memory, and "
                               f"the grids of {lock['samples']} samples take more than half of it"

@@ -3,7 +3,7 @@
 Usage::
 
     python scripts/bench_train.py PACK [--device cuda] [--network small] [--batch-sizes 8,32,64] [--steps 10] \
-        [--erase 0.5] [--precision fp32,bf16]
+        [--erase 0.5] [--precision fp32,bf16] [--pool 1,2]
 
 Uses the pack's validation split (its samples are only read). On a CUDA
 device it first checks that the min-plus distance transform used there
@@ -11,7 +11,9 @@ equals the ``edt`` package's on one batch. ``--erase P`` times the batches
 as ``colonbench train --erase P`` makes them (patches erased from a share of
 the partial surfaces, their input heatmaps made again). ``--precision`` times
 the training step in each arithmetic ``colonbench train --precision`` offers.
-Peak memory is the GPU's, or on the CPU the process's resident peak so far.
+``--pool`` times the full grid (1) and the screening set-up (2: ``colonbench
+train --pool 2``, the grids pooled to 32^3 and their heatmaps made once,
+decision record 0326), both by default. Peak memory is the GPU's, or on the CPU the process's resident peak so far.
 """
 
 from __future__ import annotations
@@ -43,12 +45,20 @@ def main():
     ap.add_argument("--split", default="validation")
     ap.add_argument("--erase", type=float, default=0.0, help="share of samples with erased patches (as in training)")
     ap.add_argument("--precision", default="fp32", help=f"comma-separated, of {', '.join(PRECISIONS)} (default fp32)")
+    ap.add_argument("--pool", default="1,2", help="comma-separated grid poolings: 1 full, 2 screening (default 1,2)")
     args = ap.parse_args()
+    for pool in (int(p) for p in args.pool.split(",")):
+        bench(args, pool)
+
+
+def bench(args, pool: int) -> None:
+    """Time heatmaps and training steps of one pooling of the pack's grids."""
     dev = resolve_device(args.device)
     t = time.perf_counter()
-    split = packdata.PackSplit(args.pack, args.split, dev, cache=False)
-    print(f"{len(split)} samples of {args.pack}:{args.split} on {dev} "
-          f"({torch.cuda.get_device_name(dev) if dev.type == 'cuda' else 'CPU'}), loaded in "
+    split = packdata.PackSplit(args.pack, args.split, dev, cache=pool > 1, pool=pool)
+    print(f"\n{len(split)} samples of {args.pack}:{args.split} on {dev} "
+          f"({torch.cuda.get_device_name(dev) if dev.type == 'cuda' else 'CPU'}), grid {split.size}^3 "
+          f"({'full' if pool == 1 else f'screening: pooled {pool} times, heatmaps made once'}), loaded in "
           f"{time.perf_counter() - t:.1f} s")
     if dev.type == "cuda":
         occ = split.grids(range(min(8, len(split)))).reshape(-1, *(split.size,) * 3)

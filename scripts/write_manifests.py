@@ -190,6 +190,29 @@ dump("validation-real", "The real validation and calibration colons gca00020 (CT
      {"segments": {"lengths_mm": [40.0, 50.0, 55.0, 60.0, 70.0], "end_margin_mm": 10.0}}, axes="tube",
      mesh_names=["gca00020", "gca00070"])
 
+# ------------------------------------------------------------------ screening set-up (issue 71, decision 0326)
+#: Small training sets for screening recipes at 32^3 (colonbench train --pool 2), beside train-wide.yaml (the base):
+#: paper-like colons (the recipe of the 0.1 model's data), and two changes aimed at the colons the network misses.
+dump("screen-paper", "Screening: the paper's generator alone (the recipe of the 0.1 model's data), sized as "
+     "train-wide.yaml: 24 of paper.yaml's train colons, 6 segments per length, 2 hole draws; validated on 8 of its "
+     "validation colons (not calibration-paper.yaml's).", 20210901,
+     {"train": split(0, 24, 6, 2, NOISY), "validation": split(340, 8, 4, 1, NOISY)}, axes="tube")
+HAUSTRA = {**WIDE, "colon": {**WIDE["colon"], "radius_caecum_mm": [35.0, 50.0], "radius_transverse_mm": [30.0, 45.0],
+                             "radius_sigmoid_mm": [20.0, 32.0], "radius_rectum_mm": [28.0, 40.0],
+                             "fold_spacing_mm": [15.0, 40.0], "fold_depth": [0.35, 0.6], "fold_free_share": 0.0,
+                             "taenia_depth": [0.1, 0.25], "taenia_depth_transverse": [0.2, 0.35]}}
+dump("screen-haustra", "Screening candidate: wide lumens (radii 20-50 mm) with deep haustral pockets between the "
+     "taeniae (folds 0.35-0.6 of the radius deep, taeniae 0.1-0.35), the widened generator otherwise: 12 colons, 6 segments per "
+     "length, 2 hole draws, trained beside train-wide.yaml; validated on 4 others.", 20261201,
+     {"train": split(0, 12, 6, 2, WIDE_NOISE, WIDE_HOLES), "validation": split(100, 4, 2, 1, WIDE_NOISE, WIDE_HOLES)},
+     HAUSTRA, axes="tube")
+LOWCOV = {**WIDE, "camera": {"poses": [2, 6]}, "spheres": {"spheres": [3, 8], "radius_mm": [8.0, 22.0]}}
+dump("screen-lowcov", "Screening candidate: low coverage, where the estimate's bias is largest (camera holes of 2-6 "
+     "poses, 3-8 sphere holes of 8-22 mm), the widened generator otherwise: 12 colons, 6 segments per length, 2 hole "
+     "draws, trained beside train-wide.yaml; validated on 4 others.", 20261202,
+     {"train": split(0, 12, 6, 2, WIDE_NOISE, WIDE_HOLES), "validation": split(100, 4, 2, 1, WIDE_NOISE, WIDE_HOLES)},
+     LOWCOV, axes="tube")
+
 # ------------------------------------------------------------------ whole-colon benchmark (issue 12)
 def whole_colons(first, count, permutations, meshes):
     """A split of whole-colon reconstructions (task: colon): no segments, camera and sphere holes half and half."""

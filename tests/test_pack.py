@@ -345,3 +345,49 @@ def test_training_on_a_pack_needs_no_geometry_stack(smoke_pack, tmp_path):
     assert r.returncode == 0, r.stderr[-2000:]
     assert "1 epochs" in r.stdout and (run / "best.safetensors").exists()
     assert load_model(run / "best.safetensors")[2]["train_config"]["transposes"] == 0.3
+
+
+def test_the_screening_set_up_pools_the_grids_and_runs_inside_the_full_grid(smoke_pack, tmp_path):
+    """``--pool 2`` (decision record 0326): a coarse voxel is occupied where any of its 8 fine ones is, the heatmaps
+    count distances in the pack's own voxels, the model trained on them records its pooling, and at inference it
+    sees the cloud's pooled input and gives a prediction on the full grid."""
+    from colonbench.completion.method import CompletionMethod
+    from colonbench.completion.screening import pooled_input
+    from colonbench.grid import fit_grid
+    from colonbench.heatmaps import input_heatmap, voxelize_points
+    from colonbench.shards.reader import Shard
+
+    occ = torch.zeros(1, 8, 8, 8, dtype=torch.bool)
+    occ[0, 3, 4, 5] = True                                 # one fine voxel: its coarse block (1, 2, 2)
+    coarse = packdata.pooled(occ, 2)
+    assert coarse.shape == (1, 4, 4, 4) and coarse.sum() == 1 and bool(coarse[0, 1, 2, 2])
+    data, _, out, _ = smoke_pack
+    full, screen = packdata.PackSplit(out, "validation", "cpu"), packdata.PackSplit(out, "validation", "cpu", pool=2)
+    assert screen.size == 32 and screen._cache is not None  # screening heatmaps are made once
+    g_full, g_screen = full.grids([0]), screen.grids([0])
+    assert torch.equal(packdata.pooled(g_full[0], 2), g_screen[0])
+    x, _ = screen.batch([0])
+    d = torch.from_numpy(distance_np(g_screen[0, 0].numpy())).float()
+    assert torch.allclose(x[0, 0], input_heatmap(2 * d), atol=1e-6)    # distances in the pack's voxels
+    with pytest.raises(InputError, match="whole blocks"):
+        packdata.PackSplit(out, "validation", "cpu", pool=3)
+
+    run = tmp_path / "screen"
+    train(out, run, TrainConfig(epochs=1, batch_size=2, workers=0, augment_prob=0.0, pool=2), device="cpu",
+          progress=False)
+    _, cfg, meta = load_model(run / "best.safetensors")
+    assert meta["train_config"]["pool"] == 2 and meta["grid_options"]["size"] == 64
+    with pytest.raises(InputError, match="pool must be"):
+        train(out, tmp_path / "bad", TrainConfig(epochs=1, workers=0, augment_prob=0.0, pool=3), device="cpu",
+              progress=False)
+    with Shard(next((data / "test").glob("*.h5"))) as shard:
+        points = shard.geometry(0)["partial_points"]
+    method = CompletionMethod(run / "best.safetensors")
+    p = method.predictor(points)
+    assert p.heatmap.shape == (64, 64, 64) and p.grid.size == 64       # on the full grid, the steps as ever
+    grid = fit_grid(points, **meta["grid_options"])
+    small = pooled_input(grid, points, 2)
+    fine, _ = voxelize_points(grid, points)
+    assert small.shape == (32, 32, 32) and np.array_equal(small == 0, packdata.pooled(
+        torch.from_numpy(fine)[None], 2)[0].numpy())
+    assert np.isfinite(method.estimate(points).coverage)

@@ -22,7 +22,7 @@ def cmd_train(args):
     cfg = TrainConfig(network=args.network, batch_size=args.batch_size, lr=args.lr, epochs=args.epochs,
                       augment_prob=args.augment_prob, seed=args.seed, workers=args.workers, flips=args.flips,
                       transposes=args.transposes, erase=args.erase, repeat=tuple(args.repeat or ()),
-                      precision=args.precision, hole_weight=args.hole_weight,
+                      precision=args.precision, hole_weight=args.hole_weight, pool=args.pool,
                       checkpoint_minutes=args.checkpoint_minutes, max_minutes=args.max_minutes,
                       keep_epochs=args.keep_epochs, init=args.init, init_sha256=model_sha256(args.init))
     command = "colonbench train " + " ".join(sys.argv[2:]) if len(sys.argv) > 2 else ""
@@ -146,6 +146,10 @@ def add_parsers(sub) -> None:
                    help="each voxel's squared error counts 1 + A times where the complete surface lies and the input "
                         "has no partial point within 2 voxels: the missing wall weighs more in the loss (default 0, "
                         "the paper's plain L2)")
+    p.add_argument("--pool", type=int, default=1, metavar="N",
+                   help="screening set-up: train on a pack's grids pooled N times (2: 32^3 from 64^3, their heatmaps "
+                        "made once and kept); the model then runs at that resolution inside the full grid. Several "
+                        "times faster, for ranking recipes, not for shipping (default 1; docs/training.md)")
     p.add_argument("--repeat", type=repeats, default=None, metavar="N,N,...",
                    help="times each dataset's training samples come up per epoch, one whole number per dataset in "
                         "the order given (default 1 each): e.g. 1,8 gives a small real-colon set eight times its "
