@@ -58,8 +58,8 @@ ALL_METHODS = ("completion", "thresholding", "unwrap", "poisson", "constant")
 #: Per-segment columns of ``results/segments.csv``.
 SEGMENT_COLUMNS = ["method", "track", "context_mm", "shard", "colon", "index", "hole_model", "noise_mm", "segment",
                    "piece", "start_mm", "end_mm", "true_start_mm", "true_end_mm", "points", "true_coverage",
-                   "coverage", "coverage_error", "interval_low", "interval_high", "area_mm2", "true_area_mm2",
-                   "end_seen", "end_unobserved", "review", "seconds", "error", "skipped"]
+                   "coverage", "coverage_error", "interval_low", "interval_high", "review", "area_mm2",
+                   "true_area_mm2", "end_seen", "end_unobserved", "seconds", "error", "skipped"]
 #: Per-map columns of ``results/colons.csv``.
 COLON_COLUMNS = ["method", "track", "context_mm", "shard", "colon", "index", "hole_model", "noise_mm",
                  "colon_length_mm", "segments", "estimated", "interruptions", "true_coverage", "coverage",
@@ -146,7 +146,8 @@ def run_colon_unit(data: str, shard_name: str, index: int, sigma: float, noise_s
                                  "interval_high": high, "area_mm2": r["area_mm2"],
                                  "true_area_mm2": score["true_area_mm2"][k], "end_seen": seen,
                                  "end_unobserved": bool(np.isfinite(seen) and seen < END_SEEN),
-                                 "review": len(s.review) if s.coverage_interval is not None else np.nan,
+                                 "review": float(len(s.review)) if s.coverage_interval is not None or s.review
+                                 else np.nan,                  # as Estimate.review_count
                                  "seconds": s.seconds, "error": s.error or "", "skipped": bool(s.skipped)})
             colon_rows.append({**track, **ids, "colon_length_mm": float(shard.attrs["colon_length_mm"]),
                                "segments": len(segs), "estimated": sum(s.coverage is not None for s in segs),

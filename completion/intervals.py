@@ -85,7 +85,8 @@ def features(coverage: float, signals: dict, names) -> np.ndarray:
     value = {"one": 1.0, "estimate": float(coverage), "length": length / 60.0,
              "span_ratio": g("span_mm") / max(length, 1.0), "no_rim": float(rims == 0), "one_rim": float(rims == 1),
              "doubtful": float(g("rims_doubtful") > 0), "gap_share": g("gap_share"), "spread": 10.0 * g("spread"),
-             "radius_ratio": g("radius_mm") / max(length, 1.0), "line_extent": length / g("extent_mm") if g("extent_mm") > 0 else 0.0}
+             "radius_ratio": g("radius_mm") / max(length, 1.0),
+             "line_extent": length / g("extent_mm") if g("extent_mm") > 0 else 0.0}
     out = np.array([value[n] for n in names], float)
     return np.where(np.isfinite(out), out, 0.0)
 
@@ -278,9 +279,23 @@ def _log_fit(x: np.ndarray, magnitude: np.ndarray, weights: np.ndarray | None = 
 
 
 def weighted_quantiles(values, weights, level: float = LEVEL) -> tuple[float, float]:
-    """:func:`conformal_quantiles` of values carrying weights (colons as the unit, decision record 0325): the low and
-    high quantiles of their weighted distribution at the split-conformal ranks of the effective sample size
-    ``(sum w)^2 / sum w^2`` (with equal weights: the unweighted ranks' quantiles)."""
+    """:func:`conformal_quantiles` of values carrying weights (colons as the unit, decision record 0325).
+
+    Parameters
+    ----------
+    values : (n,) float
+        Residuals (fractions) or scaled residuals.
+    weights : (n,) float
+        Each value's weight, >= 0, not all 0 (normalised here).
+    level : float
+
+    Returns
+    -------
+    (float, float)
+        The low and high quantiles of the weighted distribution at the split-conformal ranks of the effective sample
+        size ``(sum w)^2 / sum w^2`` (Kish's; with equal weights the unweighted ranks' quantiles); -1 or 1 where the
+        sample is too small for a tail.
+    """
     v, w = np.asarray(values, float), np.asarray(weights, float)
     order = np.argsort(v, kind="stable")
     v, w = v[order], w[order] / w.sum()
@@ -334,8 +349,11 @@ def _fit_group(residual: np.ndarray, x: np.ndarray | None, names, level: float, 
         return {**out, **shift}
     out["weights_low"], s_low = _log_fit(x, np.maximum(-residual, 0.0), weights)
     out["weights_high"], s_high = _log_fit(x, np.maximum(residual, 0.0), weights)
-    out["low"] = _quantiles(residual / s_low, level, weights, colons)[0]
-    out["high"] = _quantiles(residual / s_high, level, weights, colons)[1]
+    low, _, shift_low = _quantiles(residual / s_low, level, weights, colons)
+    _, high, shift_high = _quantiles(residual / s_high, level, weights, colons)
+    out["low"], out["high"] = low, high
+    if shift_low:                        # each end's shift term, in its own scaled units
+        out.update(shift_low=shift_low["shift_low"], shift_high=shift_high["shift_high"])
     return out
 
 
@@ -358,7 +376,7 @@ def known_length(est, length_mm: float) -> None:
                           "unobserved")
 
 
-def _unit_weights(scheme: str, weights, colons) -> tuple[np.ndarray | None, np.ndarray | None]:
+def _unit_weights(scheme: str, weights, colons, n: int) -> tuple[np.ndarray | None, np.ndarray | None]:
     """The weights and colons a scheme fits with: a ``-colon`` scheme needs weights (the colon as the unit), a
     ``-shift`` one the colons too; any other scheme counts every segment once."""
     if "-colon" not in scheme:
@@ -367,7 +385,13 @@ def _unit_weights(scheme: str, weights, colons) -> tuple[np.ndarray | None, np.n
         raise ValueError(f"interval scheme {scheme!r} weighs colons: give each segment's weight")
     if scheme.endswith("-shift") and colons is None:
         raise ValueError(f"interval scheme {scheme!r} has a colon-level shift term: give each segment's colon")
-    return np.asarray(weights, float), (np.asarray(colons) if scheme.endswith("-shift") else None)
+    w = np.asarray(weights, float)
+    if w.ndim != 1 or len(w) != n or not np.isfinite(w).all() or (w < 0).any() or not w.sum() > 0:
+        raise ValueError(f"the segments' weights must be {n} finite numbers >= 0, not all 0 (got shape {w.shape})")
+    c = np.asarray(colons) if scheme.endswith("-shift") else None
+    if c is not None and c.shape != (n,):
+        raise ValueError(f"the segments' colons must be {n} labels (got shape {c.shape})")
+    return w, c
 
 
 def fit(true, estimated, signals: list, scheme: str, review_width: float, level: float = LEVEL,
@@ -380,7 +404,7 @@ def fit(true, estimated, signals: list, scheme: str, review_width: float, level:
     scaled = _scaled(scheme)
     names = SCALE_FEATURES[scaled] if scaled else ()
     x = np.array([features(c, sig, names) for c, sig in zip(estimated, signals)]) if scaled else None
-    weights, colons = _unit_weights(scheme, weights, colons)
+    weights, colons = _unit_weights(scheme, weights, colons, len(true))
     groups = {}
     for sch in dict.fromkeys(("marginal", scheme.split("+")[0], scheme)):
         keys = np.array([group_key(c, sig, sch) for c, sig in zip(estimated, signals)])
@@ -400,7 +424,7 @@ def fit_known(cal: Intervals, true, estimated, signals: list | None = None, weig
     scaled = _scaled(cal.scheme)
     names = SCALE_FEATURES[scaled] if scaled else ()
     x = np.array([features(c, sig, names) for c, sig in zip(estimated, signals)]) if scaled else None
-    weights, colons = _unit_weights(cal.scheme, weights, colons)
+    weights, colons = _unit_weights(cal.scheme, weights, colons, len(residual))
     cal.known = _fit_group(residual, x, names, cal.level, _two_sided(scaled), weights, colons)
 
 

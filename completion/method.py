@@ -168,7 +168,7 @@ class Prediction:
     heatmap: np.ndarray
     seconds: dict
     _centerline: np.ndarray | None = None
-    _rerun: tuple | None = None              # (network, input tensor): for :attr:`spread`
+    _rerun: tuple | None = None              # (network, input, whether heatmap is its single pass): for spread
     _spread: float | None = None
 
     @property
@@ -176,7 +176,8 @@ class Prediction:
         """The network's disagreement with itself on this cloud (:func:`colonbench.completion.novelty.spread`;
         one more network pass, on first use)."""
         if self._spread is None:
-            self._spread = novelty.spread(*self._rerun, self.heatmap) if self._rerun is not None else 0.0
+            forward, x, single = self._rerun
+            self._spread = novelty.spread(forward, x, self.heatmap if single else None)
         return self._spread
 
     @property
@@ -225,9 +226,10 @@ class Predictor:
         self.net, self.config, self.meta = load_model(path, self.device)
         self._forward: dict = {}     # grid size -> the network made fast for inputs of that size
         self.path = path
-        self.version = f"{path.stem}@{self.meta.get('steps', '?')}" + (f",tta={self.tta}" if self.tta > 1 else "")
-        self.grid_options = self.meta.get("grid_options", {})
         self.pool = screening.pool_of(self.meta)        # a screening model runs on the grid pooled (0326)
+        self.version = f"{path.stem}@{self.meta.get('steps', '?')}" + (f",tta={self.tta}" if self.tta > 1 else "") \
+            + (f",pool={self.pool}" if self.pool > 1 else "")
+        self.grid_options = self.meta.get("grid_options", {})
         self._cache: OrderedDict[bytes, Prediction] = OrderedDict()
 
     @property
@@ -279,7 +281,7 @@ class Predictor:
             pred = averaged(self._forward.get(size, self.net), x, self.tta)
             pred = screening.upsampled(pred, self.pool, grid.size)[0, 0].float().cpu().numpy()
         out = Prediction(grid, h_in, np.clip(pred, 0.0, 1.0), {"network": time.perf_counter() - t},
-                         _rerun=(self._forward.get(size, self.net), x) if self.pool == 1 else None)
+                         _rerun=(self._forward.get(size, self.net), x, self.pool == 1 and self.tta == 1))
         self._cache[key] = out
         while len(self._cache) > self.CACHE:
             self._cache.popitem(last=False)
@@ -381,6 +383,8 @@ class CompletionMethod:
         self.intervals = load_intervals(self.predictor.path, steps_version(shell_level, gaps, end_level, thin_above)
                                         if self.context_predictor is None else "context")
         self.version += f",intervals={self.intervals.source['id']}" if self.intervals is not None else ""
+        self.spread = self.intervals is not None and any("spread" in g.get("features", ()) for g in [
+            *self.intervals.groups.values(), self.intervals.known])   # signals["spread"] (novelty.spread) wanted
         self.meta = self.predictor.meta
 
     def predict(self, points) -> tuple[Grid, np.ndarray, np.ndarray]:
@@ -421,7 +425,9 @@ class CompletionMethod:
         est = from_heatmap(p.heatmap, p.grid, pts, self.name, self.hole_distance, centerline_vox=cl,
                            cut_rims=self.cut_rims, shell_level=self.shell_level, gaps=self.gaps)
         est.seconds = {"check": t1 - t0, **shared, **{k: v for k, v in est.seconds.items() if k != "centerline"}}
-        est.signals.update(spread=round(p.spread, 5), **novelty.shape(pts, est.centerline))
+        est.signals.update(novelty.shape(pts, est.centerline))
+        if self.spread:                  # one more network pass: only where the intervals use it
+            est.signals["spread"] = round(p.spread, 5)
         if length_mm is not None:
             known_length(est, length_mm)
         if self.intervals is not None:

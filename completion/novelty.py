@@ -28,7 +28,7 @@ SAYS = 0.2
 SECOND_VIEW = (2, 1, 0)
 
 
-def spread(forward, x, heatmap: np.ndarray) -> float:
+def spread(forward, x, heatmap: np.ndarray | None = None) -> float:
     """The network's disagreement with itself under :data:`SECOND_VIEW` (fraction of the heatmap's range).
 
     Parameters
@@ -37,8 +37,9 @@ def spread(forward, x, heatmap: np.ndarray) -> float:
         The network, ``(1, C, S, S, S)`` tensors to ``(1, 1, S, S, S)``.
     x : (1, C, S, S, S) torch.Tensor
         Its input.
-    heatmap : (S, S, S) float
-        Its prediction for ``x``, clipped to [0, 1].
+    heatmap : (S, S, S) float, optional
+        Its single prediction for ``x``, clipped to [0, 1], where the caller has it (not an average over
+        symmetries, not interpolated onto another grid); else the network runs on ``x`` once more.
 
     Returns
     -------
@@ -51,6 +52,8 @@ def spread(forward, x, heatmap: np.ndarray) -> float:
 
     with torch.inference_mode():
         y = transform(forward(transform(x, SECOND_VIEW).contiguous()), SECOND_VIEW, inverse=True)
+        if heatmap is None:
+            heatmap = np.clip(forward(x)[0, 0].float().cpu().numpy(), 0.0, 1.0)
     other = np.clip(y[0, 0].float().cpu().numpy(), 0.0, 1.0)
     says = (np.abs(heatmap - 0.5) > SAYS) | (np.abs(other - 0.5) > SAYS)
     return float(np.abs(heatmap - other)[says].mean()) if says.any() else 0.0

@@ -323,7 +323,8 @@ class PackSplit:
         todo = [k for k, rng in enumerate(erase or []) if rng is not None]
         if todo:
             s0 = self.grids([indices[k] for k in todo])[:, 0]
-            cut = torch.stack([erase_patches(s0[j], erase[k]) for j, k in enumerate(todo)])
+            radius = tuple(r / self.pool for r in ERASE_RADIUS)     # the same balls in mm on a pooled grid
+            cut = torch.stack([erase_patches(s0[j], erase[k], radius=radius) for j, k in enumerate(todo)])
             x = x.clone()
             x[todo, :1] = input_heatmap(self.pool * distance_to(cut)).unsqueeze(1)
         return x, y

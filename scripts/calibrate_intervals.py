@@ -4,15 +4,16 @@
 
 Generates the calibration's datasets where missing (``<data>/<manifest>``, the manifests' validation splits):
 data_manifests/calibration.yaml's widened colons (``V_wide``: no manifest trains on them; its segments of the real
-training colons are left out) and validation-real.yaml, the real validation colon gca00020 (``V_real``), with
-calibration-real.yaml's real training colons, which are reported, never calibrated on (the network saw them).
-Estimates every segment with the completion method (its intervals off) at 0 and 0.5 mm noise, as the suites do,
-with the signals its intervals are scaled by (cached per model and steps in ``<data>/<manifest>``), then chooses
-the scheme by decision record 0156's rule (0158's candidates among them): every scheme is measured
-leave-one-colon-out (a colon's estimates get the intervals of a calibration fitted on all the other colons); of those whose truth-inside share lies within 85-95 % in
-each of ``V_real`` and ``V_wide`` at each noise level, the one with the smallest mean width on ``V_real`` (else the
-one whose worst cell lies closest to the level). The review width comes from the same held-out intervals. The
-chosen scheme is fitted on all of ``V_wide`` and ``V_real`` and written beside the model
+training colons are left out), calibration-paper.yaml's colons of the paper's generator (``V_paper``) and
+validation-real.yaml, the real validation colons gca00020 and gca00070 (``V_real``), with calibration-real.yaml's real
+training colons, which are reported, never calibrated on (the network saw them). Estimates every segment with the
+completion method (its intervals off, every signal on) at 0 and 0.5 mm noise, as the suites do (cached per model
+and steps in ``<data>/<manifest>``), then chooses the scheme by decision record 0325's rule: every scheme is measured
+leave-one-colon-out (a colon's estimates get the intervals of a calibration fitted on all the other colons); of
+those whose truth-inside share lies within 85-95 % in each cell (``V_wide``, ``V_paper`` and each real colon on its
+own, at each noise level), the one with the smallest mean width over the real colons (else the one whose worst cell
+lies closest to the level). The review widths (of the segments' intervals and of the known extent's) come from the
+same held-out intervals. The chosen scheme is fitted on all three sets and written beside the model
 (``<model>.intervals.json``), with the known-length interval fitted on the same segments with their true lengths.
 Prints every scheme's held-out table.
 """
@@ -282,7 +283,7 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=2, help="processes generating the data")
     args = ap.parse_args()
     method = CompletionMethod(args.model)
-    method.intervals = None
+    method.intervals, method.spread = None, True         # every candidate's signals, the network's spread too
     path = model_path(args.model)
     df = table(calibration_data(Path(args.data), args.workers), method, path)
     source = {"model": path.name, "model_sha256": sha256_file(path), "steps": steps_version(),

@@ -7,13 +7,14 @@ Maps ``<data>/colon-val`` and ``<data>/colon-val-real`` (the two manifests' vali
 missing) with completion as the whole-colon benchmark maps them (``colonbench evaluate --task colon --split
 validation``: both tracks, 0 and 0.5 mm noise; each run kept in its dataset folder per model, manifest, steps and
 calibration, and read again by the next call), keeps colon-val's procedural colons (``M_proc``: its maps of the real
-training colons are left out) and the real validation colons' maps (``M_real``: gca00020, gca00070), and measures three candidate intervals for a map's
-segments leave-one-colon-out: ``known``, the known-extent interval the map's segments get from the model's
-calibration file, and split-conformal quantiles of ``true - map coverage`` per ``track`` and per ``track+band`` (the
-map's coverage below 0.8). Of those within 85-95 % in each cell (M_proc and each real colon, each track, noise levels
-pooled), the narrowest on ``M_real`` (else the one whose worst cell lies closest to 90 %). Prints how the map's own
-``review`` flags did per cell: the share of the segments off by more than 15 points it flags, and of its flags right. With ``--write``, a chosen map candidate is
-fitted on all the maps and written into the model's calibration file (``map``), which ``colonbench map`` then uses.
+training colons are left out) and the real validation colons' maps (``M_real``: gca00020, gca00070), and measures
+three candidate intervals for a map's segments leave-one-colon-out: ``known``, the known-extent interval the map's
+segments get from the model's calibration file, and split-conformal quantiles of ``true - map coverage`` per
+``track`` and per ``track+band`` (the map's coverage below 0.8). Of those within 85-95 % in each cell (M_proc and
+each real colon, each track, noise levels pooled), the narrowest on ``M_real`` (else the one whose worst cell lies
+closest to 90 %). Prints how the map's own ``review`` flags did per cell: the share of the segments off by more
+than 15 points it flags, and of its flags right. With ``--write``, a chosen map candidate is fitted on all the maps
+and written into the model's calibration file (``map``), which ``colonbench map`` then uses.
 """
 
 from __future__ import annotations
@@ -106,11 +107,11 @@ def flags(seg: pd.DataFrame) -> pd.DataFrame:
     """How the map's own ``review`` did per cell (a real colon, or M_proc) and track: segments, those off by more
     than 15 points, the share of them flagged (recall, %) and the share of flags on them (precision, %)."""
     seg = seg.assign(off=(seg["estimate"] - seg["true"]).abs() > 0.15, flag=seg["review"].fillna(0) > 0)
-    out = seg.groupby(["cell", "track_kind"]).apply(lambda g: pd.Series({
-        "n": len(g), "off": int(g["off"].sum()), "flagged": int(g["flag"].sum()),
-        "recall": round(100 * (g["off"] & g["flag"]).sum() / max(g["off"].sum(), 1), 1),
-        "precision": round(100 * (g["off"] & g["flag"]).sum() / max(g["flag"].sum(), 1), 1)}),
-        include_groups=False)
+    seg = seg.assign(caught=seg["off"] & seg["flag"])
+    out = seg.groupby(["cell", "track_kind"]).agg(n=("off", "size"), off=("off", "sum"), flagged=("flag", "sum"),
+                                                  caught=("caught", "sum"))
+    out["recall"] = (100 * out["caught"] / out["off"].clip(lower=1)).round(1)
+    out["precision"] = (100 * out["caught"] / out["flagged"].clip(lower=1)).round(1)
     return out
 
 

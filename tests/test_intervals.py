@@ -236,8 +236,8 @@ def test_the_colon_is_the_unit_of_a_colon_scheme():
     +0.3, each weighing half, put the upper quartile's rank in the small colon; unweighted, the 5 are a tail."""
     values = np.r_[np.zeros(200), np.full(5, 0.3)]
     weights = np.r_[np.full(200, 0.5 / 200), np.full(5, 0.5 / 5)]
-    # effective size 1 / (200 (1/400)^2 + 5 (1/10)^2) = 19.05; ranks floor(20.05 * 0.25) = 5 and ceil(20.05 * 0.75)
-    # = 16 of 19.05: the cumulated weight reaches 0.262 among the zeros and 0.840 at the small colon's 4th segment
+    # effective size 1 / (200 (1/400)^2 + 5 (1/10)^2) = 19.51; ranks floor(20.51 * 0.25) = 5 and ceil(20.51 * 0.75)
+    # = 16 of 19.51: the cumulated weight reaches 0.256 among the zeros and 0.820 at the small colon's 4th segment
     assert intervals.weighted_quantiles(values, weights, 0.5) == (0.0, 0.3)
     assert intervals.conformal_quantiles(values, 0.5) == (0.0, 0.0)
     # equal weights give the split-conformal ranks
@@ -382,3 +382,44 @@ def test_a_calibration_with_a_map_part_gives_each_map_track_its_own_interval():
     assert cal.interval(0.5, {**known, "map_track": "context"}) == pytest.approx((0.48, 0.53))   # its track's
     again = intervals.Intervals(**json.loads(json.dumps(cal.to_json())))
     assert again.interval(0.9, {**known, "map_track": "context"}) == pytest.approx((0.85, 0.9))
+
+
+def test_the_novelty_signals_measure_the_lumen_and_the_cloud():
+    """``novelty.shape`` on a tube of known radius and length: the median distance to its axis is the radius, the
+    extent along the principal axis its length; ``spread`` is 0 for a network that agrees with itself."""
+    torch = pytest.importorskip("torch")
+    from colonbench.completion import novelty
+
+    a, z = np.meshgrid(np.linspace(0, 2 * np.pi, 72, endpoint=False), np.linspace(0, 80, 81))   # a regular tube
+    points = np.c_[20 * np.cos(a.ravel()), 20 * np.sin(a.ravel()), z.ravel()]
+    line = np.c_[np.zeros(161), np.zeros(161), np.linspace(0, 80, 161)]
+    shape = novelty.shape(points, line)
+    assert shape["radius_mm"] == pytest.approx(20.0, abs=0.01) and shape["extent_mm"] == pytest.approx(80.0, abs=0.01)
+    x = torch.rand(1, 1, 8, 8, 8)
+    same = novelty.spread(lambda t: torch.full_like(t, 0.9), x)          # a constant field: the same in any view
+    assert same == 0.0
+    flipped = novelty.spread(lambda t: t, x, x[0, 0].numpy())          # the identity: the view moved, compared back
+    assert flipped == 0.0
+    other = novelty.spread(lambda t: 1 - t, x, x[0, 0].numpy())        # a second pass that disagrees everywhere
+    assert other > 0
+
+
+def test_each_colon_weighs_the_same_and_each_set_a_third():
+    """calibrate_intervals.unit_weights: within a set every colon weighs the same, every set the same, whatever their
+    sizes; with_units names each real colon's cell."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(
+        "calibrate_intervals", Path(__file__).resolve().parents[1] / "scripts" / "calibrate_intervals.py")
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    df = script.with_units(pd.DataFrame({"set": ["V_wide"] * 6 + ["V_paper"] * 2 + ["V_real"] * 4,
+                                         "colon_id": [1, 1, 1, 1, 2, 2, 3, 4, 900020, 900020, 900020, 900070]}))
+    w = script.unit_weights(df)
+    assert w.sum() == pytest.approx(1.0)
+    per_colon = pd.Series(w).groupby(df["colon"]).sum()
+    assert per_colon["V_wide:1"] == pytest.approx(1 / 6) and per_colon["V_wide:2"] == pytest.approx(1 / 6)
+    assert per_colon["V_real:900020"] == pytest.approx(1 / 6) and per_colon["V_paper:3"] == pytest.approx(1 / 6)
+    assert set(df["cell"]) == {"V_wide", "V_paper", "V_real gca00020", "V_real gca00070"}
+    with pytest.raises(ValueError, match="finite numbers"):
+        intervals.fit([0.5] * 40, [0.5] * 40, [{}] * 40, "scaled-colon", 0.3, weights=[0.0] * 40)

@@ -391,3 +391,17 @@ def test_the_screening_set_up_pools_the_grids_and_runs_inside_the_full_grid(smok
     assert small.shape == (32, 32, 32) and np.array_equal(small == 0, packdata.pooled(
         torch.from_numpy(fine)[None], 2)[0].numpy())
     assert np.isfinite(method.estimate(points).coverage)
+
+
+def test_a_pooled_prediction_is_interpolated_onto_the_full_grids_voxel_centres():
+    """screening.upsampled: trilinear with the coarse voxel k's centre at fine index 2k + 0.5, so a linear ramp over
+    the coarse voxels comes back as the same ramp at the fine voxels' centres (inside, away from the clamped faces)."""
+    from colonbench.completion.screening import upsampled
+
+    k = torch.arange(8, dtype=torch.float32)
+    coarse = k.view(1, 1, 8, 1, 1).expand(1, 1, 8, 8, 8).contiguous()          # value k at coarse centre 2k + 0.5
+    fine = upsampled(coarse, 2, 16)[0, 0, :, 4, 4]
+    i = torch.arange(16, dtype=torch.float32)
+    expected = (i - 0.5) / 2                                                     # fine index i lies at coarse (i - 0.5) / 2
+    assert torch.allclose(fine[1:-1], expected[1:-1], atol=1e-6)
+    assert upsampled(coarse, 1, 8) is coarse
