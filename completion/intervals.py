@@ -167,9 +167,10 @@ class Intervals:
         ``{"low", "high", "n"}`` of segments whose extent is known (``signals["extent"] == "known"``: a length
         given to :func:`known_length`, or planes the caller clips at, as ``colonbench map`` does).
     review_known : float
-        The review width of :attr:`known`'s intervals (fraction; 0: :attr:`review_width`), chosen as
-        :attr:`review_width` is on intervals of known extent (decision record 0325): a map's segment is flagged
-        when its interval is wider than its calibration's.
+        The review width of the intervals of segments whose planes the caller gives (a map's segments; fraction;
+        0: :attr:`review_width`), chosen as :attr:`review_width` is on intervals of known extent (decision record
+        0325): a map's segment is flagged when its interval is wider than its calibration's. A length given
+        (:func:`known_length`) keeps :attr:`review_width`.
     """
 
     scheme: str
@@ -220,7 +221,8 @@ class Intervals:
                 f"the intervals were calibrated on ({longest:.0f} mm): longer than one segment, outside what the "
                 "method and its interval were tested on (cut the reconstruction into segments: colonbench map does)"
                 if longest and line > LONG_SHARE * longest else "")
-        known = est.signals.get("extent") == "known" and self.review_known > 0
+        # planes the caller clips at (a map's segment), not a length given (known_length sets length_share)
+        known = est.signals.get("extent") == "known" and "length_share" not in est.signals and self.review_known > 0
         review_width = self.review_known if known else self.review_width
         if width <= review_width:           # sure enough: the notes (the rims', a known length's) are reasons only
             est.review.clear()              # where it is not

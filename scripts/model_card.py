@@ -88,7 +88,9 @@ def intervals_rows(model: Path) -> list[str]:
            f"{' and '.join(f'`{name}` (sha256 `{sha[:16]}...`)' for name, sha in manifests.items())}, "
            f"{src.get('estimates')} estimates at noise {', '.join(f'{x:g}' for x in src.get('noise_mm', []))} mm"
            + (f" (chosen {held}; left out: {src.get('not_calibrated_on')})" if held else "")
-           + f"; an interval wider than {100 * cal.review_width:.0f} points flags its estimate for review.", "",
+           + f"; an interval wider than {100 * cal.review_width:.0f} points flags its estimate for review"
+           + (f" ({100 * cal.review_known:.0f} points for a map's segment)" if cal.review_known
+              else "") + ".", "",
            "| group | calibration estimates | interval around the estimate | scale weights |", "|---|---:|---|---|"]
     rows = [(k, g) for k, g in cal.groups.items() if k != "all" or scaled] + \
         ([("extent known", cal.known)] if cal.known else [])
