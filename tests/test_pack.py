@@ -383,6 +383,7 @@ def test_the_screening_set_up_pools_the_grids_and_runs_inside_the_full_grid(smok
     with Shard(next((data / "test").glob("*.h5"))) as shard:
         points = shard.geometry(0)["partial_points"]
     method = CompletionMethod(run / "best.safetensors")
+    assert ",pool=2" in method.version                  # a screening model's rows never pass for a full model's
     p = method.predictor(points)
     assert p.heatmap.shape == (64, 64, 64) and p.grid.size == 64       # on the full grid, the steps as ever
     grid = fit_grid(points, **meta["grid_options"])
