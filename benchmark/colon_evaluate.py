@@ -47,6 +47,7 @@ from colonbench.benchmark.parallel import run_units
 from colonbench.benchmark.runfolder import RUN_FILE, begin_run, check_run_folder, read_rows, write_csv, write_json
 from colonbench.completion.symmetry import check_tta
 from colonbench.errors import ColonbenchError, InputError
+from colonbench.estimate import review_count
 from colonbench.folderlock import folder_lock
 from colonbench.mapping import CONTEXT_MM, SEGMENT_MM
 
@@ -146,8 +147,7 @@ def run_colon_unit(data: str, shard_name: str, index: int, sigma: float, noise_s
                                  "interval_high": high, "area_mm2": r["area_mm2"],
                                  "true_area_mm2": score["true_area_mm2"][k], "end_seen": seen,
                                  "end_unobserved": bool(np.isfinite(seen) and seen < END_SEEN),
-                                 "review": float(len(s.review)) if s.coverage_interval is not None or s.review
-                                 else np.nan,                  # as Estimate.review_count
+                                 "review": review_count(s.coverage_interval, s.review),
                                  "seconds": s.seconds, "error": s.error or "", "skipped": bool(s.skipped)})
             colon_rows.append({**track, **ids, "colon_length_mm": float(shard.attrs["colon_length_mm"]),
                                "segments": len(segs), "estimated": sum(s.coverage is not None for s in segs),

@@ -11,6 +11,12 @@ import numpy as np
 from colonbench.errors import InputError
 
 
+def review_count(interval, review) -> float:
+    """How many reasons to review an answer gives (``review``, a list), where it says how sure it is (an
+    ``interval``, or a reason); NaN for one that says nothing of it: the benchmark's ``review`` column."""
+    return float(len(review)) if interval is not None or review else float("nan")
+
+
 @dataclass
 class Estimate:
     """What a coverage-estimation method returns for one partial segment (mm, the input's frame).
@@ -58,9 +64,8 @@ class Estimate:
 
     @property
     def review_count(self) -> float:
-        """How many reasons to review the estimate gives, where it says how sure it is (an interval or a reason);
-        NaN for an estimate that says nothing of it."""
-        return float(len(self.review)) if self.coverage_interval is not None or self.review else float("nan")
+        """How many reasons to review the estimate gives (:func:`review_count`)."""
+        return review_count(self.coverage_interval, self.review)
 
     def to_json(self) -> dict:
         """The ``estimate`` command's JSON: coverage (with its interval where the method gives one, and why to review

@@ -52,19 +52,12 @@ LONG_SHARE = 1.5
 SUFFIX = ".intervals.json"
 #: The features of an estimate its interval is scaled by, per scaled scheme (:func:`features`; decision records 0156
 #: and 0158; 0156's measurement also tried features the method does not compute, kept in its session script).
+_SIGNALS = ("one", "estimate", "length", "span_ratio", "no_rim", "one_rim", "doubtful")
+_NOVEL = _SIGNALS + ("spread", "radius_ratio", "line_extent")     # decision record 0325
 SCALE_FEATURES = {
-    "scaled": ("one", "estimate", "length", "span_ratio", "no_rim", "one_rim", "doubtful"),
-    "scaled2": ("one", "estimate", "length", "span_ratio", "no_rim", "one_rim", "doubtful"),
-    "scaled2-gaps": ("one", "estimate", "length", "span_ratio", "no_rim", "one_rim", "doubtful", "gap_share"),
-    "scaled-colon": ("one", "estimate", "length", "span_ratio", "no_rim", "one_rim", "doubtful"),
-    "scaled-colon-novel": ("one", "estimate", "length", "span_ratio", "no_rim", "one_rim", "doubtful", "spread",
-                           "radius_ratio", "line_extent"),
-    "scaled-colon-novel-shift": ("one", "estimate", "length", "span_ratio", "no_rim", "one_rim", "doubtful", "spread",
-                                 "radius_ratio", "line_extent"),
-    "scaled2-colon-novel": ("one", "estimate", "length", "span_ratio", "no_rim", "one_rim", "doubtful", "spread",
-                            "radius_ratio", "line_extent"),
-    "scaled2-colon-novel-shift": ("one", "estimate", "length", "span_ratio", "no_rim", "one_rim", "doubtful",
-                                  "spread", "radius_ratio", "line_extent"),
+    "scaled": _SIGNALS, "scaled2": _SIGNALS, "scaled2-gaps": _SIGNALS + ("gap_share",), "scaled-colon": _SIGNALS,
+    "scaled-colon-novel": _NOVEL, "scaled-colon-novel-shift": _NOVEL, "scaled2-colon-novel": _NOVEL,
+    "scaled2-colon-novel-shift": _NOVEL,
 }
 #: Added to ``|true - estimated|`` before its log is fitted: a floor of the scale (fractions).
 SCALE_FLOOR = 0.005

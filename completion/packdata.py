@@ -94,11 +94,17 @@ def distance_to(occupied: torch.Tensor, method: str = "auto") -> torch.Tensor:
     return f.sqrt()
 
 
+def pooled_distance(occupied: torch.Tensor, pool: int = 1) -> torch.Tensor:
+    """:func:`distance_to` of grids pooled ``pool`` times (:func:`pooled`), counted in the pack's own voxels (the
+    distance in mm over the pack's voxel size, as the full grid's heatmaps count it); (n, S, S, S) float32."""
+    d = distance_to(occupied)
+    return d * pool if pool > 1 else d
+
+
 def heatmaps(s0: torch.Tensor, s1: torch.Tensor, c: torch.Tensor, pool: int = 1) -> tuple[torch.Tensor, torch.Tensor]:
     """Input and target heatmaps, (n, S, S, S) float32, from the partial-surface, surface and centerline grids;
     ``pool``: grids pooled that many times (:func:`pooled`), their distances counted in the pack's own voxels."""
-    return heatmaps_from_occupancy(s0, s1, c, distance=lambda occ: pool * distance_to(occ) if pool > 1
-                                   else distance_to(occ))
+    return heatmaps_from_occupancy(s0, s1, c, distance=lambda occ: pooled_distance(occ, pool))
 
 
 def pooled(occupied: torch.Tensor, pool: int) -> torch.Tensor:
@@ -326,7 +332,7 @@ class PackSplit:
             radius = tuple(r / self.pool for r in ERASE_RADIUS)     # the same balls in mm on a pooled grid
             cut = torch.stack([erase_patches(s0[j], erase[k], radius=radius) for j, k in enumerate(todo)])
             x = x.clone()
-            x[todo, :1] = input_heatmap(self.pool * distance_to(cut)).unsqueeze(1)
+            x[todo, :1] = input_heatmap(pooled_distance(cut, self.pool)).unsqueeze(1)
         return x, y
 
 

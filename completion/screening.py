@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from colonbench.grid import Grid
-from colonbench.heatmaps import distance_to, input_heatmap, voxelize_points
+from colonbench.heatmaps import input_heatmap, voxelize_points
 
 
 def pool_of(meta: dict) -> int:
@@ -23,11 +23,14 @@ def pool_of(meta: dict) -> int:
 
 def pooled_input(grid: Grid, points: np.ndarray, pool: int) -> np.ndarray:
     """(S / pool,)^3 float32 input heatmap of a cloud (mm) on ``grid`` pooled ``pool`` times, distances in the full
-    grid's voxels (as :class:`colonbench.completion.packdata.PackSplit` makes them for training)."""
+    grid's voxels: made by the functions :class:`colonbench.completion.packdata.PackSplit` trains with."""
+    import torch
+
+    from colonbench.completion.packdata import pooled, pooled_distance
+
     occ, _ = voxelize_points(grid, points)
-    s = occ.shape[0] // pool
-    coarse = occ[: s * pool, : s * pool, : s * pool].reshape(s, pool, s, pool, s, pool).any(axis=(1, 3, 5))
-    return input_heatmap(pool * distance_to(coarse)).astype(np.float32)
+    coarse = pooled(torch.from_numpy(occ)[None], pool)
+    return input_heatmap(pooled_distance(coarse, pool))[0].numpy().astype(np.float32, copy=False)
 
 
 def upsampled(pred, pool: int, size: int):
