@@ -57,8 +57,10 @@ _NOVEL = _SIGNALS + ("spread", "radius_ratio", "line_extent")     # decision rec
 SCALE_FEATURES = {
     "scaled": _SIGNALS, "scaled2": _SIGNALS, "scaled2-gaps": _SIGNALS + ("gap_share",), "scaled-colon": _SIGNALS,
     "scaled-colon-novel": _NOVEL, "scaled-colon-novel-shift": _NOVEL, "scaled2-colon-novel": _NOVEL,
-    "scaled2-colon-novel-shift": _NOVEL,
+    "scaled2-colon-novel-shift": _NOVEL, "binned-colon-novel": _NOVEL, "binned-colon-novel-shift": _NOVEL,
 }
+#: A ``binned`` scheme's bands of the fitted scale: cut at these colon-weighted quantiles of it (decision record 0327).
+BAND_QUANTILES = (0.25, 0.5, 0.75)
 #: Added to ``|true - estimated|`` before its log is fitted: a floor of the scale (fractions).
 SCALE_FLOOR = 0.005
 
@@ -88,6 +90,12 @@ def _scaled(scheme: str) -> str | None:
     """The scaled factor of a scheme (``scaled`` or ``scaled+``), or None."""
     last = scheme.split("+", 1)[-1] if scheme.startswith("length+") else scheme
     return last if last in SCALE_FEATURES else None
+
+
+def _binned(scaled: str | None) -> bool:
+    """Whether a scaled factor takes its quantiles per band of the fitted scale (``binned...``, decision record
+    0327: Mondrian conformal regression over a difficulty estimate, Bostrom and Johansson 2020)."""
+    return bool(scaled) and scaled.startswith("binned")
 
 
 def _two_sided(scaled: str | None) -> bool:
@@ -262,6 +270,10 @@ def _scale_of(group: dict, coverage: float, signals: dict, side: str = "") -> fl
 
 
 def _scale(group: dict, coverage: float, signals: dict) -> tuple[float, float]:
+    if "band_edges" in group:            # the quantiles of the band the estimate's scale falls in
+        s = _scale_of(group, coverage, signals)
+        k = int(np.searchsorted(np.asarray(group["band_edges"], float), math.log(s), side="right"))
+        return group["band_low"][k] * s, group["band_high"][k] * s
     return (group["low"] * _scale_of(group, coverage, signals, "low"),
             group["high"] * _scale_of(group, coverage, signals, "high"))
 
@@ -327,17 +339,37 @@ def _quantiles(z: np.ndarray, level: float, weights, colons) -> tuple[float, flo
     return low + q1, high + q3, {"shift_low": q1, "shift_high": q3}
 
 
+def _bands(z: np.ndarray, log_scale: np.ndarray, level: float, weights, colons) -> dict:
+    """Per band of the fitted scale (cut at its :data:`BAND_QUANTILES`, weighted as the fit is) the quantiles of the
+    scaled residuals ``z`` in it (:func:`_quantiles`); ``low`` and ``high``: the quantiles of all of ``z``."""
+    w = np.ones(len(z)) if weights is None else np.asarray(weights, float)
+    edges = [_weighted_median(log_scale, w, q) for q in BAND_QUANTILES]
+    band = np.searchsorted(np.asarray(edges), log_scale, side="right")
+    out = {"band_edges": edges, "band_low": [], "band_high": [], "band_n": []}
+    for k in range(len(edges) + 1):
+        sel = band == k
+        low, high, _ = _quantiles(z[sel], level, None if weights is None else w[sel],
+                                  None if colons is None else np.asarray(colons)[sel])
+        out["band_low"].append(low), out["band_high"].append(high), out["band_n"].append(int(sel.sum()))
+    out["low"], out["high"], _ = _quantiles(z, level, weights, colons)
+    return out
+
+
 def _fit_group(residual: np.ndarray, x: np.ndarray | None, names, level: float, two_sided: bool = False,
-               weights: np.ndarray | None = None, colons=None) -> dict:
+               weights: np.ndarray | None = None, colons=None, binned: bool = False) -> dict:
     """A group's quantiles: of the residuals, or (``x``: its features) of the residuals over their fitted scale;
     ``two_sided``: a scale of the residuals below 0 for the low end and one of those above for the high end, each
     end's quantile taken of the residuals over its own scale. ``weights``: each residual's weight in the scale's
-    fit and the quantiles (:func:`weighted_quantiles`); ``colons``: each residual's colon, for the shift term."""
+    fit and the quantiles (:func:`weighted_quantiles`); ``colons``: each residual's colon, for the shift term;
+    ``binned``: the quantiles per band of the scale (:func:`_bands`)."""
     if x is None:
         low, high, _ = _quantiles(residual, level, weights, colons)
         return {"low": low, "high": high, "n": int(len(residual))}
     out = {"n": int(len(residual)), "features": list(names),
            "ranges": [[float(v) for v in r] for r in np.stack([x.min(axis=0), x.max(axis=0)], axis=1)]}
+    if binned:
+        out["weights"], s = _log_fit(x, np.abs(residual), weights)
+        return {**out, **_bands(residual / s, np.log(s), level, weights, colons)}
     if not two_sided:
         out["weights"], s = _log_fit(x, np.abs(residual), weights)
         out["low"], out["high"], shift = _quantiles(residual / s, level, weights, colons)
@@ -408,7 +440,7 @@ def fit(true, estimated, signals: list, scheme: str, review_width: float, level:
             if sel.sum() >= MIN_GROUP and str(key) not in groups:
                 groups[str(key)] = _fit_group(residual[sel], x[sel] if scaled else None, names, level,
                                               _two_sided(scaled), None if weights is None else weights[sel],
-                                              None if colons is None else colons[sel])
+                                              None if colons is None else colons[sel], _binned(scaled))
     return Intervals(scheme, level, groups, review_width, dict(source or {}))
 
 
@@ -420,7 +452,7 @@ def fit_known(cal: Intervals, true, estimated, signals: list | None = None, weig
     names = SCALE_FEATURES[scaled] if scaled else ()
     x = np.array([features(c, sig, names) for c, sig in zip(estimated, signals)]) if scaled else None
     weights, colons = _unit_weights(cal.scheme, weights, colons, len(residual))
-    cal.known = _fit_group(residual, x, names, cal.level, _two_sided(scaled), weights, colons)
+    cal.known = _fit_group(residual, x, names, cal.level, _two_sided(scaled), weights, colons, _binned(scaled))
 
 
 def path_for(model: Path) -> Path:
