@@ -54,10 +54,14 @@ SUFFIX = ".intervals.json"
 #: and 0158; 0156's measurement also tried features the method does not compute, kept in its session script).
 _SIGNALS = ("one", "estimate", "length", "span_ratio", "no_rim", "one_rim", "doubtful")
 _NOVEL = _SIGNALS + ("spread", "radius_ratio", "line_extent")     # decision record 0325
+_GAPS = _NOVEL + ("log_gap",)                                       # decision record 0327
+_DEPTH = _NOVEL + ("depth",)                                        # decision record 0327, round 5
 SCALE_FEATURES = {
     "scaled": _SIGNALS, "scaled2": _SIGNALS, "scaled2-gaps": _SIGNALS + ("gap_share",), "scaled-colon": _SIGNALS,
     "scaled-colon-novel": _NOVEL, "scaled-colon-novel-shift": _NOVEL, "scaled2-colon-novel": _NOVEL,
     "scaled2-colon-novel-shift": _NOVEL, "binned-colon-novel": _NOVEL, "binned-colon-novel-shift": _NOVEL,
+    "scaled2-colon-novel-gaps-shift": _GAPS, "binned-colon-novel-gaps-shift": _GAPS,
+    "scaled2-colon-novel-depth-shift": _DEPTH, "binned-colon-novel-depth-shift": _DEPTH,
 }
 #: A ``binned`` scheme's bands of the fitted scale: cut at these colon-weighted quantiles of it (decision record 0327).
 BAND_QUANTILES = (0.25, 0.5, 0.75)
@@ -73,7 +77,9 @@ def features(coverage: float, signals: dict, names) -> np.ndarray:
     between the planes / that line; ``no_rim``, ``one_rim``: how many cut rims were found; ``doubtful``: a doubtful
     rim; ``gap_share``: the area share of the wall-gap patches; ``spread``: the network's disagreement with itself
     times 10, ``radius_ratio``: the lumen's radius / the line, ``line_extent``: the line / the cloud's extent
-    (:mod:`colonbench.completion.novelty`)."""
+    (:mod:`colonbench.completion.novelty`); ``log_gap``: ``log10(gap_share + 0.001)``, -3 where no wall-gap patch
+    was found; ``depth``: the holes' depth (``hole_depth_mm``, :func:`colonbench.completion.novelty.hole_depth`) /
+    10 mm."""
     g = lambda k: float(signals.get(k, 0.0) or 0.0)          # noqa: E731
     length = g("length_mm")
     rims = int(g("rims"))
@@ -81,7 +87,8 @@ def features(coverage: float, signals: dict, names) -> np.ndarray:
              "span_ratio": g("span_mm") / max(length, 1.0), "no_rim": float(rims == 0), "one_rim": float(rims == 1),
              "doubtful": float(g("rims_doubtful") > 0), "gap_share": g("gap_share"), "spread": 10.0 * g("spread"),
              "radius_ratio": g("radius_mm") / max(length, 1.0),
-             "line_extent": length / g("extent_mm") if g("extent_mm") > 0 else 0.0}
+             "line_extent": length / g("extent_mm") if g("extent_mm") > 0 else 0.0,
+             "log_gap": math.log10(max(g("gap_share"), 0.0) + 0.001), "depth": g("hole_depth_mm") / 10.0}
     out = np.array([value[n] for n in names], float)
     return np.where(np.isfinite(out), out, 0.0)
 
@@ -272,7 +279,7 @@ def _scale_of(group: dict, coverage: float, signals: dict, side: str = "") -> fl
 def _scale(group: dict, coverage: float, signals: dict) -> tuple[float, float]:
     if "band_edges" in group:            # the quantiles of the band the estimate's scale falls in
         s = _scale_of(group, coverage, signals)
-        k = int(np.searchsorted(np.asarray(group["band_edges"], float), math.log(s), side="right"))
+        k = int(np.searchsorted(np.asarray(group["band_edges"], float), math.log(s), side="left"))
         return group["band_low"][k] * s, group["band_high"][k] * s
     return (group["low"] * _scale_of(group, coverage, signals, "low"),
             group["high"] * _scale_of(group, coverage, signals, "high"))
@@ -340,18 +347,22 @@ def _quantiles(z: np.ndarray, level: float, weights, colons) -> tuple[float, flo
 
 
 def _bands(z: np.ndarray, log_scale: np.ndarray, level: float, weights, colons) -> dict:
-    """Per band of the fitted scale (cut at its :data:`BAND_QUANTILES`, weighted as the fit is) the quantiles of the
-    scaled residuals ``z`` in it (:func:`_quantiles`); ``low`` and ``high``: the quantiles of all of ``z``."""
+    """Per band of the fitted scale the quantiles of the scaled residuals ``z`` in it (:func:`_quantiles`). Band
+    ``k`` holds the scales at or below the ``k``-th edge (the :data:`BAND_QUANTILES` of the log scale, weighted as
+    the fit is) and above the one before; a band of fewer than :data:`MIN_GROUP` estimates gets the quantiles of all
+    of ``z`` (``low``, ``high``)."""
     w = np.ones(len(z)) if weights is None else np.asarray(weights, float)
     edges = [_weighted_median(log_scale, w, q) for q in BAND_QUANTILES]
-    band = np.searchsorted(np.asarray(edges), log_scale, side="right")
+    band = np.searchsorted(np.asarray(edges), log_scale, side="left")
     out = {"band_edges": edges, "band_low": [], "band_high": [], "band_n": []}
+    out["low"], out["high"], _ = _quantiles(z, level, weights, colons)
     for k in range(len(edges) + 1):
         sel = band == k
-        low, high, _ = _quantiles(z[sel], level, None if weights is None else w[sel],
-                                  None if colons is None else np.asarray(colons)[sel])
+        low, high = out["low"], out["high"]
+        if sel.sum() >= MIN_GROUP:
+            low, high, _ = _quantiles(z[sel], level, None if weights is None else w[sel],
+                                      None if colons is None else np.asarray(colons)[sel])
         out["band_low"].append(low), out["band_high"].append(high), out["band_n"].append(int(sel.sum()))
-    out["low"], out["high"], _ = _quantiles(z, level, weights, colons)
     return out
 
 

@@ -43,10 +43,13 @@ MANIFESTS = {"calibration": "V_wide", "calibration-paper": "V_paper", "validatio
 CALIBRATED = ("V_wide", "V_paper", "V_real")
 #: Decision records 0325's and 0327's candidates.
 SCHEMES = ("scaled", "scaled-colon", "scaled-colon-novel", "scaled-colon-novel-shift", "scaled2-colon-novel",
-           "scaled2-colon-novel-shift", "binned-colon-novel", "binned-colon-novel-shift")
+           "scaled2-colon-novel-shift", "binned-colon-novel", "binned-colon-novel-shift",
+           "scaled2-colon-novel-gaps-shift", "binned-colon-novel-gaps-shift", "scaled2-colon-novel-depth-shift",
+           "binned-colon-novel-depth-shift")
 NOISE_MM = (0.0, 0.5)
 #: The signals an estimate's interval may be scaled by, as columns of the estimates' table.
-SIGNALS = ("rims", "rims_doubtful", "gap_share", "length_mm", "span_mm", "spread", "radius_mm", "extent_mm")
+SIGNALS = ("rims", "rims_doubtful", "gap_share", "length_mm", "span_mm", "spread", "radius_mm", "extent_mm",
+           "hole_depth_mm")
 #: The review rule (decision record 0325): flag at least this share of the estimates off by more than BIG in each
 #: real colon held out and in V_wide.
 REVIEW_RECALL, BIG = 0.75, 0.15
@@ -270,7 +273,7 @@ def table(data: list[tuple[str, Path]], method: CompletionMethod, path: Path) ->
     """Every calibration dataset's estimates, each row with its ``set``."""
     parts = []
     for name, folder in data:
-        cache = folder / f"completion-estimates-{sha256_file(path)[:12]}-{steps_version()}-signals2.csv"
+        cache = folder / f"completion-estimates-{sha256_file(path)[:12]}-{steps_version()}-signals3.csv"
         part = estimates(folder, method, cache).assign(manifest=name, set=MANIFESTS[name])
         if name == "calibration":         # its segments of the real training colons: seen by the network
             part.loc[part["colon_id"] >= REAL_IDS, "set"] = "train_real"
