@@ -14,12 +14,18 @@ rims, the estimate and the line's length do not show. Three signals the estimate
 ``extent_mm``
     The cloud's extent along its principal axis (mm): a line far longer than the cloud is long has wandered
     through pockets of a wide lumen.
+
+And one of how much of the wall the network had to make up (decision record 0327): ``hole_depth_mm``, how far the
+completed surface's hole vertices lie from the nearest point of the cloud (their 90th percentile, mm). A small
+hole ringed by seen wall is shallow; a wall no camera saw is deep, and there the network guesses.
 """
 
 from __future__ import annotations
 
 import numpy as np
 from scipy.spatial import cKDTree
+
+from colonbench.grid import principal_axes
 
 #: A heatmap voxel whose value differs from 0.5 by more than this says surface (0) or line (1).
 SAYS = 0.2
@@ -63,8 +69,20 @@ def shape(points: np.ndarray, line: np.ndarray) -> dict:
     """``radius_mm`` and ``extent_mm`` of a cloud (points, (n, 3) mm) around its line between the planes
     ((m, 3) mm, resampled); ``radius_mm`` is 0 where the line is empty."""
     pts = np.asarray(points, float)
-    centred = pts - pts.mean(axis=0)
-    axis = np.linalg.svd(centred[:: max(1, len(pts) // 4000)], full_matrices=False)[2][0]
-    along = centred @ axis
+    along = pts @ principal_axes(pts)[0]
     radius = float(np.median(cKDTree(line).query(pts)[0])) if len(line) else 0.0
     return {"radius_mm": round(radius, 2), "extent_mm": round(float(along.max() - along.min()), 2)}
+
+
+#: The percentile of the hole vertices' distances :func:`hole_depth` reports.
+DEPTH_PERCENTILE = 90.0
+
+
+def hole_depth(points: np.ndarray, holes: np.ndarray) -> float:
+    """``hole_depth_mm``: the :data:`DEPTH_PERCENTILE`-th percentile of the distances (mm) from the completed
+    surface's hole vertices (``holes``, (h, 3) mm) to the nearest point of the cloud (``points``, (n, 3) mm); 0 where
+    there is no hole vertex."""
+    holes = np.asarray(holes, float).reshape(-1, 3)
+    if not len(holes) or not len(points):
+        return 0.0
+    return round(float(np.percentile(cKDTree(np.asarray(points, float)).query(holes)[0], DEPTH_PERCENTILE)), 2)

@@ -405,6 +405,16 @@ def test_the_novelty_signals_measure_the_lumen_and_the_cloud():
     assert flipped == 0.0
     other = novelty.spread(lambda t: 1 - t, x, x[0, 0].numpy())        # a second pass that disagrees everywhere
     assert other > 0
+    # the holes' depth: a disk of radius 8 mm cut from the tube's wall at z = 40; its deepest vertices lie 8 mm from
+    # the rim, the 90th percentile of the distances of a disk's area from its rim is 8 (1 - sqrt(0.1)) = 5.47 mm
+    wall = np.c_[20 * np.cos(a.ravel()), 20 * np.sin(a.ravel()), z.ravel()]
+    dense = np.meshgrid(np.linspace(-np.pi / 4, np.pi / 4, 400), np.linspace(25, 55, 400))
+    patch = np.c_[20 * np.cos(dense[0].ravel()), 20 * np.sin(dense[0].ravel()), dense[1].ravel()]
+    cut = np.hypot(20 * dense[0].ravel(), dense[1].ravel() - 40) < 8
+    seen = np.vstack([wall[np.hypot(20 * np.arctan2(wall[:, 1], wall[:, 0]), wall[:, 2] - 40) >= 8 + 1e-9],
+                      patch[~cut]])
+    assert novelty.hole_depth(seen, patch[cut]) == pytest.approx(8 * (1 - np.sqrt(0.1)), abs=0.1)
+    assert novelty.hole_depth(seen, np.zeros((0, 3))) == 0.0
 
 
 def test_each_colon_weighs_the_same_and_each_set_a_third():
@@ -426,3 +436,32 @@ def test_each_colon_weighs_the_same_and_each_set_a_third():
     assert set(df["cell"]) == {"V_wide", "V_paper", "V_real gca00020", "V_real gca00070"}
     with pytest.raises(ValueError, match="finite numbers"):
         intervals.fit([0.5] * 40, [0.5] * 40, [{}] * 40, "scaled-colon", 0.3, weights=[0.0] * 40)
+
+
+def test_a_binned_scheme_takes_each_band_of_the_scale_its_own_quantiles():
+    """Four line lengths, each a quarter of the segments, with residuals of +-m_k where log(m_k + 0.005) is linear in
+    the length: the fitted scale is exactly m_k + 0.005, each length its own band, and the band's quantiles give
+    the interval +-m_k, which holds every truth exactly; one shared quantile (``scaled-colon-novel``) is as wide as
+    the largest ``m_k / (m_k + 0.005)`` makes it. One scale for all: every band but the first is empty and all get
+    the pooled quantiles."""
+    lengths = np.array([30.0, 50.0, 70.0, 90.0])
+    b = (np.log(0.025) - np.log(0.205)) / 60.0
+    m = np.exp(np.log(0.205) + b * (lengths - 30.0)) - 0.005          # 0.2 ... 0.02
+    n = 400
+    k = np.arange(n) % 4
+    sign = np.where((np.arange(n) // 4) % 2 == 0, 1.0, -1.0)
+    sig = [{"length_mm": lengths[j], "span_mm": lengths[j], "rims": 2} for j in k]
+    residual = sign * m[k]
+    w = np.full(n, 1.0 / n)
+    cal = intervals.fit(0.5 + residual, np.full(n, 0.5), sig, "binned-colon-novel", 0.4, weights=w)
+    assert cal.groups["all"]["band_n"] == [100] * 4
+    for j in range(4):
+        low, high = cal.interval(0.5, sig[j])
+        assert (low, high) == (pytest.approx(0.5 - m[j]), pytest.approx(0.5 + m[j]))
+    one = intervals.fit(0.5 + residual, np.full(n, 0.5), sig, "scaled-colon-novel", 0.4, weights=w)
+    c = m / (m + 0.005)
+    assert one.interval(0.5, sig[3])[1] == pytest.approx(0.5 + c.max() * (m[3] + 0.005))
+    flat = [{"length_mm": 60.0, "span_mm": 60.0, "rims": 2}] * n
+    same = intervals.fit(0.5 + residual, np.full(n, 0.5), flat, "binned-colon-novel", 0.4, weights=w)
+    g = same.groups["all"]
+    assert g["band_n"] == [n, 0, 0, 0] and g["band_low"] == [g["low"]] * 4 and g["band_high"] == [g["high"]] * 4
