@@ -54,8 +54,8 @@ SUFFIX = ".intervals.json"
 #: and 0158; 0156's measurement also tried features the method does not compute, kept in its session script).
 _SIGNALS = ("one", "estimate", "length", "span_ratio", "no_rim", "one_rim", "doubtful")
 _NOVEL = _SIGNALS + ("spread", "radius_ratio", "line_extent")     # decision record 0325
-_GAPS = _NOVEL + ("log_gap",)                                       # decision record 0327
-_DEPTH = _NOVEL + ("depth",)                                        # decision record 0327, round 5
+_GAPS = _NOVEL + ("log_gap",)                                       # decision record 0161
+_DEPTH = _NOVEL + ("depth",)                                        # decision record 0161, round 5
 SCALE_FEATURES = {
     "scaled": _SIGNALS, "scaled2": _SIGNALS, "scaled2-gaps": _SIGNALS + ("gap_share",), "scaled-colon": _SIGNALS,
     "scaled-colon-novel": _NOVEL, "scaled-colon-novel-shift": _NOVEL, "scaled2-colon-novel": _NOVEL,
@@ -63,7 +63,7 @@ SCALE_FEATURES = {
     "scaled2-colon-novel-gaps-shift": _GAPS, "binned-colon-novel-gaps-shift": _GAPS,
     "scaled2-colon-novel-depth-shift": _DEPTH, "binned-colon-novel-depth-shift": _DEPTH,
 }
-#: A ``binned`` scheme's bands of the fitted scale: cut at these colon-weighted quantiles of it (decision record 0327).
+#: A ``binned`` scheme's bands of the fitted scale: cut at these colon-weighted quantiles of it (decision 0161).
 BAND_QUANTILES = (0.25, 0.5, 0.75)
 #: Added to ``|true - estimated|`` before its log is fitted: a floor of the scale (fractions).
 SCALE_FLOOR = 0.005
@@ -101,7 +101,7 @@ def _scaled(scheme: str) -> str | None:
 
 def _binned(scaled: str | None) -> bool:
     """Whether a scaled factor takes its quantiles per band of the fitted scale (``binned...``, decision record
-    0327: Mondrian conformal regression over a difficulty estimate, Bostrom and Johansson 2020)."""
+    0161: Mondrian conformal regression over a difficulty estimate, Bostrom and Johansson 2020)."""
     return bool(scaled) and scaled.startswith("binned")
 
 

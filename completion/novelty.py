@@ -15,7 +15,7 @@ rims, the estimate and the line's length do not show. Three signals the estimate
     The cloud's extent along its principal axis (mm): a line far longer than the cloud is long has wandered
     through pockets of a wide lumen.
 
-And one of how much of the wall the network had to make up (decision record 0327): ``hole_depth_mm``, how far the
+And one of how much of the wall the network had to make up (decision record 0161): ``hole_depth_mm``, how far the
 completed surface's hole vertices lie from the nearest point of the cloud (their 90th percentile, mm). A small
 hole ringed by seen wall is shallow; a wall no camera saw is deep, and there the network guesses.
 """

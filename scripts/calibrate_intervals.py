@@ -8,13 +8,14 @@ training colons are left out), calibration-paper.yaml's colons of the paper's ge
 validation-real.yaml, the real validation colons gca00020 and gca00070 (``V_real``), with calibration-real.yaml's real
 training colons, which are reported, never calibrated on (the network saw them). Estimates every segment with the
 completion method (its intervals off, every signal on) at 0 and 0.5 mm noise, as the suites do (cached per model
-and steps in ``<data>/<manifest>``), then chooses the scheme by decision record 0327's rule: every scheme is measured
+and steps in ``<data>/<manifest>``), then chooses the scheme by decision record 0161's rule: every scheme is measured
 leave-one-colon-out (a colon's estimates get the intervals of a calibration fitted on all the other colons); of
 those whose truth-inside share lies within 85-95 % in each cell (``V_wide``, ``V_paper`` and each real colon on its
 own, at each noise level), the one with the smallest mean width over the real colons (else the one whose lowest cell
-is highest, counted below 85 %, then with the fewest cells above 95 %, then the narrowest). The review widths (of the segments' intervals and of the known extent's) come from the
-same held-out intervals. The chosen scheme is fitted on all three sets and written beside the model
-(``<model>.intervals.json``), with the known-length interval fitted on the same segments with their true lengths.
+is highest, counted below 85 %, then with the fewest cells above 95 %, then the narrowest). The review widths (of
+the segments' intervals and of the known extent's) come from the same held-out intervals. The chosen scheme is
+fitted on all three sets and written beside the model (``<model>.intervals.json``), with the known-length interval
+fitted on the same segments with their true lengths.
 Prints every scheme's held-out table.
 """
 
@@ -41,7 +42,7 @@ ROOT = Path(__file__).resolve().parents[1] / "data_manifests"
 MANIFESTS = {"calibration": "V_wide", "calibration-paper": "V_paper", "validation-real": "V_real",
              "calibration-real": "train_real"}
 CALIBRATED = ("V_wide", "V_paper", "V_real")
-#: Decision records 0325's and 0327's candidates.
+#: Decision records 0325's and 0161's candidates.
 SCHEMES = ("scaled", "scaled-colon", "scaled-colon-novel", "scaled-colon-novel-shift", "scaled2-colon-novel",
            "scaled2-colon-novel-shift", "binned-colon-novel", "binned-colon-novel-shift",
            "scaled2-colon-novel-gaps-shift", "binned-colon-novel-gaps-shift", "scaled2-colon-novel-depth-shift",
@@ -166,7 +167,7 @@ def real_width(held: pd.DataFrame) -> float:
 
 
 def choose(held: dict, level: float) -> tuple[str, dict]:
-    """0327's rule on held-out intervals per scheme: of the schemes within 85-95 % in every cell (each calibrated set,
+    """0161's rule on held-out intervals per scheme: of the schemes within 85-95 % in every cell (each calibrated set,
     each real colon on its own, each noise level), the narrowest over the real colons; else the one whose lowest cell
     is highest, counted only below 85 % (under-coverage first), then with the fewest cells above 95 %, then the
     narrowest over the real colons. Also the summary."""
