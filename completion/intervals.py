@@ -10,9 +10,12 @@ method over-estimates where most of the wall is missing, so the interval reaches
 
 A group is a key of the method's own signals (:func:`group_key`): how many of the segment's ends were found at a
 cut rim (an end without one is where the segment may go on unseen) and the estimate's band. In a *scaled* scheme
-(the shipped ``scaled``, decision record 0156) the residuals are divided by a scale ``exp(w . f)`` of the estimate's
-features (:func:`features`) before their quantiles are taken, and an estimate's quantiles are multiplied by its
-own scale; each feature is first clipped into the range the calibration saw (decision record 0160). The calibration
+(decision record 0156) the residuals are divided by a scale ``exp(w . f)`` of the estimate's features
+(:func:`features`) before their quantiles are taken, and an estimate's quantiles are multiplied by its own scale;
+each feature is first clipped into the range the calibration saw (decision record 0160). A two-sided scheme
+(``scaled2...``, decision record 0158) fits a scale for each end; a ``-colon`` scheme weighs every colon the same
+(decision record 0325), a ``-shift`` one adds a colon-level shift term; a ``binned`` one takes its quantiles per
+band of the scale (decision record 0161). The shipped calibration is ``scaled2-colon-novel-shift``. The calibration
 (groups, quantiles, weights, ranges, the data it came from) is a JSON file beside the model
 (``<model>.intervals.json``), made by ``scripts/calibrate_intervals.py``, which also chooses the scheme and the
 review width.
@@ -27,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
+from colonbench.completion.conformal import band_of, band_quantiles, shifted_quantiles
 from colonbench.errors import InputError
 
 #: Nominal coverage of the intervals.
@@ -106,7 +110,7 @@ def _binned(scaled: str | None) -> bool:
 
 
 def _two_sided(scaled: str | None) -> bool:
-    """Whether a scaled factor fits a scale for each end of the interval (``scaled2``, ``scaled2-gaps``)."""
+    """Whether a scaled factor fits a scale for each end of the interval (``scaled2...``)."""
     return bool(scaled) and scaled.startswith("scaled2")
 
 
@@ -138,18 +142,6 @@ def group_key(coverage: float, signals: dict, scheme: str) -> str:
     return ",".join(parts)
 
 
-def conformal_quantiles(residuals, level: float = LEVEL) -> tuple[float, float]:
-    """The split-conformal low and high quantiles of ``true - estimated`` residuals (fractions)."""
-    r = np.sort(np.asarray(residuals, float))
-    n = len(r)
-    a = (1.0 - level) / 2.0
-    lo = math.floor((n + 1) * a + 1e-9)          # (1 - 0.9) / 2 is 0.04999...: ranks at a float near-tie
-    hi = math.ceil((n + 1) * (1.0 - a) - 1e-9)
-    low = r[lo - 1] if lo >= 1 else -1.0      # too few residuals for the tail: the widest interval
-    high = r[hi - 1] if hi <= n else 1.0
-    return float(low), float(high)
-
-
 @dataclass
 class Intervals:
     """A calibration: per group the residual quantiles, and the width above which an estimate is to be reviewed.
@@ -160,7 +152,10 @@ class Intervals:
         ``marginal``, or factors of :func:`group_key` joined by ``+`` (``length+band``).
     level : float
     groups : dict
-        Group key -> ``{"low", "high", "n"}`` (fractions, calibration estimates: segments times noise levels).
+        Group key -> ``{"low", "high", "n"}`` (fractions, calibration estimates: segments times noise levels); a
+        scaled group adds ``features``, ``ranges`` and ``weights`` (``weights_low``, ``weights_high``: two-sided),
+        the shift term's ``shift_low``, ``shift_high`` (included in ``low``, ``high``) and a binned one's
+        ``band_edges``, ``band_low``, ``band_high``, ``band_n``.
     review_width : float
         An interval wider than this (fraction) flags the estimate for review; only then are its rims' notes, and a
         known length's the cloud stops short of, reasons too (decision record 0156).
@@ -266,20 +261,28 @@ class Intervals:
 def _scale_of(group: dict, coverage: float, signals: dict, side: str = "") -> float:
     """``exp(w . f)`` of a scaled group (its ``weights``, or ``weights_low`` / ``weights_high`` by ``side`` in a
     two-sided one, over its ``features``), else 1."""
+    return float(np.exp(_log_scale_of(group, coverage, signals, side)))
+
+
+def _log_scale_of(group: dict, coverage: float, signals: dict, side: str = "") -> float:
+    """``w . f`` of :func:`_scale_of`, clipped to [-20, 5]; 0 for a group without weights."""
     w = group.get(f"weights_{side}", group.get("weights"))
     if w is None:
-        return 1.0
+        return 0.0
     f = features(coverage, signals, group["features"])
     if "ranges" in group:                # within the range calibrated on, never extrapolated (decision record 0160)
         lo, hi = np.asarray(group["ranges"], float).T
         f = np.clip(f, lo, hi)
-    return float(np.exp(np.clip(f @ np.asarray(w), -20, 5)))
+    return float(np.clip(f @ np.asarray(w), -20, 5))
 
 
 def _scale(group: dict, coverage: float, signals: dict) -> tuple[float, float]:
-    if "band_edges" in group:            # the quantiles of the band the estimate's scale falls in
-        s = _scale_of(group, coverage, signals)
-        k = int(np.searchsorted(np.asarray(group["band_edges"], float), math.log(s), side="left"))
+    """A group's low and high quantiles times the estimate's scale (each end's own in a two-sided group); in a
+    binned group, the quantiles of the band the estimate's scale falls in
+    (:func:`~colonbench.completion.conformal.band_quantiles`)."""
+    if "band_edges" in group:
+        log_s = _log_scale_of(group, coverage, signals)
+        k, s = int(band_of(group["band_edges"], log_s)), math.exp(log_s)
         return group["band_low"][k] * s, group["band_high"][k] * s
     return (group["low"] * _scale_of(group, coverage, signals, "low"),
             group["high"] * _scale_of(group, coverage, signals, "high"))
@@ -292,103 +295,31 @@ def _log_fit(x: np.ndarray, magnitude: np.ndarray, weights: np.ndarray | None = 
     return [float(v) for v in w], np.exp(np.clip(x @ w, -20, 5))
 
 
-def weighted_quantiles(values, weights, level: float = LEVEL) -> tuple[float, float]:
-    """:func:`conformal_quantiles` of values carrying weights (colons as the unit, decision record 0325).
-
-    Parameters
-    ----------
-    values : (n,) float
-        Residuals (fractions) or scaled residuals.
-    weights : (n,) float
-        Each value's weight, >= 0, not all 0 (normalised here).
-    level : float
-
-    Returns
-    -------
-    (float, float)
-        The low and high quantiles of the weighted distribution at the split-conformal ranks of the effective sample
-        size ``(sum w)^2 / sum w^2`` (Kish's; with equal weights the unweighted ranks' quantiles); -1 or 1 where the
-        sample is too small for a tail.
-    """
-    v, w = np.asarray(values, float), np.asarray(weights, float)
-    order = np.argsort(v, kind="stable")
-    v, w = v[order], w[order] / w.sum()
-    n = 1.0 / float(np.sum(w ** 2))
-    a = (1.0 - level) / 2.0
-    lo, hi = math.floor((n + 1) * a + 1e-9) / n, math.ceil((n + 1) * (1.0 - a) - 1e-9) / n
-    cum = np.cumsum(w)
-    low = float(v[min(np.searchsorted(cum, lo - 1e-9), len(v) - 1)]) if lo > 0 else -1.0
-    high = float(v[min(np.searchsorted(cum, hi - 1e-9), len(v) - 1)]) if hi <= 1.0 + 1e-9 else 1.0
-    return low, high
-
-
-def _weighted_median(values, weights, q: float = 0.5) -> float:
-    v, w = np.asarray(values, float), np.asarray(weights, float)
-    order = np.argsort(v, kind="stable")
-    cum = np.cumsum(w[order]) / w.sum()
-    return float(v[order][min(np.searchsorted(cum, q - 1e-12), len(v) - 1)])
-
-
-def _quantiles(z: np.ndarray, level: float, weights, colons) -> tuple[float, float, dict]:
-    """The low and high quantiles of scaled residuals ``z``: split-conformal (no weights), weighted, or (``colons``
-    given too) those of ``z`` less its colon's median, widened by the colons' medians' quartiles (the colon-level
-    shift term, decision record 0325); and what the shift term recorded."""
-    if weights is None:
-        return (*conformal_quantiles(z, level), {})
-    if colons is None:
-        return (*weighted_quantiles(z, weights, level), {})
-    colons = np.asarray(colons)
-    names, index = np.unique(colons, return_inverse=True)
-    medians = np.array([_weighted_median(z[index == k], weights[index == k]) for k in range(len(names))])
-    colon_weight = np.bincount(index, weights=weights)
-    q1, q3 = _weighted_median(medians, colon_weight, 0.25), _weighted_median(medians, colon_weight, 0.75)
-    low, high = weighted_quantiles(z - medians[index], weights, level)
-    return low + q1, high + q3, {"shift_low": q1, "shift_high": q3}
-
-
-def _bands(z: np.ndarray, log_scale: np.ndarray, level: float, weights, colons) -> dict:
-    """Per band of the fitted scale the quantiles of the scaled residuals ``z`` in it (:func:`_quantiles`). Band
-    ``k`` holds the scales at or below the ``k``-th edge (the :data:`BAND_QUANTILES` of the log scale, weighted as
-    the fit is) and above the one before; a band of fewer than :data:`MIN_GROUP` estimates gets the quantiles of all
-    of ``z`` (``low``, ``high``)."""
-    w = np.ones(len(z)) if weights is None else np.asarray(weights, float)
-    edges = [_weighted_median(log_scale, w, q) for q in BAND_QUANTILES]
-    band = np.searchsorted(np.asarray(edges), log_scale, side="left")
-    out = {"band_edges": edges, "band_low": [], "band_high": [], "band_n": []}
-    out["low"], out["high"], _ = _quantiles(z, level, weights, colons)
-    for k in range(len(edges) + 1):
-        sel = band == k
-        low, high = out["low"], out["high"]
-        if sel.sum() >= MIN_GROUP:
-            low, high, _ = _quantiles(z[sel], level, None if weights is None else w[sel],
-                                      None if colons is None else np.asarray(colons)[sel])
-        out["band_low"].append(low), out["band_high"].append(high), out["band_n"].append(int(sel.sum()))
-    return out
-
-
 def _fit_group(residual: np.ndarray, x: np.ndarray | None, names, level: float, two_sided: bool = False,
                weights: np.ndarray | None = None, colons=None, binned: bool = False) -> dict:
     """A group's quantiles: of the residuals, or (``x``: its features) of the residuals over their fitted scale;
     ``two_sided``: a scale of the residuals below 0 for the low end and one of those above for the high end, each
     end's quantile taken of the residuals over its own scale. ``weights``: each residual's weight in the scale's
-    fit and the quantiles (:func:`weighted_quantiles`); ``colons``: each residual's colon, for the shift term;
-    ``binned``: the quantiles per band of the scale (:func:`_bands`)."""
+    fit and the quantiles (:func:`~colonbench.completion.conformal.weighted_quantiles`); ``colons``: each residual's
+    colon, for the shift term; ``binned``: the quantiles per band of the scale
+    (:func:`~colonbench.completion.conformal.band_quantiles`)."""
     if x is None:
-        low, high, _ = _quantiles(residual, level, weights, colons)
+        low, high, _ = shifted_quantiles(residual, level, weights, colons)
         return {"low": low, "high": high, "n": int(len(residual))}
     out = {"n": int(len(residual)), "features": list(names),
            "ranges": [[float(v) for v in r] for r in np.stack([x.min(axis=0), x.max(axis=0)], axis=1)]}
     if binned:
         out["weights"], s = _log_fit(x, np.abs(residual), weights)
-        return {**out, **_bands(residual / s, np.log(s), level, weights, colons)}
+        log_s = np.clip(x @ np.asarray(out["weights"]), -20, 5)
+        return {**out, **band_quantiles(residual / s, log_s, level, weights, colons, MIN_GROUP, BAND_QUANTILES)}
     if not two_sided:
         out["weights"], s = _log_fit(x, np.abs(residual), weights)
-        out["low"], out["high"], shift = _quantiles(residual / s, level, weights, colons)
+        out["low"], out["high"], shift = shifted_quantiles(residual / s, level, weights, colons)
         return {**out, **shift}
     out["weights_low"], s_low = _log_fit(x, np.maximum(-residual, 0.0), weights)
     out["weights_high"], s_high = _log_fit(x, np.maximum(residual, 0.0), weights)
-    low, _, shift_low = _quantiles(residual / s_low, level, weights, colons)
-    _, high, shift_high = _quantiles(residual / s_high, level, weights, colons)
+    low, _, shift_low = shifted_quantiles(residual / s_low, level, weights, colons)
+    _, high, shift_high = shifted_quantiles(residual / s_high, level, weights, colons)
     out["low"], out["high"] = low, high
     if shift_low:                        # each end's shift term, in its own scaled units
         out.update(shift_low=shift_low["shift_low"], shift_high=shift_high["shift_high"])
@@ -436,7 +367,7 @@ def fit(true, estimated, signals: list, scheme: str, review_width: float, level:
         source=None, weights=None, colons=None) -> Intervals:
     """Calibrate intervals on segments' true and estimated coverages (fractions, (n,)) and their signals (n dicts);
     add :attr:`Intervals.known` with :func:`fit_known`. ``weights`` ((n,)) and ``colons`` ((n,)): each segment's
-    weight and colon, for the schemes that take the colon as the unit (``scaled-colon...``)."""
+    weight and colon, for the schemes that take the colon as the unit (``...-colon...``)."""
     true, estimated = np.asarray(true, float), np.asarray(estimated, float)
     residual = true - estimated
     scaled = _scaled(scheme)

@@ -29,7 +29,7 @@ import pandas as pd
 
 from colonbench.benchmark.colon_evaluate import evaluate_colons
 from colonbench.benchmark.runfolder import read_rows
-from colonbench.completion import intervals
+from colonbench.completion import conformal, intervals
 from colonbench.completion.method import model_path, steps_version
 from colonbench.shards.dataset import generate
 from colonbench.shards.schema import sha256_file
@@ -73,7 +73,7 @@ def fit(seg: pd.DataFrame, scheme: str, level: float) -> dict:
         for k in keys.unique():
             sel = (keys == k).to_numpy()
             if sel.sum() >= intervals.MIN_GROUP:
-                low, high = intervals.conformal_quantiles(seg["true"][sel] - seg["estimate"][sel], level)
+                low, high = conformal.conformal_quantiles(seg["true"][sel] - seg["estimate"][sel], level)
                 out[k] = {"low": low, "high": high, "n": int(sel.sum())}
     return out
 

@@ -77,8 +77,10 @@ def intervals_rows(model: Path) -> list[str]:
     src = cal.source
     manifests = src.get("manifests") or {src.get("manifest", "?"): src.get("manifest_sha256", "")}  # one before 0147
     scaled = any("features" in g for g in cal.groups.values())
-    how = (f"scaled by `exp(w . f)` of the estimate's signals ({', '.join(next(iter(cal.groups.values()))['features'])})"
-           if scaled else f"grouped by {cal.scheme}")
+    two_sided = any("weights_low" in g for g in cal.groups.values())
+    names = ", ".join(next(iter(cal.groups.values())).get("features", ()))
+    how = (f"scaled by `exp(w . f)` of the estimate's signals ({names})"
+           + (", a scale for each end" if two_sided else "") if scaled else f"grouped by {cal.scheme}")
     if any("ranges" in g for g in cal.groups.values()):
         how += f", each clipped into the range calibrated on (the line up to {cal.longest_mm():.0f} mm)"
     held = src.get("held_out")
@@ -95,9 +97,15 @@ def intervals_rows(model: Path) -> list[str]:
     rows = [(k, g) for k, g in cal.groups.items() if k != "all" or scaled] + \
         ([("extent known", cal.known)] if cal.known else [])
     for key, g in rows:
-        ends = (f"{g['low']:+.2f} s to {g['high']:+.2f} s" if "features" in g
+        two = "weights_low" in g                       # this group's scale for each end (``scaled2...``)
+        ends = (f"{g['low']:+.2f} s_low to {g['high']:+.2f} s_high" if two
+                else f"{g['low']:+.2f} s to {g['high']:+.2f} s" if "features" in g
                 else f"{100 * g['low']:+.1f} to {100 * g['high']:+.1f} points")
-        weights = ", ".join(f"{n} {w:+.2f}" for n, w in zip(g.get("features", ()), g.get("weights", ())))
+        if "shift_low" in g:
+            ends += f" (colon shift {g['shift_low']:+.2f}, {g['shift_high']:+.2f} included)"
+        named = lambda ws: ", ".join(f"{n} {w:+.2f}" for n, w in zip(g.get("features", ()), ws))  # noqa: E731
+        weights = (f"s_low: {named(g['weights_low'])}; s_high: {named(g['weights_high'])}" if two
+                   else named(g.get("weights", ())))
         out.append(f"| {key} | {g['n']} | {ends} | {weights} |")
     for track, g in (cal.map.get("groups") or {}).items():
         out.append(f"| map segments, {track} | {g['n']} | {100 * g['low']:+.1f} to {100 * g['high']:+.1f} points | |")

@@ -9,15 +9,15 @@ import pandas as pd
 import pytest
 
 from colonbench.cli import main
-from colonbench.completion import intervals
+from colonbench.completion import conformal, intervals
 from colonbench.errors import InputError
 from colonbench.estimate import Estimate, as_estimate
 
 
 def test_conformal_quantiles_take_the_finite_sample_ranks():
     r = np.arange(1, 20) / 100.0                       # 19 residuals: ranks floor(20 * 0.05) = 1, ceil(20 * 0.95) = 19
-    assert intervals.conformal_quantiles(r, 0.9) == (0.01, 0.19)
-    assert intervals.conformal_quantiles(r[:5], 0.9) == (-1.0, 1.0)   # too few for a 90 % interval: everything
+    assert conformal.conformal_quantiles(r, 0.9) == (0.01, 0.19)
+    assert conformal.conformal_quantiles(r[:5], 0.9) == (-1.0, 1.0)   # too few for a 90 % interval: everything
 
 
 def test_a_calibration_covers_its_level_on_fresh_segments_of_the_same_kind():
@@ -241,11 +241,11 @@ def test_the_colon_is_the_unit_of_a_colon_scheme():
     weights = np.r_[np.full(200, 0.5 / 200), np.full(5, 0.5 / 5)]
     # effective size 1 / (200 (1/400)^2 + 5 (1/10)^2) = 19.51; ranks floor(20.51 * 0.25) = 5 and ceil(20.51 * 0.75)
     # = 16 of 19.51: the cumulated weight reaches 0.256 among the zeros and 0.820 at the small colon's 4th segment
-    assert intervals.weighted_quantiles(values, weights, 0.5) == (0.0, 0.3)
-    assert intervals.conformal_quantiles(values, 0.5) == (0.0, 0.0)
+    assert conformal.weighted_quantiles(values, weights, 0.5) == (0.0, 0.3)
+    assert conformal.conformal_quantiles(values, 0.5) == (0.0, 0.0)
     # equal weights give the split-conformal ranks
     r = np.linspace(-0.3, 0.3, 61)
-    assert intervals.weighted_quantiles(r, np.ones(61), 0.9) == pytest.approx(intervals.conformal_quantiles(r, 0.9))
+    assert conformal.weighted_quantiles(r, np.ones(61), 0.9) == pytest.approx(conformal.conformal_quantiles(r, 0.9))
     # a scheme that weighs colons refuses to fit without the weights
     with pytest.raises(ValueError, match="weight"):
         intervals.fit([0.5] * 40, [0.5] * 40, [{}] * 40, "scaled-colon", 0.3)
@@ -260,7 +260,7 @@ def test_the_shift_term_widens_by_the_colons_typical_shift():
     colons = np.repeat(["a", "b", "c", "d"], 41)
     weights = np.full(len(residual), 1 / len(residual))
     group = intervals._fit_group(residual, None, (), 0.9, weights=weights, colons=colons)
-    low, high = intervals.weighted_quantiles(np.tile(spread, 4), weights, 0.9)
+    low, high = conformal.weighted_quantiles(np.tile(spread, 4), weights, 0.9)
     # the colons' medians' weighted quartiles: -0.2 (a quarter of the weight reaches it) and 0 (three quarters)
     assert group["low"] == pytest.approx(low - 0.2) and group["high"] == pytest.approx(high + 0.0)
     # the novelty signals enter a colon scheme's scale as features, a signal the estimate lacks counting 0
@@ -405,16 +405,6 @@ def test_the_novelty_signals_measure_the_lumen_and_the_cloud():
     assert flipped == 0.0
     other = novelty.spread(lambda t: 1 - t, x, x[0, 0].numpy())        # a second pass that disagrees everywhere
     assert other > 0
-    # the holes' depth: a disk of radius 8 mm cut from the tube's wall at z = 40; its deepest vertices lie 8 mm from
-    # the rim, the 90th percentile of the distances of a disk's area from its rim is 8 (1 - sqrt(0.1)) = 5.47 mm
-    wall = np.c_[20 * np.cos(a.ravel()), 20 * np.sin(a.ravel()), z.ravel()]
-    dense = np.meshgrid(np.linspace(-np.pi / 4, np.pi / 4, 400), np.linspace(25, 55, 400))
-    patch = np.c_[20 * np.cos(dense[0].ravel()), 20 * np.sin(dense[0].ravel()), dense[1].ravel()]
-    cut = np.hypot(20 * dense[0].ravel(), dense[1].ravel() - 40) < 8
-    seen = np.vstack([wall[np.hypot(20 * np.arctan2(wall[:, 1], wall[:, 0]), wall[:, 2] - 40) >= 8 + 1e-9],
-                      patch[~cut]])
-    assert novelty.hole_depth(seen, patch[cut]) == pytest.approx(8 * (1 - np.sqrt(0.1)), abs=0.1)
-    assert novelty.hole_depth(seen, np.zeros((0, 3))) == 0.0
 
 
 def test_each_colon_weighs_the_same_and_each_set_a_third():
@@ -465,3 +455,63 @@ def test_a_binned_scheme_takes_each_band_of_the_scale_its_own_quantiles():
     same = intervals.fit(0.5 + residual, np.full(n, 0.5), flat, "binned-colon-novel", 0.4, weights=w)
     g = same.groups["all"]
     assert g["band_n"] == [n, 0, 0, 0] and g["band_low"] == [g["low"]] * 4 and g["band_high"] == [g["high"]] * 4
+
+
+def test_the_holes_depth_is_how_far_the_hole_vertices_lie_from_the_cloud():
+    """A disk of radius 8 mm cut from a tube's wall: the distances of a disk's area from its rim have their 90th
+    percentile at 8 (1 - sqrt(0.1)) = 5.47 mm; no hole vertex: 0. The depth enters the scale as ``depth`` (/ 10 mm), the
+    gap share as ``log_gap`` (-3 with none)."""
+    from colonbench.completion import novelty
+
+    a, z = np.meshgrid(np.linspace(0, 2 * np.pi, 72, endpoint=False), np.linspace(0, 80, 81))
+    wall = np.c_[20 * np.cos(a.ravel()), 20 * np.sin(a.ravel()), z.ravel()]
+    dense = np.meshgrid(np.linspace(-np.pi / 4, np.pi / 4, 400), np.linspace(25, 55, 400))
+    patch = np.c_[20 * np.cos(dense[0].ravel()), 20 * np.sin(dense[0].ravel()), dense[1].ravel()]
+    cut = np.hypot(20 * dense[0].ravel(), dense[1].ravel() - 40) < 8
+    seen = np.vstack([wall[np.hypot(20 * np.arctan2(wall[:, 1], wall[:, 0]), wall[:, 2] - 40) >= 8 + 1e-9],
+                      patch[~cut]])
+    assert novelty.hole_depth(seen, patch[cut]) == pytest.approx(8 * (1 - np.sqrt(0.1)), abs=0.1)
+    assert novelty.hole_depth(seen, np.zeros((0, 3))) == 0.0
+    f = intervals.features(0.7, {"hole_depth_mm": 12.0, "gap_share": 0.099}, ("depth", "log_gap"))
+    assert f == pytest.approx([1.2, -1.0])
+    assert intervals.features(0.7, {}, ("log_gap",))[0] == pytest.approx(-3.0)
+
+
+def test_a_band_too_small_in_effect_gets_the_pooled_quantiles():
+    """A band's size is its effective one (Kish's): 40 estimates of which one carries nearly all the weight count as
+    about one, under MIN_GROUP, and take the quantiles of all the scaled residuals."""
+    z = np.linspace(-1, 1, 200)
+    log_s = np.repeat([0.0, 1.0, 2.0, 3.0], 50)
+    w = np.full(200, 1 / 50)                       # each band weighs 1 in all
+    w[:49] = 1e-6
+    w[49] = 1 - 49e-6                              # band 0: 50 estimates, effective size about 1
+    out = conformal.band_quantiles(z, log_s, 0.9, w, None, 30)
+    assert out["band_n"] == [50, 50, 50, 50]
+    assert (out["band_low"][0], out["band_high"][0]) == (out["low"], out["high"])
+    assert (out["band_low"][1], out["band_high"][1]) == conformal.weighted_quantiles(z[50:100], w[50:100], 0.9)
+    assert out["band_edges"] == [0.5, 1.5, 2.5]     # between the order statistics: no estimate lies on an edge
+
+
+def test_the_fallback_ranks_under_coverage_before_over_coverage():
+    """calibrate_intervals.choose: no scheme within 85-95 % everywhere; one is safe but wide (a cell at 97 %), one
+    narrower but short (a cell at 84 %): the safe one is chosen, though its worst cell lies further from 90 %."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("calibrate_intervals",
+                                                  Path(__file__).resolve().parents[1] / "scripts" /
+                                                  "calibrate_intervals.py")
+    ci = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(ci)
+
+    def held(inside_a, inside_b, width):
+        rows = []
+        for cell, share in (("V_wide", inside_a), ("V_real gca00020", inside_b)):
+            for i in range(100):
+                rows.append({"set": "V_real" if cell.startswith("V_real") else "V_wide", "cell": cell,
+                             "noise_mm": 0.0, "inside": i < share, "width": width})
+        return pd.DataFrame(rows)
+
+    best, summary = ci.choose({"short": held(90, 84, 0.3), "safe": held(97, 90, 0.4)}, 0.9)
+    assert best == "safe" and summary["short"]["lowest"] == 84.0 and summary["safe"]["over_95"] == 1
+    best, _ = ci.choose({"short": held(90, 85, 0.3), "safe": held(97, 90, 0.4)}, 0.9)
+    assert best == "short"                          # within 85-95 % everywhere: it passes the rule outright
