@@ -425,9 +425,11 @@ class CompletionMethod:
         est = from_heatmap(p.heatmap, p.grid, pts, self.name, self.hole_distance, centerline_vox=cl,
                            cut_rims=self.cut_rims, shell_level=self.shell_level, gaps=self.gaps)
         est.seconds = {"check": t1 - t0, **shared, **{k: v for k, v in est.seconds.items() if k != "centerline"}}
+        t = time.perf_counter()
         est.signals.update(novelty.shape(pts, est.centerline), hole_depth_mm=novelty.hole_depth(pts, est.holes))
         if self.spread:                  # one more network pass: only where the intervals use it
             est.signals["spread"] = round(p.spread, 5)
+        est.seconds["novelty"] = time.perf_counter() - t
         if length_mm is not None:
             known_length(est, length_mm)
         if self.intervals is not None:
