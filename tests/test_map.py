@@ -92,7 +92,9 @@ def test_straight_tube_segments_get_their_known_coverage(tmp_path, capsys):
     assert summary["coverage"] == pytest.approx(whole, abs=0.05)
     assert summary["interruptions"] == [] and summary["orientation"].startswith("from the rectum")
     version = json.loads((tmp_path / "map" / "segments.json").read_text())["version"]    # the calibration used
-    assert summary["version"] == version == CompletionMethod().version and ",intervals=scaled-" in version
+    shipped = CompletionMethod()
+    assert summary["version"] == version == shipped.version
+    assert f",intervals={shipped.intervals.source['id']}" in version
     for name in ("segments.csv", "centerline.npy", "map.ply", "map.glb", "map.png"):
         assert (tmp_path / "map" / name).stat().st_size > 0
     # with the neighbours' points as context, coverage counted between the planes only
