@@ -383,8 +383,10 @@ class CompletionMethod:
         self.intervals = load_intervals(self.predictor.path, steps_version(shell_level, gaps, end_level, thin_above)
                                         if self.context_predictor is None else "context")
         self.version += f",intervals={self.intervals.source['id']}" if self.intervals is not None else ""
-        self.spread = self.intervals is not None and any("spread" in g.get("features", ()) for g in [
-            *self.intervals.groups.values(), self.intervals.known])   # signals["spread"] (novelty.spread) wanted
+        used = set() if self.intervals is None else {f for g in [*self.intervals.groups.values(),
+                                                                  self.intervals.known] for f in g.get("features", ())}
+        # the signals that cost a network pass (spread) or a search of the cloud (hole depth): only where used
+        self.spread, self.hole_depth = "spread" in used, "depth" in used
         self.meta = self.predictor.meta
 
     def predict(self, points) -> tuple[Grid, np.ndarray, np.ndarray]:
@@ -426,9 +428,7 @@ class CompletionMethod:
                            cut_rims=self.cut_rims, shell_level=self.shell_level, gaps=self.gaps)
         est.seconds = {"check": t1 - t0, **shared, **{k: v for k, v in est.seconds.items() if k != "centerline"}}
         t = time.perf_counter()
-        est.signals.update(novelty.shape(pts, est.centerline), hole_depth_mm=novelty.hole_depth(pts, est.holes))
-        if self.spread:                  # one more network pass: only where the intervals use it
-            est.signals["spread"] = round(p.spread, 5)
+        est.signals.update(novelty.signals(pts, est.centerline, est.holes, p if self.spread else None, self.hole_depth))
         est.seconds["novelty"] = time.perf_counter() - t
         if length_mm is not None:
             known_length(est, length_mm)

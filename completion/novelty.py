@@ -17,7 +17,8 @@ rims, the estimate and the line's length do not show. Three signals the estimate
 
 And one of how much of the wall the network had to make up (decision record 0161): ``hole_depth_mm``, how far the
 completed surface's hole vertices lie from the nearest point of the cloud (their 90th percentile, mm). A small
-hole ringed by seen wall is shallow; a wall no camera saw is deep, and there the network guesses.
+hole ringed by seen wall is shallow; a wall no camera saw is deep, and there the network guesses. ``spread`` and
+``hole_depth_mm`` are computed where a calibration uses them (:func:`signals`).
 """
 
 from __future__ import annotations
@@ -86,3 +87,16 @@ def hole_depth(points: np.ndarray, holes: np.ndarray) -> float:
     if not len(holes) or not len(points):
         return 0.0
     return round(float(np.percentile(cKDTree(np.asarray(points, float)).query(holes)[0], DEPTH_PERCENTILE)), 2)
+
+
+def signals(points: np.ndarray, line: np.ndarray, holes: np.ndarray, prediction=None, depth: bool = False) -> dict:
+    """An estimate's novelty signals: :func:`shape` always; ``spread`` where ``prediction`` is given (its
+    ``spread``: one more network pass) and ``hole_depth_mm`` where ``depth`` (a search of the cloud), as a
+    calibration's features use them. ``points``: the cloud, ``line``: its line between the planes, ``holes``: the
+    completed surface's hole vertices ((n, 3), (m, 3), (h, 3) mm)."""
+    out = shape(points, line)
+    if prediction is not None:
+        out["spread"] = round(prediction.spread, 5)
+    if depth:
+        out["hole_depth_mm"] = hole_depth(points, holes)
+    return out

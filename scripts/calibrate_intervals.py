@@ -290,7 +290,7 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=2, help="processes generating the data")
     args = ap.parse_args()
     method = CompletionMethod(args.model)
-    method.intervals, method.spread = None, True         # every candidate's signals, the network's spread too
+    method.intervals, method.spread, method.hole_depth = None, True, True     # every candidate's signals
     path = model_path(args.model)
     df = table(calibration_data(Path(args.data), args.workers), method, path)
     source = {"model": path.name, "model_sha256": sha256_file(path), "steps": steps_version(),

@@ -133,6 +133,8 @@ def test_estimate_writes_the_interval_and_takes_a_known_length(demo_data, tmp_pa
     assert a["coverage_interval"][0] <= a["coverage"] <= a["coverage_interval"][1]
     assert a["coverage_interval_level"] == 0.9 and isinstance(a["review"], list)
     assert a["signals"]["span_mm"] >= a["signals"]["length_mm"] - 0.5     # the line, run on to its planes
+    # the costly signals only where the shipped calibration's features use them: spread does, the holes' depth not
+    assert "spread" in a["signals"] and "hole_depth_mm" not in a["signals"]
     assert main(["estimate", str(tmp_path / "seg.npy"), "--out-dir", str(tmp_path / "b"), "--length-mm", "500"]) == 0
     b = json.loads((tmp_path / "b" / "seg.json").read_text())
     assert b["coverage"] < 0.2 and b["signals"]["extent"] == "known"
