@@ -67,6 +67,11 @@ SCALE_FEATURES = {
     "scaled2-colon-novel-gaps-shift": _GAPS, "binned-colon-novel-gaps-shift": _GAPS,
     "scaled2-colon-novel-depth-shift": _DEPTH, "binned-colon-novel-depth-shift": _DEPTH,
 }
+#: The known extent's extra features, per candidate of decision record 0163 (``K0``: the scheme's own).
+KNOWN_EXTRA = {"K0": (), "K1": ("share_off",)}
+#: What an estimate's review is scored by (decision record 0163), on its interval clipped to [0, 1]: its width, the
+#: farther end's distance from the estimate, or the low end's distance below it.
+REVIEW_SCORES = ("width", "reach", "drop")
 #: A ``binned`` scheme's bands of the fitted scale: cut at these colon-weighted quantiles of it (decision 0161).
 BAND_QUANTILES = (0.25, 0.5, 0.75)
 #: Added to ``|true - estimated|`` before its log is fitted: a floor of the scale (fractions).
@@ -83,7 +88,8 @@ def features(coverage: float, signals: dict, names) -> np.ndarray:
     times 10, ``radius_ratio``: the lumen's radius / the line, ``line_extent``: the line / the cloud's extent
     (:mod:`colonbench.completion.novelty`); ``log_gap``: ``log10(gap_share + 0.001)``, -3 where no wall-gap patch
     was found; ``depth``: the holes' depth (``hole_depth_mm``, :func:`colonbench.completion.novelty.hole_depth`) /
-    10 mm."""
+    10 mm; ``share_off``: ``|ln(length_share)|``, how far the span between the planes is from a length given
+    (:func:`known_length`), 0 where none is (a map's segment, whose planes are known)."""
     g = lambda k: float(signals.get(k, 0.0) or 0.0)          # noqa: E731
     length = g("length_mm")
     rims = int(g("rims"))
@@ -92,7 +98,8 @@ def features(coverage: float, signals: dict, names) -> np.ndarray:
              "doubtful": float(g("rims_doubtful") > 0), "gap_share": g("gap_share"), "spread": 10.0 * g("spread"),
              "radius_ratio": g("radius_mm") / max(length, 1.0),
              "line_extent": length / g("extent_mm") if g("extent_mm") > 0 else 0.0,
-             "log_gap": math.log10(max(g("gap_share"), 0.0) + 0.001), "depth": g("hole_depth_mm") / 10.0}
+             "log_gap": math.log10(max(g("gap_share"), 0.0) + 0.001), "depth": g("hole_depth_mm") / 10.0,
+             "share_off": abs(math.log(g("length_share"))) if g("length_share") > 0 else 0.0}
     out = np.array([value[n] for n in names], float)
     return np.where(np.isfinite(out), out, 0.0)
 
@@ -169,6 +176,10 @@ class Intervals:
     known : dict
         ``{"low", "high", "n"}`` of segments whose extent is known (``signals["extent"] == "known"``: a length
         given to :func:`known_length`, or planes the caller clips at, as ``colonbench map`` does).
+    review_by : str
+        What the review compares with :attr:`review_width` (:data:`REVIEW_SCORES`, :func:`review_score`).
+    review_by_known : str
+        What it compares with :attr:`review_known` ("": :attr:`review_by`).
     review_known : float
         The review width of the intervals of segments whose planes the caller gives (a map's segments; fraction;
         0: :attr:`review_width`), chosen as :attr:`review_width` is on intervals of known extent (decision record
@@ -184,6 +195,14 @@ class Intervals:
     known: dict = field(default_factory=dict)
     map: dict = field(default_factory=dict)
     review_known: float = 0.0
+    review_by: str = "width"
+    review_by_known: str = ""
+
+    def __post_init__(self):
+        for by in (self.review_by, self.review_by_known or self.review_by):
+            if by not in REVIEW_SCORES:
+                raise InputError(f"a calibration's review score must be one of {', '.join(REVIEW_SCORES)}, "
+                                 f"not {by!r}")
 
     def quantiles(self, coverage: float, signals: dict) -> tuple[float, float]:
         """The residual quantiles of an estimate's group (the coarser scheme's group where its own had too few
@@ -227,11 +246,13 @@ class Intervals:
         # planes the caller clips at (a map's segment), not a length given (known_length sets length_share)
         known = est.signals.get("extent") == "known" and "length_share" not in est.signals and self.review_known > 0
         review_width = self.review_known if known else self.review_width
-        if width <= review_width:           # sure enough: the notes (the rims', a known length's) are reasons only
+        by = (self.review_by_known or self.review_by) if known else self.review_by
+        score = review_score(est.coverage, *est.coverage_interval, by)
+        if score <= review_width:           # sure enough: the notes (the rims', a known length's) are reasons only
             est.review.clear()              # where it is not
             est.review.extend([long] if long else [])
             return
-        est.review.append(f"interval {100 * width:.0f} points wide (more than {100 * review_width:.0f})")
+        est.review.append(_review_reason(width, score, review_width, by))
         est.review.extend([long] if long else [])
         if int(est.signals.get("rims", 0)) == 0 and est.signals.get("extent") != "known":
             est.review.append("no cut rim at either end: the segment's ends are the line's own, it may go on unseen")
@@ -255,7 +276,32 @@ class Intervals:
             del out["map"]
         if not out["review_known"]:        # no review width of its own for the known extent: as before it existed
             del out["review_known"]
+        for k in ("review_by", "review_by_known"):    # scored by width as before a score could be chosen
+            if out[k] in ("width", ""):
+                del out[k]
         return out
+
+
+def review_score(coverage: float, low: float, high: float, by: str = "width") -> float:
+    """What an estimate's review is scored by (decision record 0163): ``width`` ``high - low``, ``reach``
+    ``max(coverage - low, high - coverage)`` or ``drop`` ``coverage - low`` (its interval ``[low, high]``, clipped to
+    [0, 1]; fractions)."""
+    if by == "width":
+        return high - low
+    if by == "reach":
+        return max(coverage - low, high - coverage)
+    if by == "drop":
+        return coverage - low
+    raise ValueError(f"unknown review score {by!r}: one of {', '.join(REVIEW_SCORES)}")
+
+
+def _review_reason(width: float, score: float, threshold: float, by: str) -> str:
+    """The review's reason for an interval whose score exceeds its threshold (fractions, in points)."""
+    if by == "width":
+        return f"interval {100 * width:.0f} points wide (more than {100 * threshold:.0f})"
+    what = "reaches" if by == "reach" else "reaches down"
+    return (f"interval {100 * width:.0f} points wide: it {what} {100 * score:.0f} points from the estimate (more than "
+            f"{100 * threshold:.0f})")
 
 
 def _scale_of(group: dict, coverage: float, signals: dict, side: str = "") -> float:
@@ -386,12 +432,16 @@ def fit(true, estimated, signals: list, scheme: str, review_width: float, level:
     return Intervals(scheme, level, groups, review_width, dict(source or {}))
 
 
-def fit_known(cal: Intervals, true, estimated, signals: list | None = None, weights=None, colons=None) -> None:
+def fit_known(cal: Intervals, true, estimated, signals: list | None = None, weights=None, colons=None,
+              extra=()) -> None:
     """Calibrate :attr:`Intervals.known` on segments estimated with their lengths known (:func:`known_length`),
-    scaled and weighted as the calibration's scheme is (``signals``: the estimates' signals, needed then)."""
+    scaled and weighted as the calibration's scheme is (``signals``: the estimates' signals, needed then; with
+    ``length_share`` where the length was given), its scale with the features ``extra`` too (:data:`KNOWN_EXTRA`)."""
     residual = np.asarray(true, float) - np.asarray(estimated, float)
     scaled = _scaled(cal.scheme)
-    names = SCALE_FEATURES[scaled] if scaled else ()
+    if extra and not scaled:
+        raise ValueError(f"interval scheme {cal.scheme!r} has no scale for the known extent's features {extra}")
+    names = SCALE_FEATURES[scaled] + tuple(extra) if scaled else ()
     x = np.array([features(c, sig, names) for c, sig in zip(estimated, signals)]) if scaled else None
     weights, colons = _unit_weights(cal.scheme, weights, colons, len(residual))
     cal.known = _fit_group(residual, x, names, cal.level, _two_sided(scaled), weights, colons, _binned(scaled))

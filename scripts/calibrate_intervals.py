@@ -124,13 +124,21 @@ def unit_weights(df: pd.DataFrame) -> np.ndarray:
     return (1.0 / (n_sets * colons_in_set * per_colon)).to_numpy(float)
 
 
-def by_colon(df: pd.DataFrame, scheme: str, level: float, known: bool = False) -> pd.DataFrame:
+def known_signals(df: pd.DataFrame) -> list[dict]:
+    """The estimates' signals with each segment's true length given: ``length_share`` as
+    :func:`intervals.known_length` sets it."""
+    share = (df["span_mm"] / df["segment_mm"]).round(4)
+    return [{**s, "length_share": float(v)} for s, v in zip(signals(df), share)]
+
+
+def by_colon(df: pd.DataFrame, scheme: str, level: float, known: bool = False, extra=()) -> pd.DataFrame:
     """``df`` with each row's interval (``low``, ``high``) from a calibration fitted on the other colons
-    (leave-one-colon-out); ``known``: the known-length interval around the length-scaled estimate."""
+    (leave-one-colon-out); ``known``: the known-length interval around the length-scaled estimate, its scale with
+    the features ``extra`` too (decision record 0163)."""
     out = df.copy()
     est = known_estimates(df) if known else df["estimate"].to_numpy(float)
     out["estimate_used"] = est
-    sig = signals(df)
+    sig = known_signals(df) if known else signals(df)
     low, high = np.empty(len(df)), np.empty(len(df))
     colons = df["colon"].to_numpy()
     for colon in np.unique(colons):
@@ -139,7 +147,7 @@ def by_colon(df: pd.DataFrame, scheme: str, level: float, known: bool = False) -
         w, c = unit_weights(part), colons[fit_on]
         if known:
             cal = intervals.Intervals(scheme, level, {}, 1.0)
-            intervals.fit_known(cal, df["true"].to_numpy(float)[fit_on], est[fit_on], sig_fit, w, c)
+            intervals.fit_known(cal, df["true"].to_numpy(float)[fit_on], est[fit_on], sig_fit, w, c, extra)
         else:
             cal = intervals.fit(df["true"].to_numpy(float)[fit_on], est[fit_on], sig_fit, scheme, 1.0, level,
                                 weights=w, colons=c)
@@ -194,28 +202,43 @@ def review_cells(held: pd.DataFrame) -> list[str]:
     return sorted(c for c in held["cell"].unique() if c.startswith("V_real ")) + ["V_wide"]
 
 
-def review_width(held: pd.DataFrame) -> tuple[float, dict]:
+def review_width(held: pd.DataFrame, by: str = "width") -> tuple[float, dict]:
     """0325's review width: the largest at which the held-out intervals flag at least :data:`REVIEW_RECALL` of the
     estimates off by more than :data:`BIG` in each of :func:`review_cells` (else the one closest in the worst);
-    with each cell's recall and precision there."""
+    with each cell's recall and precision there. ``by``: what an interval is scored by
+    (:func:`intervals.review_score`, decision record 0163)."""
     big = (held["true"] - held["estimate_used"]).abs() > BIG
+    score = pd.Series([intervals.review_score(c, lo, hi, by) for c, lo, hi in
+                       zip(held["estimate_used"], held["low"], held["high"])], index=held.index)
     sets = {name: held["cell"] == name for name in review_cells(held)}
     best, best_recall = 0.0, -1.0
-    for w in np.unique(np.round(held["width"], 4))[::-1]:
-        flag = held["width"] > w - 1e-12
+    for w in np.unique(np.round(score, 4))[::-1]:
+        flag = score > w - 1e-12
         recall = min(float((flag & big & s).sum() / max((big & s).sum(), 1)) for s in sets.values())
         if recall >= REVIEW_RECALL:
             best = float(w)
             break
         if recall > best_recall:
             best, best_recall = float(w), recall
-    flag = held["width"] > best - 1e-12
+    flag = score > best - 1e-12
     report = {}
     for name, s in {**sets, **{c: held["cell"] == c for c in held["cell"].unique() if c not in sets}}.items():
         report[name] = {"recall": round(float((flag & big & s).sum() / max((big & s).sum(), 1)), 3),
                         "precision": round(float((flag & big & s).sum() / max((flag & s).sum(), 1)), 3),
                         "flagged": round(float((flag & s).sum() / max(s.sum(), 1)), 3), "off": int((big & s).sum())}
     return best - 1e-6, report
+
+
+def choose_review(reviews: dict, cells_caught: list[str]) -> str:
+    """0163's rule: of the review scores whose threshold flags :data:`REVIEW_RECALL` of the far-off estimates in each
+    of ``cells_caught``, the one whose lower precision over the real colons held out is highest; else the one with
+    the highest lowest recall; a tie keeps the first (``width``). ``reviews``: score -> (threshold, report)."""
+    real = [c for c in cells_caught if c.startswith("V_real ")]
+    recall = {by: min(r[c]["recall"] for c in cells_caught) for by, (_, r) in reviews.items()}
+    precision = {by: min(r[c]["precision"] for c in real) for by, (_, r) in reviews.items()}
+    meets = [by for by in reviews if recall[by] >= REVIEW_RECALL]
+    key = precision if meets else recall
+    return max(meets or list(reviews), key=lambda by: key[by])       # max keeps the first of equals
 
 
 def with_units(df: pd.DataFrame) -> pd.DataFrame:
@@ -238,19 +261,30 @@ def calibrate(df: pd.DataFrame, level: float, source: dict) -> intervals.Interva
               f"{100 * (g['estimate'] - g['true']).mean():+.2f}")
     held = {scheme: by_colon(cal_df, scheme, level) for scheme in SCHEMES}
     best, summary = choose(held, level)
-    width, review = review_width(held[best])
-    print(f"\nchosen: {best}; review width {100 * width:.1f} points: " + "; ".join(
-        f"{k} recall {100 * v['recall']:.0f} % of {v['off']}, precision {100 * v['precision']:.0f} %, flagged "
-        f"{100 * v['flagged']:.0f} %" for k, v in review.items()))
-    known_held = by_colon(cal_df, best, level, known=True)
-    known_width, known_review = review_width(known_held)
-    print(f"\nknown length, held out:\n{cells(known_held).to_string()}\nits review width {100 * known_width:.1f} "
-          "points: " + "; ".join(f"{k} recall {100 * v['recall']:.0f} % of {v['off']}, precision "
-                                 f"{100 * v['precision']:.0f} %" for k, v in known_review.items()))
+    reviews = {by: review_width(held[best], by) for by in intervals.REVIEW_SCORES}
+    for by, (w_by, r_by) in reviews.items():
+        print(f"\nreview by {by}: threshold {100 * w_by:.1f} points: " + "; ".join(
+            f"{k} recall {100 * v['recall']:.0f} % of {v['off']}, precision {100 * v['precision']:.0f} %, flagged "
+            f"{100 * v['flagged']:.0f} %" for k, v in r_by.items()))
+    by = choose_review(reviews, review_cells(held[best]))
+    width, review = reviews[by]
+    print(f"\nchosen: {best}, reviewed by {by} over {100 * width:.1f} points")
+    print("\nknown length, held out (decision record 0163's candidates):")
+    known_held = {k: by_colon(cal_df, best, level, known=True, extra=e) for k, e in intervals.KNOWN_EXTRA.items()}
+    known_choice, known_summary = choose(known_held, level)
+    known_reviews = {b: review_width(known_held[known_choice], b) for b in intervals.REVIEW_SCORES}
+    for b, (w_b, r_b) in known_reviews.items():
+        print(f"\nknown length {known_choice}, review by {b}: threshold {100 * w_b:.1f} points: " + "; ".join(
+            f"{k} recall {100 * v['recall']:.0f} % of {v['off']}, precision {100 * v['precision']:.0f} %, flagged "
+            f"{100 * v['flagged']:.0f} %" for k, v in r_b.items()))
+    by_known = choose_review(known_reviews, review_cells(known_held[known_choice]))
+    known_width, known_review = known_reviews[by_known]
+    print(f"\nknown length: {known_choice}, reviewed by {by_known} over {100 * known_width:.1f} points")
     w, c = unit_weights(cal_df), cal_df["colon"].to_numpy()
     cal = intervals.fit(cal_df["true"], cal_df["estimate"], signals(cal_df), best, width, level, weights=w, colons=c)
-    intervals.fit_known(cal, cal_df["true"], known_estimates(cal_df), signals(cal_df), w, c)
-    cal.review_known = known_width
+    intervals.fit_known(cal, cal_df["true"], known_estimates(cal_df), known_signals(cal_df), w, c,
+                        intervals.KNOWN_EXTRA[known_choice])
+    cal.review_known, cal.review_by, cal.review_by_known = known_width, by, by_known
     reported = df[df["set"] == "train_real"]
     if len(reported):                    # never calibrated on: the calibration's intervals, held out by construction
         lo_hi = np.array([cal.interval(c, s) for c, s in zip(reported["estimate"], signals(reported))])
@@ -263,8 +297,12 @@ def calibrate(df: pd.DataFrame, level: float, source: dict) -> intervals.Interva
                   "not_calibrated_on": "the real training colons (calibration-real.yaml and calibration.yaml's real "
                                        "segments): the network saw them",
                   "schemes": summary, "review": review, "known_review": known_review,
+                  "review_scores": {k: {"threshold": round(float(v[0]), 6), "cells": v[1]} for k, v in reviews.items()},
+                  "known_features": known_choice, "known_candidates": known_summary,
+                  "known_review_scores": {k: {"threshold": round(float(v[0]), 6), "cells": v[1]}
+                                          for k, v in known_reviews.items()},
                   "known_held_out": {f"{s} {n:g} mm": {"inside": float(r["inside"]), "width": float(r["width"])}
-                                     for (s, n), r in cells(known_held).iterrows()}}
+                                     for (s, n), r in cells(known_held[known_choice]).iterrows()}}
     digest = hashlib.sha256(json.dumps(cal.to_json(), sort_keys=True).encode()).hexdigest()[:8]
     cal.source["id"] = f"{best}-{digest}"
     return cal
