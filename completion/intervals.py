@@ -181,10 +181,9 @@ class Intervals:
     review_by_known : str
         What it compares with :attr:`review_known` ("": :attr:`review_by`).
     review_known : float
-        The review width of the intervals of segments whose planes the caller gives (a map's segments; fraction;
-        0: :attr:`review_width`), chosen as :attr:`review_width` is on intervals of known extent (decision record
-        0325): a map's segment is flagged when its interval is wider than its calibration's. A length given
-        (:func:`known_length`) keeps :attr:`review_width`.
+        The review threshold of the intervals of known extent (fraction; 0: :attr:`review_width`): a segment whose
+        planes the caller gives (a map's) or whose length is given (:func:`known_length`; decision record 0163,
+        round 8), chosen as :attr:`review_width` is on the known-length intervals held out (decision record 0325).
     """
 
     scheme: str
@@ -230,7 +229,8 @@ class Intervals:
 
     def apply(self, est) -> None:
         """Set an :class:`~colonbench.estimate.Estimate`'s ``coverage_interval``, ``interval_level`` and ``review``
-        from its coverage and its signals: an interval wider than :attr:`review_width` is a reason, and then so are
+        from its coverage and its signals: an interval whose score (:attr:`review_by`) exceeds :attr:`review_width`
+        (:attr:`review_known`, :attr:`review_by_known` where its extent is known) is a reason, and then so are
         the rims' notes and a known length's; a line over :data:`LONG_SHARE` times :meth:`longest_mm` always is."""
         if not np.isfinite(est.coverage):
             return
@@ -243,8 +243,8 @@ class Intervals:
                 f"the intervals were calibrated on ({longest:.0f} mm): longer than one segment, outside what the "
                 "method and its interval were tested on (cut the reconstruction into segments: colonbench map does)"
                 if longest and line > LONG_SHARE * longest else "")
-        # planes the caller clips at (a map's segment), not a length given (known_length sets length_share)
-        known = est.signals.get("extent") == "known" and "length_share" not in est.signals and self.review_known > 0
+        # planes the caller clips at (a map's segment) or a length given (decision record 0163, round 8)
+        known = est.signals.get("extent") == "known" and self.review_known > 0
         review_width = self.review_known if known else self.review_width
         by = (self.review_by_known or self.review_by) if known else self.review_by
         score = review_score(est.coverage, *est.coverage_interval, by)

@@ -12,10 +12,12 @@ and steps in ``<data>/<manifest>``), then chooses the scheme by decision record 
 leave-one-colon-out (a colon's estimates get the intervals of a calibration fitted on all the other colons); of
 those whose truth-inside share lies within 85-95 % in each cell (``V_wide``, ``V_paper`` and each real colon on its
 own, at each noise level), the one with the smallest mean width over the real colons (else the one whose lowest cell
-is highest, counted below 85 %, then with the fewest cells above 95 %, then the narrowest). The review widths (of
-the segments' intervals and of the known extent's) come from the same held-out intervals. The chosen scheme is
-fitted on all three sets and written beside the model (``<model>.intervals.json``), with the known-length interval
-fitted on the same segments with their true lengths.
+is highest, counted below 85 %, then with the fewest cells above 95 %, then the narrowest). The known-length
+interval's features (``K0``: the scheme's, ``K1``: with the share of the length the span covers) are chosen by the
+same rule on the held-out known-length intervals. The review rules, each a score of the interval and its threshold,
+come from the same held-out intervals, for the segments and for the known extent (decision record 0163). The chosen
+scheme is fitted on all three sets and written beside the model (``<model>.intervals.json``), with the known-length
+interval fitted on the same segments with their true lengths.
 Prints every scheme's held-out table.
 """
 
@@ -298,6 +300,7 @@ def calibrate(df: pd.DataFrame, level: float, source: dict) -> intervals.Interva
                                        "segments): the network saw them",
                   "schemes": summary, "review": review, "known_review": known_review,
                   "review_scores": {k: {"threshold": round(float(v[0]), 6), "cells": v[1]} for k, v in reviews.items()},
+                  "review_known_for": "a map's segments and a length given (decision record 0163, round 8)",
                   "known_features": known_choice, "known_candidates": known_summary,
                   "known_review_scores": {k: {"threshold": round(float(v[0]), 6), "cells": v[1]}
                                           for k, v in known_reviews.items()},

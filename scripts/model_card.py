@@ -67,6 +67,13 @@ def main(argv=None):
     return 0
 
 
+def _flags(by: str, threshold: float) -> str:
+    """What makes an interval flag its estimate, in words (:func:`colonbench.completion.intervals.review_score`)."""
+    where = {"width": "wider than", "reach": "reaching from its estimate more than",
+             "drop": "reaching below its estimate more than"}[by]
+    return f"an interval {where} {100 * threshold:.0f} points"
+
+
 def intervals_rows(model: Path) -> list[str]:
     """The card's section on the model's coverage intervals, from its calibration file (none: no section)."""
     from colonbench.completion import intervals
@@ -90,9 +97,9 @@ def intervals_rows(model: Path) -> list[str]:
            f"{' and '.join(f'`{name}` (sha256 `{sha[:16]}...`)' for name, sha in manifests.items())}, "
            f"{src.get('estimates')} estimates at noise {', '.join(f'{x:g}' for x in src.get('noise_mm', []))} mm"
            + (f" (chosen {held}; left out: {src.get('not_calibrated_on')})" if held else "")
-           + f"; an interval wider than {100 * cal.review_width:.0f} points flags its estimate for review"
-           + (f" ({100 * cal.review_known:.0f} points for a map's segment)" if cal.review_known
-              else "") + ".", "",
+           + f"; {_flags(cal.review_by, cal.review_width)} flags its estimate for review"
+           + (f" (a map's segment: {_flags(cal.review_by_known or cal.review_by, cal.review_known)})"
+              if cal.review_known else "") + ".", "",
            "| group | calibration estimates | interval around the estimate | scale weights |", "|---|---:|---|---|"]
     rows = [(k, g) for k, g in cal.groups.items() if k != "all" or scaled] + \
         ([("extent known", cal.known)] if cal.known else [])

@@ -86,9 +86,9 @@ def test_review_fires_on_a_wide_interval_and_then_names_a_doubtful_rim_unless_th
 
 
 def test_a_known_extent_is_reviewed_against_its_own_width():
-    """``review_known`` (decision record 0325): a segment whose planes the caller gives (a map's) is flagged where its
-    interval is wider than the known extent's review width, not the segments' wider one; a length given keeps the
-    segments' width; a calibration without one keeps the segments' width, and its file says nothing of it."""
+    """``review_known`` (decision record 0325): a segment whose planes the caller gives (a map's) or whose length is
+    given (0163, round 8) is flagged where its interval is wider than the known extent's review width, not the
+    segments' wider one; a calibration without one keeps the segments' width, and its file says nothing of it."""
     cal = intervals.fit([0.8] * 40, [0.8] * 40, [{"length_mm": 70.0, "rims": 2}] * 40, "length", 0.4)
     cal.known = {"low": -0.1, "high": 0.1, "n": 40}                  # a known extent's interval: 20 points
     known = {"length_mm": 70.0, "rims": 2, "extent": "known"}
@@ -100,8 +100,8 @@ def test_a_known_extent_is_reviewed_against_its_own_width():
     cal.apply(est)
     assert est.review == ["interval 20 points wide (more than 15)"] and cal.to_json()["review_known"] == 0.15
     given = Estimate(0.5, np.zeros((0, 3)), np.zeros((0, 3)), "m", signals={**known, "length_share": 1.0})
-    cal.apply(given)                    # a length given (known_length): the segments' review width
-    assert given.review == []
+    cal.apply(given)                    # a length given (known_length): the known extent's review width too
+    assert given.review == ["interval 20 points wide (more than 15)"]
     segment = Estimate(0.5, np.zeros((0, 3)), np.zeros((0, 3)), "m", signals={"length_mm": 70.0, "rims": 2})
     cal.groups["length>=60"].update(low=-0.1, high=0.1)             # 20 points, under the segments' 40
     cal.apply(segment)
