@@ -60,12 +60,14 @@ _SIGNALS = ("one", "estimate", "length", "span_ratio", "no_rim", "one_rim", "dou
 _NOVEL = _SIGNALS + ("spread", "radius_ratio", "line_extent")     # decision record 0325
 _GAPS = _NOVEL + ("log_gap",)                                       # decision record 0161
 _DEPTH = _NOVEL + ("depth",)                                        # decision record 0161, round 5
+_MISFIT = _NOVEL + ("misfit",)                                      # decision record 0165
 SCALE_FEATURES = {
     "scaled": _SIGNALS, "scaled2": _SIGNALS, "scaled2-gaps": _SIGNALS + ("gap_share",), "scaled-colon": _SIGNALS,
     "scaled-colon-novel": _NOVEL, "scaled-colon-novel-shift": _NOVEL, "scaled2-colon-novel": _NOVEL,
     "scaled2-colon-novel-shift": _NOVEL, "binned-colon-novel": _NOVEL, "binned-colon-novel-shift": _NOVEL,
     "scaled2-colon-novel-gaps-shift": _GAPS, "binned-colon-novel-gaps-shift": _GAPS,
     "scaled2-colon-novel-depth-shift": _DEPTH, "binned-colon-novel-depth-shift": _DEPTH,
+    "scaled2-colon-novel-misfit-shift": _MISFIT, "binned-colon-novel-misfit-shift": _MISFIT,
 }
 #: The known extent's extra features, per candidate of decision record 0163 (``K0``: the scheme's own).
 KNOWN_EXTRA = {"K0": (), "K1": ("share_off",)}
@@ -88,8 +90,10 @@ def features(coverage: float, signals: dict, names) -> np.ndarray:
     times 10, ``radius_ratio``: the lumen's radius / the line, ``line_extent``: the line / the cloud's extent
     (:mod:`colonbench.completion.novelty`); ``log_gap``: ``log10(gap_share + 0.001)``, -3 where no wall-gap patch
     was found; ``depth``: the holes' depth (``hole_depth_mm``, :func:`colonbench.completion.novelty.hole_depth`) /
-    10 mm; ``share_off``: ``|ln(length_share)|``, how far the span between the planes is from a length given
-    (:func:`known_length`), 0 where none is (a map's segment, whose planes are known)."""
+    10 mm; ``misfit``: how far the cloud lies from the completed wall (``wall_misfit_mm``, mm,
+    :func:`colonbench.completion.novelty.wall_misfit`); ``share_off``: ``|ln(length_share)|``, how far the span
+    between the planes is from a length given (:func:`known_length`), 0 where none is (a map's segment, whose planes
+    are known)."""
     g = lambda k: float(signals.get(k, 0.0) or 0.0)          # noqa: E731
     length = g("length_mm")
     rims = int(g("rims"))
@@ -99,6 +103,7 @@ def features(coverage: float, signals: dict, names) -> np.ndarray:
              "radius_ratio": g("radius_mm") / max(length, 1.0),
              "line_extent": length / g("extent_mm") if g("extent_mm") > 0 else 0.0,
              "log_gap": math.log10(max(g("gap_share"), 0.0) + 0.001), "depth": g("hole_depth_mm") / 10.0,
+             "misfit": g("wall_misfit_mm"),
              "share_off": abs(math.log(g("length_share"))) if g("length_share") > 0 else 0.0}
     out = np.array([value[n] for n in names], float)
     return np.where(np.isfinite(out), out, 0.0)
@@ -276,9 +281,10 @@ class Intervals:
             del out["map"]
         if not out["review_known"]:        # no review width of its own for the known extent: as before it existed
             del out["review_known"]
-        for k in ("review_by", "review_by_known"):    # scored by width as before a score could be chosen
-            if out[k] in ("width", ""):
-                del out[k]
+        if out["review_by"] == "width":    # scored by width, as before a score could be chosen
+            del out["review_by"]
+        if not out["review_by_known"]:     # the known extent scored as the segments are
+            del out["review_by_known"]
         return out
 
 

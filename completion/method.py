@@ -385,8 +385,8 @@ class CompletionMethod:
         self.version += f",intervals={self.intervals.source['id']}" if self.intervals is not None else ""
         used = set() if self.intervals is None else {f for g in [*self.intervals.groups.values(),
                                                                   self.intervals.known] for f in g.get("features", ())}
-        # the signals that cost a network pass (spread) or a search of the cloud (hole depth): only where used
-        self.spread, self.hole_depth = "spread" in used, "depth" in used
+        # the signals that cost a network pass (spread) or a search (hole depth, wall misfit): only where used
+        self.spread, self.hole_depth, self.misfit = "spread" in used, "depth" in used, "misfit" in used
         self.meta = self.predictor.meta
 
     def predict(self, points) -> tuple[Grid, np.ndarray, np.ndarray]:
@@ -428,7 +428,8 @@ class CompletionMethod:
                            cut_rims=self.cut_rims, shell_level=self.shell_level, gaps=self.gaps)
         est.seconds = {"check": t1 - t0, **shared, **{k: v for k, v in est.seconds.items() if k != "centerline"}}
         t = time.perf_counter()
-        est.signals.update(novelty.signals(pts, est.centerline, est.holes, p if self.spread else None, self.hole_depth))
+        est.signals.update(novelty.signals(pts, est.centerline, est.holes, p if self.spread else None, self.hole_depth,
+                                           est.mesh_vertices if self.misfit else None))
         est.seconds["novelty"] = time.perf_counter() - t
         if length_mm is not None:
             known_length(est, length_mm)

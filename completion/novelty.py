@@ -17,8 +17,11 @@ rims, the estimate and the line's length do not show. Three signals the estimate
 
 And one of how much of the wall the network had to make up (decision record 0161): ``hole_depth_mm``, how far the
 completed surface's hole vertices lie from the nearest point of the cloud (their 90th percentile, mm). A small
-hole ringed by seen wall is shallow; a wall no camera saw is deep, and there the network guesses. ``spread`` and
-``hole_depth_mm`` are computed where a calibration uses them (:func:`signals`).
+hole ringed by seen wall is shallow; a wall no camera saw is deep, and there the network guesses. And one of how
+well the network's wall fits what was seen (decision record 0165): ``wall_misfit_mm``, how far the cloud's points
+lie from the completed surface (their 90th percentile, mm); a network that knows a colon puts its wall through the
+points it was given. ``spread``, ``hole_depth_mm`` and ``wall_misfit_mm`` are computed where a calibration uses them
+(:func:`signals`).
 """
 
 from __future__ import annotations
@@ -89,14 +92,33 @@ def hole_depth(points: np.ndarray, holes: np.ndarray) -> float:
     return round(float(np.percentile(cKDTree(np.asarray(points, float)).query(holes)[0], DEPTH_PERCENTILE)), 2)
 
 
-def signals(points: np.ndarray, line: np.ndarray, holes: np.ndarray, prediction=None, depth: bool = False) -> dict:
+#: The percentile of the cloud's distances to the completed surface :func:`wall_misfit` reports.
+MISFIT_PERCENTILE = 90.0
+
+
+def wall_misfit(points: np.ndarray, vertices: np.ndarray) -> float:
+    """``wall_misfit_mm``: the :data:`MISFIT_PERCENTILE`-th percentile of the distances (mm) from the cloud's points
+    (``points``, (n, 3) mm) to the nearest vertex of the completed surface (``vertices``, (v, 3) mm, holes
+    included); 0 where either is empty."""
+    vertices = np.asarray(vertices, float).reshape(-1, 3)
+    if not len(vertices) or not len(points):
+        return 0.0
+    d = cKDTree(vertices).query(np.asarray(points, float))[0]
+    return round(float(np.percentile(d, MISFIT_PERCENTILE)), 3)
+
+
+def signals(points: np.ndarray, line: np.ndarray, holes: np.ndarray, prediction=None, depth: bool = False,
+            vertices: np.ndarray | None = None) -> dict:
     """An estimate's novelty signals: :func:`shape` always; ``spread`` where ``prediction`` is given (its
-    ``spread``: one more network pass) and ``hole_depth_mm`` where ``depth`` (a search of the cloud), as a
-    calibration's features use them. ``points``: the cloud, ``line``: its line between the planes, ``holes``: the
-    completed surface's hole vertices ((n, 3), (m, 3), (h, 3) mm)."""
+    ``spread``: one more network pass), ``hole_depth_mm`` where ``depth`` (a search of the cloud) and
+    ``wall_misfit_mm`` where the completed surface's ``vertices`` are given (a search of them), as a calibration's
+    features use them. ``points``: the cloud, ``line``: its line between the planes, ``holes``: the completed
+    surface's hole vertices ((n, 3), (m, 3), (h, 3) mm)."""
     out = shape(points, line)
     if prediction is not None:
         out["spread"] = round(prediction.spread, 5)
     if depth:
         out["hole_depth_mm"] = hole_depth(points, holes)
+    if vertices is not None:
+        out["wall_misfit_mm"] = wall_misfit(points, vertices)
     return out

@@ -44,15 +44,15 @@ ROOT = Path(__file__).resolve().parents[1] / "data_manifests"
 MANIFESTS = {"calibration": "V_wide", "calibration-paper": "V_paper", "validation-real": "V_real",
              "calibration-real": "train_real"}
 CALIBRATED = ("V_wide", "V_paper", "V_real")
-#: Decision records 0325's and 0161's candidates.
+#: Decision records 0325's, 0161's and 0165's candidates.
 SCHEMES = ("scaled", "scaled-colon", "scaled-colon-novel", "scaled-colon-novel-shift", "scaled2-colon-novel",
            "scaled2-colon-novel-shift", "binned-colon-novel", "binned-colon-novel-shift",
            "scaled2-colon-novel-gaps-shift", "binned-colon-novel-gaps-shift", "scaled2-colon-novel-depth-shift",
-           "binned-colon-novel-depth-shift")
+           "binned-colon-novel-depth-shift", "scaled2-colon-novel-misfit-shift", "binned-colon-novel-misfit-shift")
 NOISE_MM = (0.0, 0.5)
 #: The signals an estimate's interval may be scaled by, as columns of the estimates' table.
 SIGNALS = ("rims", "rims_doubtful", "gap_share", "length_mm", "span_mm", "spread", "radius_mm", "extent_mm",
-           "hole_depth_mm")
+           "hole_depth_mm", "wall_misfit_mm")
 #: The review rule (decision record 0325): flag at least this share of the estimates off by more than BIG in each
 #: real colon held out and in V_wide.
 REVIEW_RECALL, BIG = 0.75, 0.15
@@ -243,6 +243,20 @@ def choose_review(reviews: dict, cells_caught: list[str]) -> str:
     return max(meets or list(reviews), key=lambda by: key[by])       # max keeps the first of equals
 
 
+def review_rule(held: pd.DataFrame, label: str) -> tuple[str, float, dict, dict]:
+    """0163's review rule on held-out intervals: each score's threshold (:func:`review_width`), printed, and the score
+    :func:`choose_review` takes; returns the score, its threshold, its report, and every score's (threshold,
+    report)."""
+    reviews = {by: review_width(held, by) for by in intervals.REVIEW_SCORES}
+    for by, (w_by, r_by) in reviews.items():
+        print(f"\n{label}, review by {by}: threshold {100 * w_by:.1f} points: " + "; ".join(
+            f"{k} recall {100 * v['recall']:.0f} % of {v['off']}, precision {100 * v['precision']:.0f} %, flagged "
+            f"{100 * v['flagged']:.0f} %" for k, v in r_by.items()))
+    by = choose_review(reviews, review_cells(held))
+    print(f"\n{label}: reviewed by {by} over {100 * reviews[by][0]:.1f} points")
+    return by, reviews[by][0], reviews[by][1], reviews
+
+
 def with_units(df: pd.DataFrame) -> pd.DataFrame:
     """``df`` with ``colon`` (a set's colon: the unit held out) and ``cell`` (its set, a real colon on its own)."""
     real = df["set"] == "V_real"
@@ -263,25 +277,12 @@ def calibrate(df: pd.DataFrame, level: float, source: dict) -> intervals.Interva
               f"{100 * (g['estimate'] - g['true']).mean():+.2f}")
     held = {scheme: by_colon(cal_df, scheme, level) for scheme in SCHEMES}
     best, summary = choose(held, level)
-    reviews = {by: review_width(held[best], by) for by in intervals.REVIEW_SCORES}
-    for by, (w_by, r_by) in reviews.items():
-        print(f"\nreview by {by}: threshold {100 * w_by:.1f} points: " + "; ".join(
-            f"{k} recall {100 * v['recall']:.0f} % of {v['off']}, precision {100 * v['precision']:.0f} %, flagged "
-            f"{100 * v['flagged']:.0f} %" for k, v in r_by.items()))
-    by = choose_review(reviews, review_cells(held[best]))
-    width, review = reviews[by]
-    print(f"\nchosen: {best}, reviewed by {by} over {100 * width:.1f} points")
+    by, width, review, reviews = review_rule(held[best], best)
     print("\nknown length, held out (decision record 0163's candidates):")
     known_held = {k: by_colon(cal_df, best, level, known=True, extra=e) for k, e in intervals.KNOWN_EXTRA.items()}
     known_choice, known_summary = choose(known_held, level)
-    known_reviews = {b: review_width(known_held[known_choice], b) for b in intervals.REVIEW_SCORES}
-    for b, (w_b, r_b) in known_reviews.items():
-        print(f"\nknown length {known_choice}, review by {b}: threshold {100 * w_b:.1f} points: " + "; ".join(
-            f"{k} recall {100 * v['recall']:.0f} % of {v['off']}, precision {100 * v['precision']:.0f} %, flagged "
-            f"{100 * v['flagged']:.0f} %" for k, v in r_b.items()))
-    by_known = choose_review(known_reviews, review_cells(known_held[known_choice]))
-    known_width, known_review = known_reviews[by_known]
-    print(f"\nknown length: {known_choice}, reviewed by {by_known} over {100 * known_width:.1f} points")
+    by_known, known_width, known_review, known_reviews = review_rule(known_held[known_choice],
+                                                                     f"known length {known_choice}")
     w, c = unit_weights(cal_df), cal_df["colon"].to_numpy()
     cal = intervals.fit(cal_df["true"], cal_df["estimate"], signals(cal_df), best, width, level, weights=w, colons=c)
     intervals.fit_known(cal, cal_df["true"], known_estimates(cal_df), known_signals(cal_df), w, c,
@@ -315,7 +316,7 @@ def table(data: list[tuple[str, Path]], method: CompletionMethod, path: Path) ->
     """Every calibration dataset's estimates, each row with its ``set``."""
     parts = []
     for name, folder in data:
-        cache = folder / f"completion-estimates-{sha256_file(path)[:12]}-{steps_version()}-signals3.csv"
+        cache = folder / f"completion-estimates-{sha256_file(path)[:12]}-{steps_version()}-signals4.csv"
         part = estimates(folder, method, cache).assign(manifest=name, set=MANIFESTS[name])
         if name == "calibration":         # its segments of the real training colons: seen by the network
             part.loc[part["colon_id"] >= REAL_IDS, "set"] = "train_real"
@@ -331,7 +332,7 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=2, help="processes generating the data")
     args = ap.parse_args()
     method = CompletionMethod(args.model)
-    method.intervals, method.spread, method.hole_depth = None, True, True     # every candidate's signals
+    method.intervals, method.spread, method.hole_depth, method.misfit = None, True, True, True   # every signal
     path = model_path(args.model)
     df = table(calibration_data(Path(args.data), args.workers), method, path)
     source = {"model": path.name, "model_sha256": sha256_file(path), "steps": steps_version(),

@@ -133,8 +133,9 @@ def test_estimate_writes_the_interval_and_takes_a_known_length(demo_data, tmp_pa
     assert a["coverage_interval"][0] <= a["coverage"] <= a["coverage_interval"][1]
     assert a["coverage_interval_level"] == 0.9 and isinstance(a["review"], list)
     assert a["signals"]["span_mm"] >= a["signals"]["length_mm"] - 0.5     # the line, run on to its planes
-    # the costly signals only where the shipped calibration's features use them: spread does, the holes' depth not
-    assert "spread" in a["signals"] and "hole_depth_mm" not in a["signals"]
+    # the costly signals only where the shipped calibration's features use them: spread and the wall's misfit do,
+    # the holes' depth not
+    assert "spread" in a["signals"] and "wall_misfit_mm" in a["signals"] and "hole_depth_mm" not in a["signals"]
     assert main(["estimate", str(tmp_path / "seg.npy"), "--out-dir", str(tmp_path / "b"), "--length-mm", "500"]) == 0
     b = json.loads((tmp_path / "b" / "seg.json").read_text())
     assert b["coverage"] < 0.2 and b["signals"]["extent"] == "known"
@@ -144,9 +145,10 @@ def test_estimate_writes_the_interval_and_takes_a_known_length(demo_data, tmp_pa
     assert b["coverage_interval"] == pytest.approx(cal.interval(b["coverage"], b["signals"]), abs=2e-6)
     # the known-extent interval (its own quantiles), not the one of an estimate whose length is unknown
     assert b["coverage_interval"] != pytest.approx(cal.interval(b["coverage"], {**b["signals"], "extent": None}))
-    width = b["coverage_interval"][1] - b["coverage_interval"][0]
-    # the note of a length the cloud stops short of is a reason to review where the interval is wide, as the rims'
-    assert bool(b["review"]) == (width > cal.review_width)
+    # the note of a length the cloud stops short of is a reason to review where the interval reaches far, as the
+    # rims' are; a length given is reviewed by the known extent's rule (decision record 0163)
+    score = intervals.review_score(b["coverage"], *b["coverage_interval"], cal.review_by_known or cal.review_by)
+    assert bool(b["review"]) == (score > (cal.review_known or cal.review_width))
     assert not b["review"] or "counted unobserved" in b["review"][0]
     assert CompletionMethod().intervals is not None
     capsys.readouterr()
@@ -421,6 +423,20 @@ def test_the_holes_depth_is_how_far_the_hole_vertices_lie_from_the_cloud():
     f = intervals.features(0.7, {"hole_depth_mm": 12.0, "gap_share": 0.099}, ("depth", "log_gap"))
     assert f == pytest.approx([1.2, -1.0])
     assert intervals.features(0.7, {}, ("log_gap",))[0] == pytest.approx(-3.0)
+
+
+def test_the_wall_misfit_is_how_far_the_cloud_lies_from_the_completed_wall():
+    """A cloud on a tube of radius 20 mm and a completed wall on the same stations 3 mm inside it: every point lies 3
+    mm from its nearest vertex, so the 90th percentile is 3; the same wall: 0; no wall: 0. It enters the scale as
+    ``misfit`` (mm)."""
+    from colonbench.completion import novelty
+
+    a, z = np.meshgrid(np.linspace(0, 2 * np.pi, 72, endpoint=False), np.linspace(0, 80, 81))
+    ring = np.c_[np.cos(a.ravel()), np.sin(a.ravel())]
+    cloud = np.c_[20 * ring, z.ravel()]
+    assert novelty.wall_misfit(cloud, np.c_[17 * ring, z.ravel()]) == pytest.approx(3.0)
+    assert novelty.wall_misfit(cloud, cloud) == 0.0 and novelty.wall_misfit(cloud, np.zeros((0, 3))) == 0.0
+    assert intervals.features(0.7, {"wall_misfit_mm": 1.25}, ("misfit",))[0] == 1.25
 
 
 def test_a_band_too_small_in_effect_gets_the_pooled_quantiles():

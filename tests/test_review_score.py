@@ -70,9 +70,10 @@ def test_a_known_extent_takes_its_own_score_and_a_segment_the_segments():
 def test_the_scores_survive_the_calibration_file_and_a_wrong_one_is_refused():
     cal = intervals.fit([0.8] * 40, [0.8] * 40, [{"length_mm": 70.0, "rims": 2}] * 40, "length", 0.25)
     assert "review_by" not in cal.to_json() and "review_by_known" not in cal.to_json()   # width, as files before
-    cal.review_by, cal.review_by_known = "drop", "reach"
-    back = intervals.Intervals(**json.loads(json.dumps(cal.to_json())))
-    assert (back.review_by, back.review_by_known) == ("drop", "reach")
+    for by, by_known in (("drop", "reach"), ("drop", "width"), ("width", "drop"), ("reach", "")):
+        cal.review_by, cal.review_by_known = by, by_known
+        back = intervals.Intervals(**json.loads(json.dumps(cal.to_json())))
+        assert (back.review_by, back.review_by_known) == (by, by_known)     # "width" for the known extent is kept
     with pytest.raises(InputError, match="review score must be one of width, reach, drop, not 'size'"):
         intervals.Intervals(**{**cal.to_json(), "review_by": "size"})
 
