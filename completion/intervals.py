@@ -90,10 +90,10 @@ def features(coverage: float, signals: dict, names) -> np.ndarray:
     times 10, ``radius_ratio``: the lumen's radius / the line, ``line_extent``: the line / the cloud's extent
     (:mod:`colonbench.completion.novelty`); ``log_gap``: ``log10(gap_share + 0.001)``, -3 where no wall-gap patch
     was found; ``depth``: the holes' depth (``hole_depth_mm``, :func:`colonbench.completion.novelty.hole_depth`) /
-    10 mm; ``misfit``: how far the cloud lies from the completed wall (``wall_misfit_mm``, mm,
+    10 mm; ``misfit``: how far the cloud lies from the completed wall's nearest vertices (``wall_misfit_mm``, mm,
     :func:`colonbench.completion.novelty.wall_misfit`); ``share_off``: ``|ln(length_share)|``, how far the span
     between the planes is from a length given (:func:`known_length`), 0 where none is (a map's segment, whose planes
-    are known)."""
+    are known; like every feature, then clipped into the range calibrated on)."""
     g = lambda k: float(signals.get(k, 0.0) or 0.0)          # noqa: E731
     length = g("length_mm")
     rims = int(g("rims"))
@@ -156,7 +156,7 @@ def group_key(coverage: float, signals: dict, scheme: str) -> str:
 
 @dataclass
 class Intervals:
-    """A calibration: per group the residual quantiles, and the width above which an estimate is to be reviewed.
+    """A calibration: per group the residual quantiles, and when an estimate is to be reviewed.
 
     Attributes
     ----------
@@ -169,8 +169,9 @@ class Intervals:
         the shift term's ``shift_low``, ``shift_high`` (included in ``low``, ``high``) and a binned one's
         ``band_edges``, ``band_low``, ``band_high``, ``band_n``.
     review_width : float
-        An interval wider than this (fraction) flags the estimate for review; only then are its rims' notes, and a
-        known length's the cloud stops short of, reasons too (decision record 0156).
+        An interval whose score (:attr:`review_by`: its width, or how far it reaches from the estimate) exceeds this
+        (fraction) flags the estimate for review; only then are its rims' notes, and a known length's the cloud stops
+        short of, reasons too (decision record 0156).
     source : dict
         What it was calibrated on: model, manifests and their hashes (``known_manifests``: those :attr:`known` was
         fitted on), noise levels, samples.

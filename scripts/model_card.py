@@ -98,7 +98,8 @@ def intervals_rows(model: Path) -> list[str]:
            f"{src.get('estimates')} estimates at noise {', '.join(f'{x:g}' for x in src.get('noise_mm', []))} mm"
            + (f" (chosen {held}; left out: {src.get('not_calibrated_on')})" if held else "")
            + f"; {_flags(cal.review_by, cal.review_width)} flags its estimate for review"
-           + (f" (a map's segment: {_flags(cal.review_by_known or cal.review_by, cal.review_known)})"
+           + (f" (an estimate of known extent, a map's segment or a length given: "
+              f"{_flags(cal.review_by_known or cal.review_by, cal.review_known)})"
               if cal.review_known else "") + ".", "",
            "| group | calibration estimates | interval around the estimate | scale weights |", "|---|---:|---|---|"]
     rows = [(k, g) for k, g in cal.groups.items() if k != "all" or scaled] + \

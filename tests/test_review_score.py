@@ -53,18 +53,29 @@ def test_review_by_drop_flags_an_interval_reaching_far_below_not_one_as_wide_rea
 
 def test_a_known_extent_takes_its_own_score_and_a_segment_the_segments():
     """A map's segment and a length given (decision record 0163, round 8) are scored by ``review_by_known`` against
-    ``review_known``; a segment of unknown extent with the same interval by ``review_by`` against ``review_width``."""
-    cal = intervals.fit([0.8] * 40, [0.8] * 40, [{"length_mm": 70.0, "rims": 2}] * 40, "length", 0.25)
-    cal.known = {"low": -0.05, "high": 0.15, "n": 40}         # 20 points wide, 15 above, 5 below
-    cal.review_known, cal.review_by, cal.review_by_known = 0.12, "drop", "reach"
-    for signals in ({"extent": "known"}, {"extent": "known", "length_share": 1.0}):   # a map's planes, a length
-        est = _estimate(**signals)                              # reach 15 > 12
-        cal.apply(est)
-        assert est.review == ["interval 20 points wide: it reaches 15 points from the estimate (more than 12)"]
-    cal.groups["length>=60"].update(low=-0.05, high=0.15)       # the same interval, extent unknown: drop 5 <= 25
-    segment = _estimate()
+    ``review_known``; a segment of unknown extent with the same interval by ``review_by`` against ``review_width``.
+    The interval is 20 points wide, reaching 15 above and 5 below: each case is one that another score would
+    decide the other way."""
+    cal = intervals.fit([0.8] * 40, [0.8] * 40, [{"length_mm": 70.0, "rims": 2}] * 40, "length", 0.15)
+    cal.known = {"low": -0.05, "high": 0.15, "n": 40}
+    cal.review_known, cal.review_by = 0.17, "drop"
+    for by_known, flagged in (("reach", False), ("width", True)):         # reach 15 <= 17 < width 20
+        cal.review_by_known = by_known
+        for signals in ({"extent": "known"}, {"extent": "known", "length_share": 1.0}):   # a map's planes, a length
+            est = _estimate(**signals)
+            cal.apply(est)
+            assert bool(est.review) == flagged, (by_known, signals)
+    cal.review_known, cal.review_by_known = 0.12, "reach"
+    est = _estimate(extent="known")
+    cal.apply(est)
+    assert est.review == ["interval 20 points wide: it reaches 15 points from the estimate (more than 12)"]
+    cal.groups["length>=60"].update(low=-0.05, high=0.15)       # the same interval, extent unknown: drop 5 <= 15,
+    segment = _estimate()                                       # though its width (20) is over 15
     cal.apply(segment)
     assert segment.review == []
+    cal.review_by = "width"
+    cal.apply(segment)
+    assert segment.review == ["interval 20 points wide (more than 15)"]
 
 
 def test_the_scores_survive_the_calibration_file_and_a_wrong_one_is_refused():
