@@ -83,8 +83,7 @@ def test_straight_tube_segments_get_their_known_coverage(tmp_path, capsys):
     inside = 0
     for seg, t in zip(segs, truth):
         low, high = seg["coverage_interval"]     # the method's 90 % interval for a segment whose ends are known
-        inside += low <= t <= high
-        # a 90 % interval may miss: never by more than a point here, and never wider than 25 points
+        inside += low <= t <= high               # a 90 % interval may miss, here never by more than a point
         assert low - 0.01 <= t <= high + 0.01 and high - low < 0.25 and isinstance(seg["review"], list)
         assert seg["plane_start"]["point"][2] == pytest.approx(seg["start_mm"], abs=4.0)
         assert abs(seg["plane_start"]["normal"][2]) > np.cos(np.radians(5))
