@@ -379,6 +379,12 @@ def _fit_group(residual: np.ndarray, x: np.ndarray | None, names, level: float, 
     return out
 
 
+def length_share(span_mm: float, length_mm: float) -> float:
+    """``signals["length_share"]`` of a segment spanning ``span_mm`` between its planes whose length ``length_mm`` is
+    given (:func:`known_length`), to 4 decimals."""
+    return round(float(span_mm) / float(length_mm), 4)
+
+
 def known_length(est, length_mm: float) -> None:
     """Use a segment's known arc length (mm): where the segment's span between its planes (``signals["span_mm"]``:
     the method's line between them, run on straight to a plane beyond its end) is less than :data:`SHORT_SHARE`
@@ -391,7 +397,7 @@ def known_length(est, length_mm: float) -> None:
         raise InputError(f"a segment's length of {length_mm:g} mm cannot be this cloud's: it spans {span:.0f} mm "
                          f"between its planes, more than {LONGEST_SHARE:g} times that (a length in cm, not mm?)")
     share = span / float(length_mm)
-    est.signals.update(extent="known", length_share=round(share, 4))
+    est.signals.update(extent="known", length_share=length_share(span, length_mm))
     if share < SHORT_SHARE and np.isfinite(est.coverage):
         est.coverage = float(est.coverage) * share
         est.review.append(f"the cloud spans {span:.0f} of the segment's {length_mm:g} mm: the rest is counted "

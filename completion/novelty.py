@@ -19,9 +19,9 @@ And one of how much of the wall the network had to make up (decision record 0161
 completed surface's hole vertices lie from the nearest point of the cloud (their 90th percentile, mm). A small
 hole ringed by seen wall is shallow; a wall no camera saw is deep, and there the network guesses. And one of how
 well the network's wall fits what was seen (decision record 0165): ``wall_misfit_mm``, how far the cloud's points
-lie from the completed surface's nearest vertices (their 90th percentile, mm); a network that knows a colon puts its wall through the
-points it was given. ``spread``, ``hole_depth_mm`` and ``wall_misfit_mm`` are computed where a calibration uses them
-(:func:`signals`).
+lie from the completed surface's nearest vertices (their 90th percentile, mm); a network that knows a colon puts its
+wall through the points it was given. ``spread``, ``hole_depth_mm`` and ``wall_misfit_mm`` are computed where a
+calibration uses them (:func:`signals`).
 """
 
 from __future__ import annotations

@@ -129,8 +129,8 @@ def unit_weights(df: pd.DataFrame) -> np.ndarray:
 def known_signals(df: pd.DataFrame) -> list[dict]:
     """The estimates' signals with each segment's true length given: ``length_share`` as
     :func:`intervals.known_length` sets it."""
-    share = (df["span_mm"] / df["segment_mm"]).round(4)
-    return [{**s, "length_share": float(v)} for s, v in zip(signals(df), share)]
+    return [{**s, "length_share": intervals.length_share(span, length)}
+            for s, span, length in zip(signals(df), df["span_mm"], df["segment_mm"])]
 
 
 def by_colon(df: pd.DataFrame, scheme: str, level: float, known: bool = False, extra=()) -> pd.DataFrame:
