@@ -111,3 +111,37 @@ def band_quantiles(z: np.ndarray, log_scale: np.ndarray, level: float, weights, 
                                       None if colons is None else np.asarray(colons)[sel])
         out["band_low"].append(low), out["band_high"].append(high), out["band_n"].append(int(sel.sum()))
     return out
+
+
+def quantile_regression(x: np.ndarray, y: np.ndarray, tau: float, weights=None) -> np.ndarray:
+    """Weighted linear quantile regression (Koenker and Bassett, 1978): the weights ``b`` ((p,)) minimising the
+    pinball loss ``sum_i w_i rho_tau(y_i - x_i . b)``, solved as a linear programme (HiGHS, through
+    :func:`scipy.optimize.linprog`); ``x . b`` estimates the ``tau``-quantile of ``y`` given ``x``.
+
+    Parameters
+    ----------
+    x : (n, p) float
+        Features (a column of ones for an intercept).
+    y : (n,) float
+    tau : float
+        The quantile, in (0, 1).
+    weights : (n,) float, optional
+        Each row's weight, >= 0 (default: 1 each).
+    """
+    from scipy import sparse
+    from scipy.optimize import linprog
+
+    x, y = np.asarray(x, float), np.asarray(y, float)
+    n, p = x.shape
+    w = np.ones(n) if weights is None else np.asarray(weights, float) / float(np.mean(weights))
+    if not 0.0 < tau < 1.0:
+        raise ValueError(f"a quantile regression's tau must lie in (0, 1), not {tau}")
+    # variables: b (free), u >= 0 (above the fit), v >= 0 (below); x b + u - v = y
+    eye = sparse.identity(n, format="csr")
+    a_eq = sparse.hstack([sparse.csr_matrix(x), eye, -eye], format="csr")
+    cost = np.concatenate([np.zeros(p), tau * w, (1.0 - tau) * w])
+    bounds = [(None, None)] * p + [(0, None)] * (2 * n)
+    res = linprog(cost, A_eq=a_eq, b_eq=y, bounds=bounds, method="highs")
+    if res.status != 0:
+        raise RuntimeError(f"quantile regression did not solve: {res.message}")
+    return np.asarray(res.x[:p], float)

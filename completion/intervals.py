@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from colonbench.completion.conformal import band_of, band_quantiles, shifted_quantiles
+from colonbench.completion.conformal import band_of, band_quantiles, quantile_regression, shifted_quantiles
 from colonbench.errors import InputError
 
 #: Nominal coverage of the intervals.
@@ -68,6 +68,7 @@ SCALE_FEATURES = {
     "scaled2-colon-novel-gaps-shift": _GAPS, "binned-colon-novel-gaps-shift": _GAPS,
     "scaled2-colon-novel-depth-shift": _DEPTH, "binned-colon-novel-depth-shift": _DEPTH,
     "scaled2-colon-novel-misfit-shift": _MISFIT, "binned-colon-novel-misfit-shift": _MISFIT,
+    "quant95-colon-novel-misfit-shift": _MISFIT, "quant90-colon-novel-misfit-shift": _MISFIT,
 }
 #: The known extent's extra features, per candidate of decision record 0163 (``K0``: the scheme's own).
 KNOWN_EXTRA = {"K0": (), "K1": ("share_off",)}
@@ -122,8 +123,14 @@ def _binned(scaled: str | None) -> bool:
 
 
 def _two_sided(scaled: str | None) -> bool:
-    """Whether a scaled factor fits a scale for each end of the interval (``scaled2...``)."""
-    return bool(scaled) and scaled.startswith("scaled2")
+    """Whether a scaled factor fits a scale for each end of the interval (``scaled2...``, ``quant...``)."""
+    return bool(scaled) and scaled.startswith(("scaled2", "quant"))
+
+
+def _tau(scaled: str | None) -> float | None:
+    """The quantile a ``quant<NN>...`` scheme fits each end's log scale at (``NN`` / 100, decision record 0166),
+    else None (a least-squares fit of the log)."""
+    return int(scaled[5:7]) / 100.0 if scaled and scaled.startswith("quant") else None
 
 
 def _groups_of(scheme: str) -> str:
@@ -341,21 +348,28 @@ def _scale(group: dict, coverage: float, signals: dict) -> tuple[float, float]:
             group["high"] * _scale_of(group, coverage, signals, "high"))
 
 
-def _log_fit(x: np.ndarray, magnitude: np.ndarray, weights: np.ndarray | None = None) -> tuple[list, np.ndarray]:
-    """(Weighted) least-squares weights of ``log(magnitude + SCALE_FLOOR)`` on ``x``, and the scales they give."""
+def _log_fit(x: np.ndarray, magnitude: np.ndarray, weights: np.ndarray | None = None,
+             tau: float | None = None) -> tuple[list, np.ndarray]:
+    """(Weighted) least-squares weights of ``log(magnitude + SCALE_FLOOR)`` on ``x`` (``tau``: its ``tau``-quantile's
+    linear regression instead, :func:`~colonbench.completion.conformal.quantile_regression`), and the scales they
+    give."""
+    if tau is not None:
+        w = quantile_regression(x, np.log(magnitude + SCALE_FLOOR), tau, weights)
+        return [float(v) for v in w], np.exp(np.clip(x @ w, -20, 5))
     root = np.sqrt(weights)[:, None] if weights is not None else 1.0
     w, *_ = np.linalg.lstsq(x * root, np.log(magnitude + SCALE_FLOOR) * np.ravel(root), rcond=None)
     return [float(v) for v in w], np.exp(np.clip(x @ w, -20, 5))
 
 
 def _fit_group(residual: np.ndarray, x: np.ndarray | None, names, level: float, two_sided: bool = False,
-               weights: np.ndarray | None = None, colons=None, binned: bool = False) -> dict:
+               weights: np.ndarray | None = None, colons=None, binned: bool = False, tau: float | None = None) -> dict:
     """A group's quantiles: of the residuals, or (``x``: its features) of the residuals over their fitted scale;
     ``two_sided``: a scale of the residuals below 0 for the low end and one of those above for the high end, each
     end's quantile taken of the residuals over its own scale. ``weights``: each residual's weight in the scale's
     fit and the quantiles (:func:`~colonbench.completion.conformal.weighted_quantiles`); ``colons``: each residual's
     colon, for the shift term; ``binned``: the quantiles per band of the scale
-    (:func:`~colonbench.completion.conformal.band_quantiles`)."""
+    (:func:`~colonbench.completion.conformal.band_quantiles`); ``tau``: each end's scale fitted at that quantile
+    (:func:`_log_fit`)."""
     if x is None:
         low, high, _ = shifted_quantiles(residual, level, weights, colons)
         return {"low": low, "high": high, "n": int(len(residual))}
@@ -369,8 +383,8 @@ def _fit_group(residual: np.ndarray, x: np.ndarray | None, names, level: float, 
         out["weights"], s = _log_fit(x, np.abs(residual), weights)
         out["low"], out["high"], shift = shifted_quantiles(residual / s, level, weights, colons)
         return {**out, **shift}
-    out["weights_low"], s_low = _log_fit(x, np.maximum(-residual, 0.0), weights)
-    out["weights_high"], s_high = _log_fit(x, np.maximum(residual, 0.0), weights)
+    out["weights_low"], s_low = _log_fit(x, np.maximum(-residual, 0.0), weights, tau)
+    out["weights_high"], s_high = _log_fit(x, np.maximum(residual, 0.0), weights, tau)
     low, _, shift_low = shifted_quantiles(residual / s_low, level, weights, colons)
     _, high, shift_high = shifted_quantiles(residual / s_high, level, weights, colons)
     out["low"], out["high"] = low, high
@@ -441,7 +455,7 @@ def fit(true, estimated, signals: list, scheme: str, review_width: float, level:
             if sel.sum() >= MIN_GROUP and str(key) not in groups:
                 groups[str(key)] = _fit_group(residual[sel], x[sel] if scaled else None, names, level,
                                               _two_sided(scaled), None if weights is None else weights[sel],
-                                              None if colons is None else colons[sel], _binned(scaled))
+                                              None if colons is None else colons[sel], _binned(scaled), _tau(scaled))
     return Intervals(scheme, level, groups, review_width, dict(source or {}))
 
 
@@ -457,7 +471,8 @@ def fit_known(cal: Intervals, true, estimated, signals: list | None = None, weig
     names = SCALE_FEATURES[scaled] + tuple(extra) if scaled else ()
     x = np.array([features(c, sig, names) for c, sig in zip(estimated, signals)]) if scaled else None
     weights, colons = _unit_weights(cal.scheme, weights, colons, len(residual))
-    cal.known = _fit_group(residual, x, names, cal.level, _two_sided(scaled), weights, colons, _binned(scaled))
+    cal.known = _fit_group(residual, x, names, cal.level, _two_sided(scaled), weights, colons, _binned(scaled),
+                           _tau(scaled))
 
 
 def path_for(model: Path) -> Path:

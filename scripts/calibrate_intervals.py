@@ -48,7 +48,11 @@ CALIBRATED = ("V_wide", "V_paper", "V_real")
 SCHEMES = ("scaled", "scaled-colon", "scaled-colon-novel", "scaled-colon-novel-shift", "scaled2-colon-novel",
            "scaled2-colon-novel-shift", "binned-colon-novel", "binned-colon-novel-shift",
            "scaled2-colon-novel-gaps-shift", "binned-colon-novel-gaps-shift", "scaled2-colon-novel-depth-shift",
-           "binned-colon-novel-depth-shift", "scaled2-colon-novel-misfit-shift", "binned-colon-novel-misfit-shift")
+           "binned-colon-novel-depth-shift", "scaled2-colon-novel-misfit-shift", "binned-colon-novel-misfit-shift",
+           "quant95-colon-novel-misfit-shift", "quant90-colon-novel-misfit-shift")
+#: Decision record 0166: the scheme in use, and by how much (points) a candidate must beat it to replace it (about
+#: the standard error of a held-out cell's share inside).
+INCUMBENT, MARGIN = "scaled2-colon-novel-misfit-shift", 1.6
 NOISE_MM = (0.0, 0.5)
 #: The signals an estimate's interval may be scaled by, as columns of the estimates' table.
 SIGNALS = ("rims", "rims_doubtful", "gap_share", "length_mm", "span_mm", "spread", "radius_mm", "extent_mm",
@@ -195,8 +199,26 @@ def choose(held: dict, level: float) -> tuple[str, dict]:
     passing = [s for s in held if ok[s]]
     if passing:
         return min(passing, key=lambda s: summary[s]["real_width"]), summary
-    return min(held, key=lambda s: (-min(summary[s]["lowest"], 85.0), summary[s]["over_95"],
-                                    summary[s]["real_width"])), summary
+    best = min(held, key=lambda s: (-min(summary[s]["lowest"], 85.0), summary[s]["over_95"],
+                                    summary[s]["real_width"]))
+    return (replace_incumbent(summary) if INCUMBENT in held else best), summary
+
+
+def replace_incumbent(summary: dict) -> str:
+    """Decision record 0166's rule where no scheme holds every cell within 85-95 %: a scheme replaces
+    :data:`INCUMBENT` only where every cell of its holds at least 85 %, and its excess (the points its cells lie above
+    95 %, summed) is smaller than the incumbent's by more than :data:`MARGIN`, or no larger while it is narrower over
+    the real colons by more than :data:`MARGIN`; of several, the smallest excess, then the narrowest."""
+    def excess(s):
+        return round(sum(max(c["inside"] - 95.0, 0.0) for c in summary[s]["cells"].values()), 1)
+
+    inc = summary[INCUMBENT]
+    better = [s for s in summary if s != INCUMBENT and summary[s]["lowest"] >= 85.0 and (
+        excess(s) < excess(INCUMBENT) - MARGIN or (excess(s) <= excess(INCUMBENT) and
+                                                   summary[s]["real_width"] < inc["real_width"] - MARGIN))]
+    for s in summary:
+        summary[s]["excess"] = excess(s)
+    return min(better, key=lambda s: (excess(s), summary[s]["real_width"])) if better else INCUMBENT
 
 
 def review_cells(held: pd.DataFrame) -> list[str]:
