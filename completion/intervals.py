@@ -15,7 +15,8 @@ cut rim (an end without one is where the segment may go on unseen) and the estim
 each feature is first clipped into the range the calibration saw (decision record 0160). A two-sided scheme
 (``scaled2...``, decision record 0158) fits a scale for each end; a ``-colon`` scheme weighs every colon the same
 (decision record 0325), a ``-shift`` one adds a colon-level shift term; a ``binned`` one takes its quantiles per
-band of the scale (decision record 0161). The shipped calibration is ``scaled2-colon-novel-shift``. The calibration
+band of the scale (decision record 0161); a ``quant<NN>`` one fits each end's scale at the ``NN`` % quantile of the
+log residual, not by least squares (decision record 0166). The shipped calibration names its scheme. The calibration
 (groups, quantiles, weights, ranges, the data it came from) is a JSON file beside the model
 (``<model>.intervals.json``), made by ``scripts/calibrate_intervals.py``, which also chooses the scheme and the
 review width.

@@ -109,6 +109,10 @@ def intervals_rows(model: Path) -> list[str]:
         ends = (f"{g['low']:+.2f} s_low to {g['high']:+.2f} s_high" if two
                 else f"{g['low']:+.2f} s to {g['high']:+.2f} s" if "features" in g
                 else f"{100 * g['low']:+.1f} to {100 * g['high']:+.1f} points")
+        if "band_edges" in g:                          # quantiles per band of the scale (``binned...``)
+            edges = ", ".join(f"{e:+.2f}" for e in g["band_edges"])
+            ends = (f"per band of log s (cut at {edges}): " + ", ".join(
+                f"{lo:+.2f} s to {hi:+.2f} s" for lo, hi in zip(g["band_low"], g["band_high"])))
         if "shift_low" in g:
             ends += f" (colon shift {g['shift_low']:+.2f}, {g['shift_high']:+.2f} included)"
         named = lambda ws: ", ".join(f"{n} {w:+.2f}" for n, w in zip(g.get("features", ()), ws))  # noqa: E731

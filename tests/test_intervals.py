@@ -123,6 +123,7 @@ def test_intervals_in_the_contract_are_checked():
 
 
 def test_estimate_writes_the_interval_and_takes_a_known_length(demo_data, tmp_path, capsys):
+    from colonbench.completion.method import CompletionMethod, model_path, steps_version
     from colonbench.shards.reader import Shard
 
     shard = sorted((demo_data / "demo-v1" / "test").glob("*.h5"))[0]
@@ -133,14 +134,14 @@ def test_estimate_writes_the_interval_and_takes_a_known_length(demo_data, tmp_pa
     assert a["coverage_interval"][0] <= a["coverage"] <= a["coverage_interval"][1]
     assert a["coverage_interval_level"] == 0.9 and isinstance(a["review"], list)
     assert a["signals"]["span_mm"] >= a["signals"]["length_mm"] - 0.5     # the line, run on to its planes
-    # the costly signals only where the shipped calibration's features use them: spread and the wall's misfit do,
-    # the holes' depth not
-    assert "spread" in a["signals"] and "wall_misfit_mm" in a["signals"] and "hole_depth_mm" not in a["signals"]
+    # the costly signals only where the shipped calibration's features use them (the shipped one: spread and the
+    # holes' depth, not the wall's misfit)
+    used = intervals.load(model_path(None), None).groups["all"]["features"]
+    for feature, signal in (("spread", "spread"), ("depth", "hole_depth_mm"), ("misfit", "wall_misfit_mm")):
+        assert (signal in a["signals"]) == (feature in used), signal
     assert main(["estimate", str(tmp_path / "seg.npy"), "--out-dir", str(tmp_path / "b"), "--length-mm", "500"]) == 0
     b = json.loads((tmp_path / "b" / "seg.json").read_text())
     assert b["coverage"] < 0.2 and b["signals"]["extent"] == "known"
-    from colonbench.completion.method import CompletionMethod, model_path, steps_version
-
     cal = intervals.load(model_path(None), steps_version())
     assert b["coverage_interval"] == pytest.approx(cal.interval(b["coverage"], b["signals"]), abs=2e-6)
     # the known-extent interval (its own quantiles), not the one of an estimate whose length is unknown

@@ -1,0 +1,87 @@
+"""Decision record 0166: each end's scale fitted at its tail (weighted linear quantile regression), and the margin a
+candidate must beat the scheme in use by in scripts/calibrate_intervals.py."""
+
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from colonbench.completion import intervals
+from colonbench.completion.conformal import quantile_regression
+
+
+def _calibrate_intervals():
+    spec = importlib.util.spec_from_file_location(
+        "calibrate_intervals", Path(__file__).resolve().parents[1] / "scripts" / "calibrate_intervals.py")
+    ci = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(ci)
+    return ci
+
+
+def test_quantile_regression_recovers_a_line_and_a_sample_quantile():
+    """Points on the line y = 2 + 3 t, a tenth of them lifted above it: the median's fit is the line itself. With an
+    intercept only, the fit is the sample's quantile: of 1..19, the 0.5-quantile is 10 and the 0.9-quantile 18; a
+    weight of 30 on the value 1 pulls the median down to it."""
+    t = np.linspace(0.0, 1.0, 41)
+    y = 2.0 + 3.0 * t
+    y[::10] += 5.0
+    x = np.c_[np.ones_like(t), t]
+    assert quantile_regression(x, y, 0.5) == pytest.approx([2.0, 3.0], abs=1e-9)
+    values, ones = np.arange(1.0, 20.0), np.ones((19, 1))
+    assert quantile_regression(ones, values, 0.5)[0] == pytest.approx(10.0)
+    assert quantile_regression(ones, values, 0.9)[0] == pytest.approx(18.0)
+    weights = np.ones(19)
+    weights[0] = 30.0
+    assert quantile_regression(ones, values, 0.5, weights)[0] == pytest.approx(1.0)
+    with pytest.raises(ValueError, match="tau"):
+        quantile_regression(ones, values, 1.0)
+
+
+def _segments(n=400, seed=3):
+    """Estimates whose residuals below zero grow with the misfit: 0.02 times it, times a half-normal draw."""
+    rng = np.random.default_rng(seed)
+    est = rng.uniform(0.4, 0.95, n)
+    misfit = rng.uniform(0.5, 3.0, n)
+    sig = [{"rims": 2, "length_mm": 50.0, "span_mm": 50.0, "spread": 0.02, "radius_mm": 12.0, "extent_mm": 55.0,
+            "wall_misfit_mm": float(m)} for m in misfit]
+    true = est - 0.02 * misfit * np.abs(rng.normal(size=n))
+    return true, est, sig, misfit
+
+
+def test_a_tail_fitted_scale_leaves_its_tail_above_it():
+    """quant95: the low end's scale is the 0.95-quantile fit of log(max(-r, 0) + floor), so at most 5 % of the
+    calibration's low-side magnitudes lie above it (the property of a quantile regression's fit), and the scale grows
+    with the misfit as the residuals do; the least-squares scale of scaled2 leaves far more above it."""
+    true, est, sig, misfit = _segments()
+    n = len(true)
+    above = {}
+    for scheme in ("quant95-colon-novel-misfit-shift", "scaled2-colon-novel-misfit-shift"):
+        cal = intervals.fit(true, est, sig, scheme, 0.3, weights=np.ones(n) / n, colons=np.arange(n) % 8)
+        group = cal.groups["all"]
+        scale = np.array([intervals._scale_of(group, c, s, "low") for c, s in zip(est, sig)])
+        above[scheme] = float(np.mean(np.log(np.maximum(est - true, 0) + intervals.SCALE_FLOOR) > np.log(scale) + 1e-9))
+        assert group["weights_low"][group["features"].index("misfit")] > 0
+    assert above["quant95-colon-novel-misfit-shift"] <= 0.05 + 1e-9
+    assert above["scaled2-colon-novel-misfit-shift"] > 0.2
+    assert intervals._tau("quant90-colon-novel-misfit-shift") == 0.9 and intervals._tau("scaled2") is None
+
+
+def test_a_candidate_replaces_the_scheme_in_use_only_by_more_than_the_margin():
+    """replace_incumbent: the scheme in use has 3.0 points above 95 %. A candidate 1.5 below it stays out (within the
+    margin); one 2.8 below replaces it, unless a cell of its is under 85 %; at the same excess, one 1.7 points
+    narrower replaces it and one 1.5 narrower does not."""
+    ci = _calibrate_intervals()
+
+    def summary(cells, real_width):
+        return {"cells": {f"c{k}": {"inside": v} for k, v in enumerate(cells)}, "lowest": min(cells),
+                "real_width": real_width}
+
+    inc = summary([97.2, 95.8, 90, 88], 38.0)
+    assert ci.replace_incumbent({ci.INCUMBENT: inc, "near": summary([95.7, 95.8, 90, 88], 38.0)}) == ci.INCUMBENT
+    assert ci.replace_incumbent({ci.INCUMBENT: inc, "better": summary([95.1, 95.1, 90, 88], 45.0)}) == "better"
+    assert ci.replace_incumbent({ci.INCUMBENT: inc, "short": summary([93, 94, 90, 84.9], 30.0)}) == ci.INCUMBENT
+    assert ci.replace_incumbent({ci.INCUMBENT: inc, "narrow": summary([97.2, 95.8, 90, 88], 36.3)}) == "narrow"
+    assert ci.replace_incumbent({ci.INCUMBENT: inc, "narrow": summary([97.2, 95.8, 90, 88], 36.5)}) == ci.INCUMBENT
+    two = {ci.INCUMBENT: inc, "wide": summary([95.1, 95.1, 90, 88], 45.0), "less": summary([95.1, 95.1, 90, 88], 44.0)}
+    assert ci.replace_incumbent(two) == "less" and two["wide"]["excess"] == 0.2
