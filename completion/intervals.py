@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from colonbench.completion.conformal import band_of, band_quantiles, quantile_regression, shifted_quantiles
+from colonbench.completion.review import REVIEW_SCORES, log_odds, review_reason, review_score  # noqa: F401
 from colonbench.errors import InputError
 
 #: Nominal coverage of the intervals.
@@ -73,9 +74,6 @@ SCALE_FEATURES = {
 }
 #: The known extent's extra features, per candidate of decision record 0163 (``K0``: the scheme's own).
 KNOWN_EXTRA = {"K0": (), "K1": ("share_off",)}
-#: What an estimate's review is scored by (decision record 0163), on its interval clipped to [0, 1]: its width, the
-#: farther end's distance from the estimate, or the low end's distance below it.
-REVIEW_SCORES = ("width", "reach", "drop")
 #: A ``binned`` scheme's bands of the fitted scale: cut at these colon-weighted quantiles of it (decision 0161).
 BAND_QUANTILES = (0.25, 0.5, 0.75)
 #: Added to ``|true - estimated|`` before its log is fitted: a floor of the scale (fractions).
@@ -177,9 +175,9 @@ class Intervals:
         the shift term's ``shift_low``, ``shift_high`` (included in ``low``, ``high``) and a binned one's
         ``band_edges``, ``band_low``, ``band_high``, ``band_n``.
     review_width : float
-        An interval whose score (:attr:`review_by`: its width, or how far it reaches from the estimate) exceeds this
-        (fraction) flags the estimate for review; only then are its rims' notes, and a known length's the cloud stops
-        short of, reasons too (decision record 0156).
+        An estimate whose score (:attr:`review_by`: its interval's width, or how far it reaches from the estimate, a
+        fraction; or the log odds that it is far off) exceeds this flags the estimate for review; only then are its
+        rims' notes, and a known length's the cloud stops short of, reasons too (decision record 0156).
     source : dict
         What it was calibrated on: model, manifests and their hashes (``known_manifests``: those :attr:`known` was
         fitted on), noise levels, samples.
@@ -191,13 +189,18 @@ class Intervals:
         ``{"low", "high", "n"}`` of segments whose extent is known (``signals["extent"] == "known"``: a length
         given to :func:`known_length`, or planes the caller clips at, as ``colonbench map`` does).
     review_by : str
-        What the review compares with :attr:`review_width` (:data:`REVIEW_SCORES`, :func:`review_score`).
+        What the review compares with :attr:`review_width` (:data:`~colonbench.completion.review.REVIEW_SCORES`:
+        :func:`~colonbench.completion.review.review_score`'s, or ``odds``).
     review_by_known : str
         What it compares with :attr:`review_known` ("": :attr:`review_by`).
     review_known : float
         The review threshold of the intervals of known extent (fraction; 0: :attr:`review_width`): a segment whose
         planes the caller gives (a map's) or whose length is given (:func:`known_length`; decision record 0163,
         round 8), chosen as :attr:`review_width` is on the known-length intervals held out (decision record 0325).
+    review_odds : dict
+        ``{"features", "ranges", "weights"}``: the logistic fit whose log odds (:func:`features` clipped into
+        ``ranges``, times ``weights``) a review by ``odds`` compares with :attr:`review_width` (decision record
+        0167); empty otherwise.
     """
 
     scheme: str
@@ -210,8 +213,11 @@ class Intervals:
     review_known: float = 0.0
     review_by: str = "width"
     review_by_known: str = ""
+    review_odds: dict = field(default_factory=dict)
 
     def __post_init__(self):
+        if self.review_by == "odds" and not self.review_odds:
+            raise InputError("a calibration reviewed by odds must hold its fit (review_odds)")
         for by in (self.review_by, self.review_by_known or self.review_by):
             if by not in REVIEW_SCORES:
                 raise InputError(f"a calibration's review score must be one of {', '.join(REVIEW_SCORES)}, "
@@ -261,12 +267,13 @@ class Intervals:
         known = est.signals.get("extent") == "known" and self.review_known > 0
         review_width = self.review_known if known else self.review_width
         by = (self.review_by_known or self.review_by) if known else self.review_by
-        score = review_score(est.coverage, *est.coverage_interval, by)
+        score = (log_odds(self.review_odds, features(est.coverage, est.signals, self.review_odds["features"]))
+                 if by == "odds" else review_score(est.coverage, *est.coverage_interval, by))
         if score <= review_width:           # sure enough: the notes (the rims', a known length's) are reasons only
             est.review.clear()              # where it is not
             est.review.extend([long] if long else [])
             return
-        est.review.append(_review_reason(width, score, review_width, by))
+        est.review.append(review_reason(width, score, review_width, by))
         est.review.extend([long] if long else [])
         if int(est.signals.get("rims", 0)) == 0 and est.signals.get("extent") != "known":
             est.review.append("no cut rim at either end: the segment's ends are the line's own, it may go on unseen")
@@ -294,29 +301,9 @@ class Intervals:
             del out["review_by"]
         if not out["review_by_known"]:     # the known extent scored as the segments are
             del out["review_by_known"]
+        if not out["review_odds"]:         # reviewed by a score of the interval
+            del out["review_odds"]
         return out
-
-
-def review_score(coverage: float, low: float, high: float, by: str = "width") -> float:
-    """What an estimate's review is scored by (decision record 0163): ``width`` ``high - low``, ``reach``
-    ``max(coverage - low, high - coverage)`` or ``drop`` ``coverage - low`` (its interval ``[low, high]``, clipped to
-    [0, 1]; fractions)."""
-    if by == "width":
-        return high - low
-    if by == "reach":
-        return max(coverage - low, high - coverage)
-    if by == "drop":
-        return coverage - low
-    raise ValueError(f"unknown review score {by!r}: one of {', '.join(REVIEW_SCORES)}")
-
-
-def _review_reason(width: float, score: float, threshold: float, by: str) -> str:
-    """The review's reason for an interval whose score exceeds its threshold (fractions, in points)."""
-    if by == "width":
-        return f"interval {100 * width:.0f} points wide (more than {100 * threshold:.0f})"
-    what = "reaches" if by == "reach" else "reaches down"
-    return (f"interval {100 * width:.0f} points wide: it {what} {100 * score:.0f} points from the estimate (more than "
-            f"{100 * threshold:.0f})")
 
 
 def _scale_of(group: dict, coverage: float, signals: dict, side: str = "") -> float:

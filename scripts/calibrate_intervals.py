@@ -15,7 +15,9 @@ own, at each noise level), the one with the smallest mean width over the real co
 is highest, counted below 85 %, then with the fewest cells above 95 %, then the narrowest). The known-length
 interval's features (``K0``: the scheme's, ``K1``: with the share of the length the span covers) are chosen by the
 same rule on the held-out known-length intervals. The review rules, each a score of the interval and its threshold,
-come from the same held-out intervals, for the segments and for the known extent (decision record 0163). The chosen
+come from the same held-out intervals, for the segments and for the known extent (decision record 0163); the
+segments' review is by the fitted odds of a far-off estimate instead where, held out, those are right more often by
+more than 3 points (decision record 0167). The chosen
 scheme is fitted on all three sets and written beside the model (``<model>.intervals.json``), with the known-length
 interval fitted on the same segments with their true lengths.
 Prints every scheme's held-out table.
@@ -32,7 +34,7 @@ import numpy as np
 import pandas as pd
 
 from colonbench.benchmark.evaluate import noisy, select
-from colonbench.completion import intervals
+from colonbench.completion import intervals, review
 from colonbench.completion.method import CompletionMethod, model_path, steps_version
 from colonbench.errors import ColonbenchError
 from colonbench.shards.dataset import generate
@@ -53,6 +55,9 @@ SCHEMES = ("scaled", "scaled-colon", "scaled-colon-novel", "scaled-colon-novel-s
 #: Decision record 0166: the scheme in use, and by how much (points) a candidate must beat it to replace it (about
 #: the standard error of a held-out cell's share inside).
 INCUMBENT, MARGIN = "scaled2-colon-novel-misfit-shift", 1.6
+#: Decision record 0167: by how many points of the lower real colon's precision the review by odds must beat the
+#: interval's score to replace it.
+ODDS_GAIN = 3.0
 NOISE_MM = (0.0, 0.5)
 #: The signals an estimate's interval may be scaled by, as columns of the estimates' table.
 SIGNALS = ("rims", "rims_doubtful", "gap_share", "length_mm", "span_mm", "spread", "radius_mm", "extent_mm",
@@ -226,14 +231,16 @@ def review_cells(held: pd.DataFrame) -> list[str]:
     return sorted(c for c in held["cell"].unique() if c.startswith("V_real ")) + ["V_wide"]
 
 
-def review_width(held: pd.DataFrame, by: str = "width") -> tuple[float, dict]:
+def review_width(held: pd.DataFrame, by: str = "width", score: pd.Series | None = None) -> tuple[float, dict]:
     """0325's review width: the largest at which the held-out intervals flag at least :data:`REVIEW_RECALL` of the
     estimates off by more than :data:`BIG` in each of :func:`review_cells` (else the one closest in the worst);
     with each cell's recall and precision there. ``by``: what an interval is scored by
-    (:func:`intervals.review_score`, decision record 0163)."""
+    (:func:`intervals.review_score`, decision record 0163); ``score``: each estimate's score, given (the held-out
+    log odds of decision record 0167)."""
     big = (held["true"] - held["estimate_used"]).abs() > BIG
-    score = pd.Series([intervals.review_score(c, lo, hi, by) for c, lo, hi in
-                       zip(held["estimate_used"], held["low"], held["high"])], index=held.index)
+    if score is None:
+        score = pd.Series([intervals.review_score(c, lo, hi, by) for c, lo, hi in
+                           zip(held["estimate_used"], held["low"], held["high"])], index=held.index)
     sets = {name: held["cell"] == name for name in review_cells(held)}
     best, best_recall = 0.0, -1.0
     for w in np.unique(np.round(score, 4))[::-1]:
@@ -269,7 +276,7 @@ def review_rule(held: pd.DataFrame, label: str) -> tuple[str, float, dict, dict]
     """0163's review rule on held-out intervals: each score's threshold (:func:`review_width`), printed, and the score
     :func:`choose_review` takes; returns the score, its threshold, its report, and every score's (threshold,
     report)."""
-    reviews = {by: review_width(held, by) for by in intervals.REVIEW_SCORES}
+    reviews = {by: review_width(held, by) for by in review.INTERVAL_SCORES}
     for by, (w_by, r_by) in reviews.items():
         print(f"\n{label}, review by {by}: threshold {100 * w_by:.1f} points: " + "; ".join(
             f"{k} recall {100 * v['recall']:.0f} % of {v['off']}, precision {100 * v['precision']:.0f} %, flagged "
@@ -277,6 +284,42 @@ def review_rule(held: pd.DataFrame, label: str) -> tuple[str, float, dict, dict]
     by = choose_review(reviews, review_cells(held))
     print(f"\n{label}: reviewed by {by} over {100 * reviews[by][0]:.1f} points")
     return by, reviews[by][0], reviews[by][1], reviews
+
+
+def odds_features(df: pd.DataFrame, names) -> np.ndarray:
+    """The estimates' features ``names`` ((n, p), :func:`intervals.features`), as the review's odds read them."""
+    return np.array([intervals.features(c, s, names) for c, s in zip(df["estimate"], signals(df))])
+
+
+def fit_odds(df: pd.DataFrame, names) -> dict:
+    """Decision record 0167's review odds fitted on ``df``'s estimates, the colon as the unit."""
+    x = odds_features(df, names)
+    far = ((df["true"] - df["estimate"]).abs() > BIG).to_numpy(float)
+    return {"features": list(names), "ranges": [[float(a), float(b)] for a, b in zip(x.min(axis=0), x.max(axis=0))],
+            "weights": review.fit_odds(x, far, unit_weights(df))}
+
+
+def held_odds(df: pd.DataFrame, names) -> pd.Series:
+    """Each estimate's log odds of being far off from a fit on the other colons (leave-one-colon-out)."""
+    x, out, colons = odds_features(df, names), np.empty(len(df)), df["colon"].to_numpy()
+    for colon in np.unique(colons):
+        model = fit_odds(df[colons != colon], names)
+        out[colons == colon] = [review.log_odds(model, f) for f in x[colons == colon]]
+    return pd.Series(out, index=df.index)
+
+
+def odds_rule(held: pd.DataFrame, names, by: str, report: dict) -> tuple[float, dict] | None:
+    """Decision record 0167's rule: the review by odds (its held-out threshold and report) where the lower of the real
+    colons' precision beats the chosen score's (``by``, its ``report``) by more than :data:`ODDS_GAIN` points; else
+    None."""
+    width, odds = review_width(held, "odds", held_odds(held, names))
+    real = [c for c in review_cells(held) if c.startswith("V_real ")]
+    gain = 100 * (min(odds[c]["precision"] for c in real) - min(report[c]["precision"] for c in real))
+    print(f"\nreview by odds: threshold {width:.3f}: " + "; ".join(
+        f"{k} recall {100 * v['recall']:.0f} %, precision {100 * v['precision']:.0f} %, flagged "
+        f"{100 * v['flagged']:.0f} %" for k, v in odds.items()) + f"; against {by}: {gain:+.1f} points of the lower "
+        f"real precision ({'adopted' if gain > ODDS_GAIN else 'not adopted'}: more than {ODDS_GAIN:g} needed)")
+    return (width, odds) if gain > ODDS_GAIN else None
 
 
 def with_units(df: pd.DataFrame) -> pd.DataFrame:
@@ -300,6 +343,7 @@ def calibrate(df: pd.DataFrame, level: float, source: dict) -> intervals.Interva
     held = {scheme: by_colon(cal_df, scheme, level) for scheme in SCHEMES}
     best, summary = choose(held, level)
     by, width, review, reviews = review_rule(held[best], best)
+    odds = odds_rule(held[best], intervals.SCALE_FEATURES[best], by, review)
     print("\nknown length, held out (decision record 0163's candidates):")
     known_held = {k: by_colon(cal_df, best, level, known=True, extra=e) for k, e in intervals.KNOWN_EXTRA.items()}
     known_choice, known_summary = choose(known_held, level)
@@ -310,6 +354,9 @@ def calibrate(df: pd.DataFrame, level: float, source: dict) -> intervals.Interva
     intervals.fit_known(cal, cal_df["true"], known_estimates(cal_df), known_signals(cal_df), w, c,
                         intervals.KNOWN_EXTRA[known_choice])
     cal.review_known, cal.review_by, cal.review_by_known = known_width, by, by_known
+    if odds is not None:
+        cal.review_by, (cal.review_width, review) = "odds", odds
+        cal.review_odds = fit_odds(cal_df, intervals.SCALE_FEATURES[best])
     reported = df[df["set"] == "train_real"]
     if len(reported):                    # never calibrated on: the calibration's intervals, held out by construction
         lo_hi = np.array([cal.interval(c, s) for c, s in zip(reported["estimate"], signals(reported))])
@@ -323,6 +370,7 @@ def calibrate(df: pd.DataFrame, level: float, source: dict) -> intervals.Interva
                                        "segments): the network saw them",
                   "schemes": summary, "review": review, "known_review": known_review,
                   "review_scores": {k: {"threshold": round(float(v[0]), 6), "cells": v[1]} for k, v in reviews.items()},
+                  "review_odds_held_out": "adopted (decision record 0167)" if odds else "not adopted",
                   "review_known_for": "a map's segments and a length given (decision record 0163, round 8)",
                   "known_features": known_choice, "known_candidates": known_summary,
                   "known_review_scores": {k: {"threshold": round(float(v[0]), 6), "cells": v[1]}

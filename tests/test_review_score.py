@@ -31,7 +31,7 @@ def test_the_three_scores_of_an_interval():
     assert intervals.review_score(0.6, 0.3, 0.7, "reach") == pytest.approx(0.3)      # the low end is farther
     assert intervals.review_score(0.6, 0.5, 0.95, "reach") == pytest.approx(0.35)    # the high end is farther
     assert intervals.review_score(0.6, 0.5, 0.95, "drop") == pytest.approx(0.1)
-    with pytest.raises(ValueError, match="unknown review score 'size'"):
+    with pytest.raises(ValueError, match="unknown interval review score 'size'"):
         intervals.review_score(0.6, 0.5, 0.95, "size")
 
 
@@ -85,7 +85,7 @@ def test_the_scores_survive_the_calibration_file_and_a_wrong_one_is_refused():
         cal.review_by, cal.review_by_known = by, by_known
         back = intervals.Intervals(**json.loads(json.dumps(cal.to_json())))
         assert (back.review_by, back.review_by_known) == (by, by_known)     # "width" for the known extent is kept
-    with pytest.raises(InputError, match="review score must be one of width, reach, drop, not 'size'"):
+    with pytest.raises(InputError, match="review score must be one of width, reach, drop, odds, not 'size'"):
         intervals.Intervals(**{**cal.to_json(), "review_by": "size"})
 
 

@@ -1,0 +1,96 @@
+"""Decision record 0167: the review by the fitted odds that an estimate is far off (colonbench.completion.review), and
+the rule in scripts/calibrate_intervals.py that adopts it."""
+
+import importlib.util
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from colonbench.completion import intervals, review
+from colonbench.errors import InputError
+from colonbench.estimate import Estimate
+
+
+def _calibrate_intervals():
+    spec = importlib.util.spec_from_file_location(
+        "calibrate_intervals", Path(__file__).resolve().parents[1] / "scripts" / "calibrate_intervals.py")
+    ci = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(ci)
+    return ci
+
+
+def test_the_odds_of_an_intercept_alone_are_the_weighted_share_far_off():
+    """With the intercept alone (no penalty on it), the fitted log odds are those of the share far off: 30 of 100
+    gives ln(0.3 / 0.7); weighing the 30 three times as much gives ln(0.9 / 0.7 * 7 / 9) = ln(90 / 70)."""
+    far = np.r_[np.ones(30), np.zeros(70)]
+    ones = np.ones((100, 1))
+    assert review.fit_odds(ones, far)[0] == pytest.approx(math.log(0.3 / 0.7), abs=1e-4)
+    weights = np.r_[np.full(30, 3.0), np.ones(70)]
+    assert review.fit_odds(ones, far, weights)[0] == pytest.approx(math.log(90 / 70), abs=1e-4)
+    with pytest.raises(ValueError, match="weights"):
+        review.fit_odds(ones, far, np.zeros(100))
+
+
+def test_the_log_odds_keep_each_feature_in_the_range_fitted_on():
+    model = {"features": ["one", "length"], "ranges": [[1, 1], [0.5, 1.0]], "weights": [1.0, -2.0]}
+    assert review.log_odds(model, np.array([1.0, 0.75])) == pytest.approx(-0.5)
+    assert review.log_odds(model, np.array([1.0, 3.0])) == pytest.approx(-1.0)      # clipped to 1.0
+
+
+def _estimate(coverage, length_mm):
+    return Estimate(coverage, np.zeros((0, 3)), np.zeros((0, 3)), "m",
+                    signals={"rims": 2, "length_mm": length_mm, "span_mm": length_mm, "extent_mm": length_mm + 5})
+
+
+def test_a_calibration_reviewed_by_odds_flags_where_they_exceed_its_threshold():
+    """A short line is far off here (the odds fall with the length): the 30 mm segment's log odds are
+    2 - 3 * 0.5 = 0.5 > 0, a 62 % chance, and it is flagged with that chance in its reason; the 60 mm one's are -1,
+    and it is not. A calibration reviewed by odds without their fit is refused."""
+    odds = {"features": ["one", "length"], "ranges": [[1, 1], [0.1, 2.0]], "weights": [2.0, -3.0]}
+    cal = intervals.Intervals("marginal", 0.9, {"all": {"low": -0.1, "high": 0.1, "n": 100}}, 0.0,
+                              review_by="odds", review_odds=odds)
+    short, full = _estimate(0.8, 30.0), _estimate(0.8, 60.0)
+    cal.apply(short), cal.apply(full)
+    assert short.review and "a 62 % chance" in short.review[0] and "flagged from 50 %" in short.review[0]
+    assert full.review == []
+    assert short.coverage_interval == pytest.approx((0.7, 0.9))
+    assert intervals.Intervals(**cal.to_json()).review_odds == odds
+    with pytest.raises(InputError, match="review_odds"):
+        intervals.Intervals("marginal", 0.9, {}, 0.0, review_by="odds")
+
+
+def _held(informative: bool, seed=5):
+    """Held-out rows of two real colons and the widened set: a quarter of each far off; every interval the same, so
+    no score of the interval tells them apart; the line's length does where ``informative``."""
+    rng = np.random.default_rng(seed)
+    rows = []
+    for cell, colon_ids in (("V_real gca00020", [900020]), ("V_real gca00070", [900070]), ("V_wide", [1, 2, 3, 4])):
+        for colon in colon_ids:
+            for i in range(120):
+                far = i % 4 == 0
+                length = (30.0 if far else 60.0) if informative else float(rng.uniform(30, 60))
+                rows.append({"set": cell.split()[0], "cell": cell, "colon": f"{cell.split()[0]}:{colon}",
+                             "estimate": 0.8, "estimate_used": 0.8, "true": 0.5 if far else 0.8, "low": 0.6,
+                             "high": 0.95, "length_mm": length + rng.normal(0, 2), "span_mm": length,
+                             "extent_mm": length + 5, "rims": 2})
+    return pd.DataFrame(rows)
+
+
+def test_the_odds_replace_the_intervals_score_only_where_they_are_right_more_often():
+    """odds_rule: where the line's length marks the far-off estimates and the intervals do not, the held-out odds
+    catch three in four of them and nothing else (precision 100 % against the width's 25 %): adopted. Where the length is noise,
+    they gain nothing: not adopted."""
+    ci = _calibrate_intervals()
+    names = ("one", "length")
+    for informative, adopted in ((True, True), (False, False)):
+        held = _held(informative)
+        by, width, report, _ = ci.review_rule(held, "test")
+        out = ci.odds_rule(held, names, by, report)
+        assert (out is not None) == adopted
+        if adopted:
+            threshold, odds = out
+            assert all(odds[c]["precision"] == 1.0 and odds[c]["recall"] >= 0.75 for c in ci.review_cells(held))
+            assert min(report[c]["precision"] for c in ci.review_cells(held)) == pytest.approx(0.25)
