@@ -3,7 +3,8 @@
 Split-conformal quantiles of residuals (Vovk et al.; Angelopoulos and Bates, 2021), the same with weights (each colon
 the unit: the pooled-CDF quantile of Dunn, Wasserman and Ramdas, 2022, decision record 0325), with a colon-level
 shift term, and per band of a difficulty estimate (Mondrian conformal regression, Bostrom and Johansson, 2020;
-decision record 0161). Values are fractions of coverage or residuals over a scale; ``level`` is the nominal coverage.
+decision record 0161); and the linear quantile regression that fits a scale at its tail (decision record 0166).
+Values are fractions of coverage or residuals over a scale; ``level`` is the nominal coverage.
 """
 
 from __future__ import annotations
@@ -131,11 +132,14 @@ def quantile_regression(x: np.ndarray, y: np.ndarray, tau: float, weights=None) 
     from scipy import sparse
     from scipy.optimize import linprog
 
-    x, y = np.asarray(x, float), np.asarray(y, float)
-    n, p = x.shape
-    w = np.ones(n) if weights is None else np.asarray(weights, float) / float(np.mean(weights))
     if not 0.0 < tau < 1.0:
         raise ValueError(f"a quantile regression's tau must lie in (0, 1), not {tau}")
+    x, y = np.asarray(x, float), np.asarray(y, float)
+    n, p = x.shape
+    w = np.ones(n) if weights is None else np.asarray(weights, float)
+    if w.shape != (n,) or not np.isfinite(w).all() or (w < 0).any() or not w.sum() > 0:
+        raise ValueError(f"a quantile regression's weights must be {n} finite numbers >= 0, not all 0")
+    w = w / float(np.mean(w))
     # variables: b (free), u >= 0 (above the fit), v >= 0 (below); x b + u - v = y
     eye = sparse.identity(n, format="csr")
     a_eq = sparse.hstack([sparse.csr_matrix(x), eye, -eye], format="csr")

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -127,9 +128,14 @@ def _two_sided(scaled: str | None) -> bool:
 
 
 def _tau(scaled: str | None) -> float | None:
-    """The quantile a ``quant<NN>...`` scheme fits each end's log scale at (``NN`` / 100, decision record 0166),
-    else None (a least-squares fit of the log)."""
-    return int(scaled[5:7]) / 100.0 if scaled and scaled.startswith("quant") else None
+    """The quantile a ``quant<NN>-...`` scheme fits each end's log scale at (``NN`` / 100, two digits, decision
+    record 0166), else None (a least-squares fit of the log)."""
+    if not (scaled and scaled.startswith("quant")):
+        return None
+    match = re.fullmatch(r"quant(\d{2})-.+", scaled)
+    if match is None:
+        raise ValueError(f"a quantile scheme is named quant<two digits>-..., not {scaled!r}")
+    return int(match.group(1)) / 100.0
 
 
 def _groups_of(scheme: str) -> str:

@@ -253,7 +253,7 @@ def moved_interval(method, est, coverage: float) -> list[float]:
     [low, high] : list of float
         Fractions in [0, 1]. A method without a calibration gets its own interval moved by ``coverage -
         est.coverage`` and clipped to [0, 1]; an end it had clipped at 1 moves with it. The estimate's review
-        reasons are kept as they are (the known-extent interval, 18 points wide, is never flagged for its width).
+        reasons are kept as they are, decided on the interval around the estimate's own coverage.
     """
     cal = getattr(method, "intervals", None)
     if callable(getattr(cal, "interval", None)):

@@ -11,8 +11,9 @@ completion method (its intervals off, every signal on) at 0 and 0.5 mm noise, as
 and steps in ``<data>/<manifest>``), then chooses the scheme by decision record 0161's rule: every scheme is measured
 leave-one-colon-out (a colon's estimates get the intervals of a calibration fitted on all the other colons); of
 those whose truth-inside share lies within 85-95 % in each cell (``V_wide``, ``V_paper`` and each real colon on its
-own, at each noise level), the one with the smallest mean width over the real colons (else the one whose lowest cell
-is highest, counted below 85 %, then with the fewest cells above 95 %, then the narrowest). The known-length
+own, at each noise level), the one with the smallest mean width over the real colons; where none is, the scheme in use
+when decision record 0166 was written stays unless a candidate beats it by more than a cell's noise (0166's rule:
+every cell at or above 85 % and 1.6 points less above 95 %, or as little and 1.6 points narrower). The known-length
 interval's features (``K0``: the scheme's, ``K1``: with the share of the length the span covers) are chosen by the
 same rule on the held-out known-length intervals. The review rules, each a score of the interval and its threshold,
 come from the same held-out intervals, for the segments and for the known extent (decision record 0163); the
@@ -52,8 +53,8 @@ SCHEMES = ("scaled", "scaled-colon", "scaled-colon-novel", "scaled-colon-novel-s
            "scaled2-colon-novel-gaps-shift", "binned-colon-novel-gaps-shift", "scaled2-colon-novel-depth-shift",
            "binned-colon-novel-depth-shift", "scaled2-colon-novel-misfit-shift", "binned-colon-novel-misfit-shift",
            "quant95-colon-novel-misfit-shift", "quant90-colon-novel-misfit-shift")
-#: Decision record 0166: the scheme in use, and by how much (points) a candidate must beat it to replace it (about
-#: the standard error of a held-out cell's share inside).
+#: Decision record 0166: the scheme in use when it was written, and by how much (points) a candidate must beat it to
+#: replace it (about the standard error of a held-out cell's share inside).
 INCUMBENT, MARGIN = "scaled2-colon-novel-misfit-shift", 1.6
 #: Decision record 0167: by how many points of the lower real colon's precision the review by odds must beat the
 #: interval's score to replace it.
@@ -189,7 +190,9 @@ def choose(held: dict, level: float) -> tuple[str, dict]:
     """0161's rule on held-out intervals per scheme: of the schemes within 85-95 % in every cell (each calibrated set,
     each real colon on its own, each noise level), the narrowest over the real colons; else the one whose lowest cell
     is highest, counted only below 85 % (under-coverage first), then with the fewest cells above 95 %, then the
-    narrowest over the real colons. Also the summary."""
+    narrowest over the real colons; but where :data:`INCUMBENT` is among the schemes, decision record 0166's
+    :func:`replace_incumbent` instead (the known extent's candidates, ``K0`` and ``K1``, keep 0161's rule). Also
+    the summary (with each scheme's ``excess`` where 0166's rule ran)."""
     summary, ok = {}, {}
     for scheme, h in held.items():
         c = cells(h[h["set"].isin(CALIBRATED)])
@@ -217,10 +220,12 @@ def replace_incumbent(summary: dict) -> str:
     def excess(s):
         return round(sum(max(c["inside"] - 95.0, 0.0) for c in summary[s]["cells"].values()), 1)
 
-    inc = summary[INCUMBENT]
-    better = [s for s in summary if s != INCUMBENT and summary[s]["lowest"] >= 85.0 and (
-        excess(s) < excess(INCUMBENT) - MARGIN or (excess(s) <= excess(INCUMBENT) and
-                                                   summary[s]["real_width"] < inc["real_width"] - MARGIN))]
+    def beats(s):                  # by more than the margin: a gain of exactly MARGIN does not
+        less = excess(INCUMBENT) - excess(s)
+        narrower = summary[INCUMBENT]["real_width"] - summary[s]["real_width"]
+        return less > MARGIN + 1e-9 or (less >= -1e-9 and narrower > MARGIN + 1e-9)
+
+    better = [s for s in summary if s != INCUMBENT and summary[s]["lowest"] >= 85.0 and beats(s)]
     for s in summary:
         summary[s]["excess"] = excess(s)
     return min(better, key=lambda s: (excess(s), summary[s]["real_width"])) if better else INCUMBENT

@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import csv
 import json
+import math
 import sys
 from pathlib import Path
 
@@ -68,7 +69,11 @@ def main(argv=None):
 
 
 def _flags(by: str, threshold: float) -> str:
-    """What makes an interval flag its estimate, in words (:func:`colonbench.completion.intervals.review_score`)."""
+    """What makes an estimate flagged, in words (:mod:`colonbench.completion.review`)."""
+    if by == "odds":
+        chance = 100.0 / (1.0 + math.exp(-threshold))
+        return (f"a chance over {chance:.0f} % that the estimate is off by more than 15 points (the log odds of a "
+                f"logistic fit of its signals over {threshold:.2f})")
     where = {"width": "wider than", "reach": "reaching from its estimate more than",
              "drop": "reaching below its estimate more than"}[by]
     return f"an interval {where} {100 * threshold:.0f} points"
@@ -105,20 +110,26 @@ def intervals_rows(model: Path) -> list[str]:
     rows = [(k, g) for k, g in cal.groups.items() if k != "all" or scaled] + \
         ([("extent known", cal.known)] if cal.known else [])
     for key, g in rows:
-        two = "weights_low" in g                       # this group's scale for each end (``scaled2...``)
+        two = "weights_low" in g                       # this group's scale for each end (``scaled2...``, ``quant...``)
         ends = (f"{g['low']:+.2f} s_low to {g['high']:+.2f} s_high" if two
                 else f"{g['low']:+.2f} s to {g['high']:+.2f} s" if "features" in g
                 else f"{100 * g['low']:+.1f} to {100 * g['high']:+.1f} points")
         if "band_edges" in g:                          # quantiles per band of the scale (``binned...``)
             edges = ", ".join(f"{e:+.2f}" for e in g["band_edges"])
             ends = (f"per band of log s (cut at {edges}): " + ", ".join(
-                f"{lo:+.2f} s to {hi:+.2f} s" for lo, hi in zip(g["band_low"], g["band_high"])))
+                f"{lo:+.2f} s to {hi:+.2f} s" for lo, hi in zip(g["band_low"], g["band_high"]))
+                + " (each band's colon shift included)")
         if "shift_low" in g:
             ends += f" (colon shift {g['shift_low']:+.2f}, {g['shift_high']:+.2f} included)"
         named = lambda ws: ", ".join(f"{n} {w:+.2f}" for n, w in zip(g.get("features", ()), ws))  # noqa: E731
         weights = (f"s_low: {named(g['weights_low'])}; s_high: {named(g['weights_high'])}" if two
                    else named(g.get("weights", ())))
         out.append(f"| {key} | {g['n']} | {ends} | {weights} |")
+    if cal.review_odds:                                  # the review's odds (decision record 0167)
+        o = cal.review_odds
+        weights = ", ".join(f"{n} {w:+.2f}" for n, w in zip(o["features"], o["weights"]))
+        out.append(f"| review: odds of off by > 15 points | {src.get('estimates')} | flagged above log odds "
+                   f"{cal.review_width:+.2f} | {weights} |")
     for track, g in (cal.map.get("groups") or {}).items():
         out.append(f"| map segments, {track} | {g['n']} | {100 * g['low']:+.1f} to {100 * g['high']:+.1f} points | |")
     return out

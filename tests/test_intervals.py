@@ -134,9 +134,9 @@ def test_estimate_writes_the_interval_and_takes_a_known_length(demo_data, tmp_pa
     assert a["coverage_interval"][0] <= a["coverage"] <= a["coverage_interval"][1]
     assert a["coverage_interval_level"] == 0.9 and isinstance(a["review"], list)
     assert a["signals"]["span_mm"] >= a["signals"]["length_mm"] - 0.5     # the line, run on to its planes
-    # the costly signals only where the shipped calibration's features use them (the shipped one: spread and the
-    # holes' depth, not the wall's misfit)
-    used = intervals.load(model_path(None), None).groups["all"]["features"]
+    # the costly signals only where the shipped calibration's features use them (its groups', known extent's, odds')
+    cal = intervals.load(model_path(None), None)
+    used = {f for g in [*cal.groups.values(), cal.known, cal.review_odds] for f in g.get("features", ())}
     for feature, signal in (("spread", "spread"), ("depth", "hole_depth_mm"), ("misfit", "wall_misfit_mm")):
         assert (signal in a["signals"]) == (feature in used), signal
     assert main(["estimate", str(tmp_path / "seg.npy"), "--out-dir", str(tmp_path / "b"), "--length-mm", "500"]) == 0

@@ -2,6 +2,7 @@
 the rule in scripts/calibrate_intervals.py that adopts it."""
 
 import importlib.util
+import json
 import math
 from pathlib import Path
 
@@ -81,8 +82,8 @@ def _held(informative: bool, seed=5):
 
 def test_the_odds_replace_the_intervals_score_only_where_they_are_right_more_often():
     """odds_rule: where the line's length marks the far-off estimates and the intervals do not, the held-out odds
-    catch three in four of them and nothing else (precision 100 % against the width's 25 %): adopted. Where the length is noise,
-    they gain nothing: not adopted."""
+    catch three in four of them and nothing else (precision 100 % against the width's 25 %): adopted. Where the
+    length is noise, they gain nothing: not adopted."""
     ci = _calibrate_intervals()
     names = ("one", "length")
     for informative, adopted in ((True, True), (False, False)):
@@ -94,3 +95,32 @@ def test_the_odds_replace_the_intervals_score_only_where_they_are_right_more_oft
             threshold, odds = out
             assert all(odds[c]["precision"] == 1.0 and odds[c]["recall"] >= 0.75 for c in ci.review_cells(held))
             assert min(report[c]["precision"] for c in ci.review_cells(held)) == pytest.approx(0.25)
+
+
+def test_the_model_card_shows_a_binned_scheme_per_band_and_the_review_odds(tmp_path):
+    """scripts/model_card.py's interval section: a binned calibration's four bands, each its own quantiles, and the
+    review's odds with their threshold said as a chance (log odds -1.38: over 20 %)."""
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "scripts"))
+    import model_card
+
+    rng = np.random.default_rng(2)
+    n = 240
+    est = rng.uniform(0.4, 0.95, n)
+    sig = [{"rims": 2, "length_mm": float(v), "span_mm": float(v), "extent_mm": float(v) + 5, "spread": 0.02,
+            "radius_mm": 12.0} for v in rng.uniform(30, 70, n)]
+    true = est - 0.05 * np.abs(rng.normal(size=n)) * np.array([s["length_mm"] for s in sig]) / 50
+    cal = intervals.fit(true, est, sig, "binned-colon-novel-shift", -1.38, weights=np.ones(n) / n,
+                        colons=np.arange(n) % 6)
+    cal.review_by = "odds"
+    cal.review_odds = {"features": ["one", "length"], "ranges": [[1, 1], [0.5, 1.2]], "weights": [1.0, -2.0]}
+    cal.source = {"id": "binned-test", "steps": "steps=10", "estimates": n}
+    model = tmp_path / "m.safetensors"
+    intervals.path_for(model).write_text(json.dumps(cal.to_json()))
+    text = "\n".join(model_card.intervals_rows(model))
+    group = cal.groups["all"]
+    assert len(group["band_low"]) == 4 and f"{group['band_low'][3]:+.2f} s to {group['band_high'][3]:+.2f} s" in text
+    assert "per band of log s (cut at " in text and "a chance over 20 % that the estimate is off" in text
+    row = "| review: odds of off by > 15 points | 240 | flagged above log odds -1.38 | one +1.00, length -2.00 |"
+    assert row in text

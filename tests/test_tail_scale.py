@@ -55,22 +55,31 @@ def test_a_tail_fitted_scale_leaves_its_tail_above_it():
     with the misfit as the residuals do; the least-squares scale of scaled2 leaves far more above it."""
     true, est, sig, misfit = _segments()
     n = len(true)
+    weights = np.where(np.arange(n) % 8 < 2, 3.0, 1.0)          # two colons of eight weigh three times as much
+    weights /= weights.sum()
     above = {}
     for scheme in ("quant95-colon-novel-misfit-shift", "scaled2-colon-novel-misfit-shift"):
-        cal = intervals.fit(true, est, sig, scheme, 0.3, weights=np.ones(n) / n, colons=np.arange(n) % 8)
+        cal = intervals.fit(true, est, sig, scheme, 0.3, weights=weights, colons=np.arange(n) % 8)
         group = cal.groups["all"]
         scale = np.array([intervals._scale_of(group, c, s, "low") for c, s in zip(est, sig)])
-        above[scheme] = float(np.mean(np.log(np.maximum(est - true, 0) + intervals.SCALE_FLOOR) > np.log(scale) + 1e-9))
+        over = np.log(np.maximum(est - true, 0) + intervals.SCALE_FLOOR) > np.log(scale) + 1e-9
+        above[scheme] = float(np.sum(weights * over))              # the weighted share above the scale
         assert group["weights_low"][group["features"].index("misfit")] > 0
+        low, high = cal.interval(0.8, sig[0])
+        assert 0.0 <= low < 0.8 <= high <= 1.0
     assert above["quant95-colon-novel-misfit-shift"] <= 0.05 + 1e-9
     assert above["scaled2-colon-novel-misfit-shift"] > 0.2
     assert intervals._tau("quant90-colon-novel-misfit-shift") == 0.9 and intervals._tau("scaled2") is None
+    with pytest.raises(ValueError, match="two digits"):
+        intervals._tau("quant975-colon-novel-misfit-shift")
+    with pytest.raises(ValueError, match="weights"):
+        quantile_regression(np.ones((3, 1)), np.arange(3.0), 0.5, [1.0, -1.0, 1.0])
 
 
 def test_a_candidate_replaces_the_scheme_in_use_only_by_more_than_the_margin():
     """replace_incumbent: the scheme in use has 3.0 points above 95 %. A candidate 1.5 below it stays out (within the
     margin); one 2.8 below replaces it, unless a cell of its is under 85 %; at the same excess, one 1.7 points
-    narrower replaces it and one 1.5 narrower does not."""
+    narrower replaces it and one 1.5 narrower does not; exactly 1.6 better is not more than the margin."""
     ci = _calibrate_intervals()
 
     def summary(cells, real_width):
@@ -83,5 +92,11 @@ def test_a_candidate_replaces_the_scheme_in_use_only_by_more_than_the_margin():
     assert ci.replace_incumbent({ci.INCUMBENT: inc, "short": summary([93, 94, 90, 84.9], 30.0)}) == ci.INCUMBENT
     assert ci.replace_incumbent({ci.INCUMBENT: inc, "narrow": summary([97.2, 95.8, 90, 88], 36.3)}) == "narrow"
     assert ci.replace_incumbent({ci.INCUMBENT: inc, "narrow": summary([97.2, 95.8, 90, 88], 36.5)}) == ci.INCUMBENT
+    # exactly the margin is not more than it: 1.6 points less above 95 %, or 1.6 points narrower
+    assert ci.replace_incumbent({ci.INCUMBENT: inc, "edge": summary([95.6, 95.8, 90, 88], 38.0)}) == ci.INCUMBENT
+    assert ci.replace_incumbent({ci.INCUMBENT: summary([97.2, 95.8], 16.01),
+                                 "edge": summary([97.2, 95.8], 14.41)}) == ci.INCUMBENT
+    # narrower by more than the margin but further above 95 %: not better
+    assert ci.replace_incumbent({ci.INCUMBENT: inc, "wide": summary([97.3, 95.8, 90, 88], 30.0)}) == ci.INCUMBENT
     two = {ci.INCUMBENT: inc, "wide": summary([95.1, 95.1, 90, 88], 45.0), "less": summary([95.1, 95.1, 90, 88], 44.0)}
     assert ci.replace_incumbent(two) == "less" and two["wide"]["excess"] == 0.2
