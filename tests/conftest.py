@@ -10,6 +10,18 @@ REAL = Path(__file__).resolve().parents[1] / "data_manifests" / "meshes"
 
 
 @pytest.fixture(scope="session")
+def calibrate_intervals():
+    """scripts/calibrate_intervals.py as a module (a script, not part of the package)."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(
+        "calibrate_intervals", Path(__file__).resolve().parents[1] / "scripts" / "calibrate_intervals.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.fixture(scope="session")
 def small_config():
     """Default generator parameters on a coarser mesh, for speed."""
     from colonbench.datagen.generate import GeneratorConfig

@@ -1,7 +1,6 @@
 """Decision record 0167: the review by the fitted odds that an estimate is far off (colonbench.completion.review), and
 the rule in scripts/calibrate_intervals.py that adopts it."""
 
-import importlib.util
 import json
 import math
 from pathlib import Path
@@ -13,14 +12,6 @@ import pytest
 from colonbench.completion import intervals, review
 from colonbench.errors import InputError
 from colonbench.estimate import Estimate
-
-
-def _calibrate_intervals():
-    spec = importlib.util.spec_from_file_location(
-        "calibrate_intervals", Path(__file__).resolve().parents[1] / "scripts" / "calibrate_intervals.py")
-    ci = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(ci)
-    return ci
 
 
 def test_the_odds_of_an_intercept_alone_are_the_weighted_share_far_off():
@@ -80,11 +71,11 @@ def _held(informative: bool, seed=5):
     return pd.DataFrame(rows)
 
 
-def test_the_odds_replace_the_intervals_score_only_where_they_are_right_more_often():
+def test_the_odds_replace_the_intervals_score_only_where_they_are_right_more_often(calibrate_intervals):
     """odds_rule: where the line's length marks the far-off estimates and the intervals do not, the held-out odds
     catch three in four of them and nothing else (precision 100 % against the width's 25 %): adopted. Where the
     length is noise, they gain nothing: not adopted."""
-    ci = _calibrate_intervals()
+    ci = calibrate_intervals
     names = ("one", "length")
     for informative, adopted in ((True, True), (False, False)):
         held = _held(informative)

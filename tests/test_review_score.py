@@ -1,9 +1,7 @@
 """What the review flag is scored by, and the known extent's share of the length given (decision record 0163)."""
 
-import importlib.util
 import json
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -11,14 +9,6 @@ import pytest
 from colonbench.completion import intervals
 from colonbench.errors import InputError
 from colonbench.estimate import Estimate
-
-
-def _script():
-    spec = importlib.util.spec_from_file_location(
-        "calibrate_intervals", Path(__file__).resolve().parents[1] / "scripts" / "calibrate_intervals.py")
-    script = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(script)
-    return script
 
 
 def _estimate(coverage=0.6, **signals):
@@ -119,8 +109,8 @@ def test_the_known_extents_scale_learns_the_share_where_its_errors_grow_with_it(
         intervals.fit_known(intervals.Intervals("length", 0.9, {}, 0.3), true, est, sig, extra=("share_off",))
 
 
-def test_the_review_score_rule_prefers_precision_among_those_that_catch():
-    script = _script()
+def test_the_review_score_rule_prefers_precision_among_those_that_catch(calibrate_intervals):
+    script = calibrate_intervals
     cells = ["V_real gca00020", "V_real gca00070", "V_wide"]
 
     def review(recalls, precisions):
@@ -136,8 +126,8 @@ def test_the_review_score_rule_prefers_precision_among_those_that_catch():
     assert script.choose_review(none, cells) == "reach"                   # none catches: the higher lowest recall
 
 
-def test_the_known_length_estimates_carry_the_share_known_length_gives():
-    script = _script()
+def test_the_known_length_estimates_carry_the_share_known_length_gives(calibrate_intervals):
+    script = calibrate_intervals
     import pandas as pd
 
     df = pd.DataFrame({"span_mm": [30.0, 66.0], "segment_mm": [60.0, 60.0], "length_mm": [30.0, 70.0],
