@@ -19,7 +19,7 @@ band of the scale (decision record 0161); a ``quant<NN>`` one fits each end's sc
 log residual, not by least squares (decision record 0166). The shipped calibration names its scheme. The calibration
 (groups, quantiles, weights, ranges, the data it came from) is a JSON file beside the model
 (``<model>.intervals.json``), made by ``scripts/calibrate_intervals.py``, which also chooses the scheme and the
-review width.
+review's rules (:mod:`colonbench.completion.review`).
 """
 
 from __future__ import annotations
@@ -222,8 +222,11 @@ class Intervals:
     review_odds: dict = field(default_factory=dict)
 
     def __post_init__(self):
-        if self.review_by == "odds" and not self.review_odds:
+        if "odds" in (self.review_by, self.review_by_known) and not self.review_odds:
             raise InputError("a calibration reviewed by odds must hold its fit (review_odds)")
+        if self.review_by == "odds" and self.review_known > 0 and not self.review_by_known:
+            raise InputError("a calibration reviewed by odds must name its known extent's score (review_by_known): "
+                             "review_known is a width, not log odds")
         for by in (self.review_by, self.review_by_known or self.review_by):
             if by not in REVIEW_SCORES:
                 raise InputError(f"a calibration's review score must be one of {', '.join(REVIEW_SCORES)}, "
@@ -255,8 +258,9 @@ class Intervals:
 
     def apply(self, est) -> None:
         """Set an :class:`~colonbench.estimate.Estimate`'s ``coverage_interval``, ``interval_level`` and ``review``
-        from its coverage and its signals: an interval whose score (:attr:`review_by`) exceeds :attr:`review_width`
-        (:attr:`review_known`, :attr:`review_by_known` where its extent is known) is a reason, and then so are
+        from its coverage and its signals: an estimate whose score (:attr:`review_by`: of its interval, or its odds of
+        being far off) exceeds :attr:`review_width` (:attr:`review_known`, :attr:`review_by_known` where its extent
+        is known) is a reason, and then so are
         the rims' notes and a known length's; a line over :data:`LONG_SHARE` times :meth:`longest_mm` always is."""
         if not np.isfinite(est.coverage):
             return

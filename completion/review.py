@@ -40,8 +40,8 @@ def review_reason(width: float, score: float, threshold: float, by: str) -> str:
     if by == "width":
         return f"interval {100 * width:.0f} points wide (more than {100 * threshold:.0f})"
     if by == "odds":
-        return (f"a {100 * _chance(score):.0f} % chance, as the calibration's fit of its signals reads them, that the "
-                f"estimate is off by more than 15 points (flagged from {100 * _chance(threshold):.0f} %); its interval "
+        return (f"a {100 * _chance(score):.1f} % chance, as the calibration's fit of its signals reads them, that the "
+                f"estimate is off by more than 15 points (flagged over {100 * _chance(threshold):.1f} %); its interval "
                 f"is {100 * width:.0f} points wide")
     what = "reaches" if by == "reach" else "reaches down"
     return (f"interval {100 * width:.0f} points wide: it {what} {100 * score:.0f} points from the estimate (more than "
@@ -70,7 +70,10 @@ def fit_odds(x: np.ndarray, far: np.ndarray, weights: np.ndarray | None = None) 
         grad = x.T @ (w * (1.0 / (1.0 + np.exp(-z)) - y)) + RIDGE * pen
         return float(np.sum(w * (np.logaddexp(0.0, z) - y * z))) + 0.5 * RIDGE * float(pen @ pen), grad
 
-    return [float(v) for v in minimize(loss, np.zeros(x.shape[1]), jac=True, method="L-BFGS-B").x]
+    res = minimize(loss, np.zeros(x.shape[1]), jac=True, method="L-BFGS-B")
+    if not res.success:
+        raise RuntimeError(f"the review's logistic fit did not converge: {res.message}")
+    return [float(v) for v in res.x]
 
 
 def log_odds(model: dict, f: np.ndarray) -> float:

@@ -314,17 +314,20 @@ def held_odds(df: pd.DataFrame, names) -> pd.Series:
 
 
 def odds_rule(held: pd.DataFrame, names, by: str, report: dict) -> tuple[float, dict] | None:
-    """Decision record 0167's rule: the review by odds (its held-out threshold and report) where the lower of the real
-    colons' precision beats the chosen score's (``by``, its ``report``) by more than :data:`ODDS_GAIN` points; else
-    None."""
+    """Decision record 0167's rule: the review by odds (its held-out threshold and report) where it catches
+    :data:`REVIEW_RECALL` in each of :func:`review_cells` and the lower of the real colons' precision beats the chosen
+    score's (``by``, its ``report``) by more than :data:`ODDS_GAIN` points; else None."""
     width, odds = review_width(held, "odds", held_odds(held, names))
     real = [c for c in review_cells(held) if c.startswith("V_real ")]
     gain = 100 * (min(odds[c]["precision"] for c in real) - min(report[c]["precision"] for c in real))
+    catches = min(odds[c]["recall"] for c in review_cells(held)) >= REVIEW_RECALL     # at the same catch
+    adopted = catches and gain > ODDS_GAIN + 1e-9          # more than the gain: exactly ODDS_GAIN is not
     print(f"\nreview by odds: threshold {width:.3f}: " + "; ".join(
         f"{k} recall {100 * v['recall']:.0f} %, precision {100 * v['precision']:.0f} %, flagged "
         f"{100 * v['flagged']:.0f} %" for k, v in odds.items()) + f"; against {by}: {gain:+.1f} points of the lower "
-        f"real precision ({'adopted' if gain > ODDS_GAIN else 'not adopted'}: more than {ODDS_GAIN:g} needed)")
-    return (width, odds) if gain > ODDS_GAIN else None
+        f"real precision ({'adopted' if adopted else 'not adopted'}: more than {ODDS_GAIN:g} needed, at "
+        f"{100 * REVIEW_RECALL:.0f} % caught in each cell)")
+    return (width, odds) if adopted else None
 
 
 def with_units(df: pd.DataFrame) -> pd.DataFrame:
@@ -347,8 +350,8 @@ def calibrate(df: pd.DataFrame, level: float, source: dict) -> intervals.Interva
               f"{100 * (g['estimate'] - g['true']).mean():+.2f}")
     held = {scheme: by_colon(cal_df, scheme, level) for scheme in SCHEMES}
     best, summary = choose(held, level)
-    by, width, review, reviews = review_rule(held[best], best)
-    odds = odds_rule(held[best], intervals.SCALE_FEATURES[best], by, review)
+    by, width, review_report, reviews = review_rule(held[best], best)
+    odds = odds_rule(held[best], intervals.SCALE_FEATURES[best], by, review_report)
     print("\nknown length, held out (decision record 0163's candidates):")
     known_held = {k: by_colon(cal_df, best, level, known=True, extra=e) for k, e in intervals.KNOWN_EXTRA.items()}
     known_choice, known_summary = choose(known_held, level)
@@ -360,7 +363,7 @@ def calibrate(df: pd.DataFrame, level: float, source: dict) -> intervals.Interva
                         intervals.KNOWN_EXTRA[known_choice])
     cal.review_known, cal.review_by, cal.review_by_known = known_width, by, by_known
     if odds is not None:
-        cal.review_by, (cal.review_width, review) = "odds", odds
+        cal.review_by, (cal.review_width, review_report) = "odds", odds
         cal.review_odds = fit_odds(cal_df, intervals.SCALE_FEATURES[best])
     reported = df[df["set"] == "train_real"]
     if len(reported):                    # never calibrated on: the calibration's intervals, held out by construction
@@ -373,7 +376,7 @@ def calibrate(df: pd.DataFrame, level: float, source: dict) -> intervals.Interva
                              for s in CALIBRATED},
                   "not_calibrated_on": "the real training colons (calibration-real.yaml and calibration.yaml's real "
                                        "segments): the network saw them",
-                  "schemes": summary, "review": review, "known_review": known_review,
+                  "schemes": summary, "review": review_report, "known_review": known_review,
                   "review_scores": {k: {"threshold": round(float(v[0]), 6), "cells": v[1]} for k, v in reviews.items()},
                   "review_odds_held_out": "adopted (decision record 0167)" if odds else "not adopted",
                   "review_known_for": "a map's segments and a length given (decision record 0163, round 8)",

@@ -46,12 +46,33 @@ def test_a_calibration_reviewed_by_odds_flags_where_they_exceed_its_threshold():
                               review_by="odds", review_odds=odds)
     short, full = _estimate(0.8, 30.0), _estimate(0.8, 60.0)
     cal.apply(short), cal.apply(full)
-    assert short.review and "a 62 % chance" in short.review[0] and "flagged from 50 %" in short.review[0]
+    assert short.review and "a 62.2 % chance" in short.review[0] and "flagged over 50.0 %" in short.review[0]
     assert full.review == []
     assert short.coverage_interval == pytest.approx((0.7, 0.9))
-    assert intervals.Intervals(**cal.to_json()).review_odds == odds
+    assert intervals.Intervals(**json.loads(json.dumps(cal.to_json()))).review_odds == odds
+    assert "review_odds" not in intervals.Intervals("marginal", 0.9, {}, 0.3).to_json()     # as before odds existed
     with pytest.raises(InputError, match="review_odds"):
         intervals.Intervals("marginal", 0.9, {}, 0.0, review_by="odds")
+    with pytest.raises(InputError, match="review_odds"):
+        intervals.Intervals("marginal", 0.9, {}, 0.3, review_by_known="odds")
+    with pytest.raises(InputError, match="review_by_known"):            # a width threshold read as log odds
+        intervals.Intervals("marginal", 0.9, {}, 0.0, review_by="odds", review_odds=odds, review_known=0.2)
+
+
+def test_a_length_given_keeps_the_known_extents_width_rule_under_odds():
+    """With the segments reviewed by odds, a length given is reviewed by its interval's width against review_known:
+    the short segment, far off by the odds, is not flagged where its known-extent interval is 10 points wide (under
+    15), and is where the threshold is 5."""
+    odds = {"features": ["one", "length"], "ranges": [[1, 1], [0.1, 2.0]], "weights": [2.0, -3.0]}
+    groups = {"all": {"low": -0.1, "high": 0.1, "n": 100}}
+    for threshold, flagged in ((0.15, False), (0.05, True)):
+        cal = intervals.Intervals("marginal", 0.9, groups, 0.0, known={"low": -0.05, "high": 0.05, "n": 100},
+                                  review_known=threshold, review_by="odds", review_by_known="width", review_odds=odds)
+        est = _estimate(0.8, 30.0)
+        intervals.known_length(est, 30.0)
+        cal.apply(est)
+        assert est.coverage_interval == pytest.approx((0.75, 0.85))
+        assert bool(est.review) == flagged and (not flagged or "10 points wide" in est.review[0])
 
 
 def _held(informative: bool, seed=5):
@@ -88,12 +109,10 @@ def test_the_odds_replace_the_intervals_score_only_where_they_are_right_more_oft
             assert min(report[c]["precision"] for c in ci.review_cells(held)) == pytest.approx(0.25)
 
 
-def test_the_model_card_shows_a_binned_scheme_per_band_and_the_review_odds(tmp_path):
+def test_the_model_card_shows_a_binned_scheme_per_band_and_the_review_odds(tmp_path, monkeypatch):
     """scripts/model_card.py's interval section: a binned calibration's four bands, each its own quantiles, and the
     review's odds with their threshold said as a chance (log odds -1.38: over 20 %)."""
-    import sys
-
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "scripts"))
+    monkeypatch.syspath_prepend(str(Path(__file__).resolve().parents[1] / "scripts"))
     import model_card
 
     rng = np.random.default_rng(2)
@@ -115,3 +134,21 @@ def test_the_model_card_shows_a_binned_scheme_per_band_and_the_review_odds(tmp_p
     assert "per band of log s (cut at " in text and "a chance over 20 % that the estimate is off" in text
     row = "| review: odds of off by > 15 points | 240 | flagged above log odds -1.38 | one +1.00, length -2.00 |"
     assert row in text
+
+
+def test_the_odds_must_gain_more_than_the_margin_at_the_same_catch(calibrate_intervals, monkeypatch):
+    """odds_rule on given held-out reports: a gain of exactly 3 points (0.333 against 0.303, as the file rounds them)
+    is not more than ODDS_GAIN; 3.1 is; and a gain of 10 with a cell caught under 75 % is not adopted."""
+    ci = calibrate_intervals
+    held = pd.DataFrame({"cell": ["V_real gca00020", "V_real gca00070", "V_wide"]})
+    base = {c: {"precision": 0.303, "recall": 0.8} for c in held["cell"]}
+
+    def with_odds(precision, recall):
+        report = {c: {"precision": precision, "recall": recall, "flagged": 0.5} for c in held["cell"]}
+        monkeypatch.setattr(ci, "held_odds", lambda h, names: pd.Series(0.0, index=h.index))
+        monkeypatch.setattr(ci, "review_width", lambda h, by="width", score=None: (-1.0, report))
+        return ci.odds_rule(held, ("one",), "reach", base)
+
+    assert with_odds(0.333, 0.8) is None
+    assert with_odds(0.334, 0.8) is not None
+    assert with_odds(0.403, 0.74) is None
