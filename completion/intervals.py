@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from colonbench.completion.conformal import band_of, band_quantiles, quantile_regression, shifted_quantiles
-from colonbench.completion.review import REVIEW_SCORES, log_odds, review_reason, review_score  # noqa: F401
+from colonbench.completion.review import REVIEW_SCORES, review_reason, review_score  # noqa: F401
 from colonbench.errors import InputError
 
 #: Nominal coverage of the intervals.
@@ -277,7 +277,7 @@ class Intervals:
         known = est.signals.get("extent") == "known" and self.review_known > 0
         review_width = self.review_known if known else self.review_width
         by = (self.review_by_known or self.review_by) if known else self.review_by
-        score = (log_odds(self.review_odds, features(est.coverage, est.signals, self.review_odds["features"]))
+        score = (linear_score(self.review_odds, features(est.coverage, est.signals, self.review_odds["features"]))
                  if by == "odds" else review_score(est.coverage, *est.coverage_interval, by))
         if score <= review_width:           # sure enough: the notes (the rims', a known length's) are reasons only
             est.review.clear()              # where it is not
@@ -324,14 +324,20 @@ def _scale_of(group: dict, coverage: float, signals: dict, side: str = "") -> fl
 
 def _log_scale_of(group: dict, coverage: float, signals: dict, side: str = "") -> float:
     """``w . f`` of :func:`_scale_of`, clipped to [-20, 5]; 0 for a group without weights."""
-    w = group.get(f"weights_{side}", group.get("weights"))
-    if w is None:
+    if group.get(f"weights_{side}", group.get("weights")) is None:
         return 0.0
-    f = features(coverage, signals, group["features"])
-    if "ranges" in group:                # within the range calibrated on, never extrapolated (decision record 0160)
-        lo, hi = np.asarray(group["ranges"], float).T
+    return float(np.clip(linear_score(group, features(coverage, signals, group["features"]), side), -20, 5))
+
+
+def linear_score(fitted: dict, f: np.ndarray, side: str = "") -> float:
+    """``w . f`` of a linear fit on an estimate's features ``f`` ((p,), :func:`features` of ``fitted["features"]``):
+    a scaled group's log scale (its ``weights``, or ``weights_<side>``) or the review's log odds
+    (:attr:`Intervals.review_odds`); each feature first clipped into ``fitted["ranges"]``, the range calibrated on,
+    never extrapolated (decision record 0160)."""
+    if "ranges" in fitted:
+        lo, hi = np.asarray(fitted["ranges"], float).T
         f = np.clip(f, lo, hi)
-    return float(np.clip(f @ np.asarray(w), -20, 5))
+    return float(f @ np.asarray(fitted.get(f"weights_{side}", fitted.get("weights")), float))
 
 
 def _scale(group: dict, coverage: float, signals: dict) -> tuple[float, float]:
@@ -353,9 +359,9 @@ def _log_fit(x: np.ndarray, magnitude: np.ndarray, weights: np.ndarray | None = 
     give."""
     if tau is not None:
         w = quantile_regression(x, np.log(magnitude + SCALE_FLOOR), tau, weights)
-        return [float(v) for v in w], np.exp(np.clip(x @ w, -20, 5))
-    root = np.sqrt(weights)[:, None] if weights is not None else 1.0
-    w, *_ = np.linalg.lstsq(x * root, np.log(magnitude + SCALE_FLOOR) * np.ravel(root), rcond=None)
+    else:
+        root = np.sqrt(weights)[:, None] if weights is not None else 1.0
+        w, *_ = np.linalg.lstsq(x * root, np.log(magnitude + SCALE_FLOOR) * np.ravel(root), rcond=None)
     return [float(v) for v in w], np.exp(np.clip(x @ w, -20, 5))
 
 

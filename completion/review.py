@@ -3,8 +3,9 @@
 A review score is either one of the estimate's interval (:data:`INTERVAL_SCORES`: its width, its farther end's
 distance from the estimate, its low end's), compared with a threshold in fractions of coverage, or ``odds``: the log
 odds that the estimate is off by more than 15 points, from a logistic regression on the estimate's features
-(:func:`fit_odds`, :func:`log_odds`; decision record 0167), compared with a threshold in log odds. The calibration
-(:class:`colonbench.completion.intervals.Intervals`) holds the score, its threshold and the fitted odds.
+(:func:`fit_odds`; read as the scale's fit is, :func:`colonbench.completion.intervals.linear_score`; decision record
+0167), compared with a threshold in log odds. The calibration (:class:`colonbench.completion.intervals.Intervals`)
+holds the score, its threshold and the fitted odds.
 """
 
 from __future__ import annotations
@@ -40,16 +41,17 @@ def review_reason(width: float, score: float, threshold: float, by: str) -> str:
     if by == "width":
         return f"interval {100 * width:.0f} points wide (more than {100 * threshold:.0f})"
     if by == "odds":
-        return (f"a {100 * _chance(score):.1f} % chance, as the calibration's fit of its signals reads them, that the "
-                f"estimate is off by more than 15 points (flagged over {100 * _chance(threshold):.1f} %); its interval "
+        return (f"a {100 * chance(score):.1f} % chance, as the calibration's fit of its signals reads them, that the "
+                f"estimate is off by more than 15 points (flagged over {100 * chance(threshold):.1f} %); its interval "
                 f"is {100 * width:.0f} points wide")
     what = "reaches" if by == "reach" else "reaches down"
     return (f"interval {100 * width:.0f} points wide: it {what} {100 * score:.0f} points from the estimate (more than "
             f"{100 * threshold:.0f})")
 
 
-def _chance(log_odds_value: float) -> float:
-    return 1.0 / (1.0 + math.exp(-float(np.clip(log_odds_value, -50, 50))))
+def chance(log_odds: float) -> float:
+    """The chance (a fraction) that log odds ``log_odds`` say."""
+    return 1.0 / (1.0 + math.exp(-float(np.clip(log_odds, -50, 50))))
 
 
 def fit_odds(x: np.ndarray, far: np.ndarray, weights: np.ndarray | None = None) -> list[float]:
@@ -74,10 +76,3 @@ def fit_odds(x: np.ndarray, far: np.ndarray, weights: np.ndarray | None = None) 
     if not res.success:
         raise RuntimeError(f"the review's logistic fit did not converge: {res.message}")
     return [float(v) for v in res.x]
-
-
-def log_odds(model: dict, f: np.ndarray) -> float:
-    """The log odds that an estimate is far off, from its features ``f`` ((p,), :func:`intervals.features` of
-    ``model["features"]``), each clipped into ``model["ranges"]`` as the fit saw them."""
-    lo, hi = np.asarray(model["ranges"], float).T
-    return float(np.clip(f, lo, hi) @ np.asarray(model["weights"], float))

@@ -277,15 +277,19 @@ def choose_review(reviews: dict, cells_caught: list[str]) -> str:
     return max(meets or list(reviews), key=lambda by: key[by])       # max keeps the first of equals
 
 
+def said(report: dict) -> str:
+    """A review's held-out report (:func:`review_width`) in words, a cell after another."""
+    return "; ".join(f"{k} recall {100 * v['recall']:.0f} % of {v['off']}, precision {100 * v['precision']:.0f} %, "
+                     f"flagged {100 * v['flagged']:.0f} %" for k, v in report.items())
+
+
 def review_rule(held: pd.DataFrame, label: str) -> tuple[str, float, dict, dict]:
     """0163's review rule on held-out intervals: each score's threshold (:func:`review_width`), printed, and the score
     :func:`choose_review` takes; returns the score, its threshold, its report, and every score's (threshold,
     report)."""
     reviews = {by: review_width(held, by) for by in review.INTERVAL_SCORES}
     for by, (w_by, r_by) in reviews.items():
-        print(f"\n{label}, review by {by}: threshold {100 * w_by:.1f} points: " + "; ".join(
-            f"{k} recall {100 * v['recall']:.0f} % of {v['off']}, precision {100 * v['precision']:.0f} %, flagged "
-            f"{100 * v['flagged']:.0f} %" for k, v in r_by.items()))
+        print(f"\n{label}, review by {by}: threshold {100 * w_by:.1f} points: {said(r_by)}")
     by = choose_review(reviews, review_cells(held))
     print(f"\n{label}: reviewed by {by} over {100 * reviews[by][0]:.1f} points")
     return by, reviews[by][0], reviews[by][1], reviews
@@ -296,9 +300,10 @@ def odds_features(df: pd.DataFrame, names) -> np.ndarray:
     return np.array([intervals.features(c, s, names) for c, s in zip(df["estimate"], signals(df))])
 
 
-def fit_odds(df: pd.DataFrame, names) -> dict:
-    """Decision record 0167's review odds fitted on ``df``'s estimates, the colon as the unit."""
-    x = odds_features(df, names)
+def fit_odds(df: pd.DataFrame, names, x: np.ndarray | None = None) -> dict:
+    """Decision record 0167's review odds fitted on ``df``'s estimates, the colon as the unit (``x``: their features
+    ``names``, :func:`odds_features`, where already made)."""
+    x = odds_features(df, names) if x is None else x
     far = ((df["true"] - df["estimate"]).abs() > BIG).to_numpy(float)
     return {"features": list(names), "ranges": [[float(a), float(b)] for a, b in zip(x.min(axis=0), x.max(axis=0))],
             "weights": review.fit_odds(x, far, unit_weights(df))}
@@ -308,8 +313,9 @@ def held_odds(df: pd.DataFrame, names) -> pd.Series:
     """Each estimate's log odds of being far off from a fit on the other colons (leave-one-colon-out)."""
     x, out, colons = odds_features(df, names), np.empty(len(df)), df["colon"].to_numpy()
     for colon in np.unique(colons):
-        model = fit_odds(df[colons != colon], names)
-        out[colons == colon] = [review.log_odds(model, f) for f in x[colons == colon]]
+        fit_on = colons != colon
+        model = fit_odds(df[fit_on], names, x[fit_on])
+        out[~fit_on] = [intervals.linear_score(model, f) for f in x[~fit_on]]
     return pd.Series(out, index=df.index)
 
 
@@ -322,11 +328,9 @@ def odds_rule(held: pd.DataFrame, names, by: str, report: dict) -> tuple[float, 
     gain = 100 * (min(odds[c]["precision"] for c in real) - min(report[c]["precision"] for c in real))
     catches = min(odds[c]["recall"] for c in review_cells(held)) >= REVIEW_RECALL     # at the same catch
     adopted = catches and gain > ODDS_GAIN + 1e-9          # more than the gain: exactly ODDS_GAIN is not
-    print(f"\nreview by odds: threshold {width:.3f}: " + "; ".join(
-        f"{k} recall {100 * v['recall']:.0f} %, precision {100 * v['precision']:.0f} %, flagged "
-        f"{100 * v['flagged']:.0f} %" for k, v in odds.items()) + f"; against {by}: {gain:+.1f} points of the lower "
-        f"real precision ({'adopted' if adopted else 'not adopted'}: more than {ODDS_GAIN:g} needed, at "
-        f"{100 * REVIEW_RECALL:.0f} % caught in each cell)")
+    print(f"\nreview by odds: threshold {width:.3f}: {said(odds)}; against {by}: {gain:+.1f} points of the lower "
+          f"real precision ({'adopted' if adopted else 'not adopted'}: more than {ODDS_GAIN:g} needed, at "
+          f"{100 * REVIEW_RECALL:.0f} % caught in each cell)")
     return (width, odds) if adopted else None
 
 

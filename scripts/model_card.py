@@ -9,7 +9,6 @@ from __future__ import annotations
 import argparse
 import csv
 import json
-import math
 import sys
 from pathlib import Path
 
@@ -71,9 +70,10 @@ def main(argv=None):
 def _flags(by: str, threshold: float) -> str:
     """What makes an estimate flagged, in words (:mod:`colonbench.completion.review`)."""
     if by == "odds":
-        chance = 100.0 / (1.0 + math.exp(-threshold))
-        return (f"a chance over {chance:.0f} % that the estimate is off by more than 15 points (the log odds of a "
-                f"logistic fit of its signals over {threshold:.2f})")
+        from colonbench.completion.review import chance
+
+        return (f"a chance over {100 * chance(threshold):.0f} % that the estimate is off by more than 15 points (the "
+                f"log odds of a logistic fit of its signals over {threshold:.2f})")
     where = {"width": "wider than", "reach": "reaching from its estimate more than",
              "drop": "reaching below its estimate more than"}[by]
     return f"an interval {where} {100 * threshold:.0f} points"

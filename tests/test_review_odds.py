@@ -28,8 +28,8 @@ def test_the_odds_of_an_intercept_alone_are_the_weighted_share_far_off():
 
 def test_the_log_odds_keep_each_feature_in_the_range_fitted_on():
     model = {"features": ["one", "length"], "ranges": [[1, 1], [0.5, 1.0]], "weights": [1.0, -2.0]}
-    assert review.log_odds(model, np.array([1.0, 0.75])) == pytest.approx(-0.5)
-    assert review.log_odds(model, np.array([1.0, 3.0])) == pytest.approx(-1.0)      # clipped to 1.0
+    assert intervals.linear_score(model, np.array([1.0, 0.75])) == pytest.approx(-0.5)
+    assert intervals.linear_score(model, np.array([1.0, 3.0])) == pytest.approx(-1.0)      # clipped to 1.0
 
 
 def _estimate(coverage, length_mm):
@@ -144,7 +144,7 @@ def test_the_odds_must_gain_more_than_the_margin_at_the_same_catch(calibrate_int
     base = {c: {"precision": 0.303, "recall": 0.8} for c in held["cell"]}
 
     def with_odds(precision, recall):
-        report = {c: {"precision": precision, "recall": recall, "flagged": 0.5} for c in held["cell"]}
+        report = {c: {"precision": precision, "recall": recall, "flagged": 0.5, "off": 40} for c in held["cell"]}
         monkeypatch.setattr(ci, "held_odds", lambda h, names: pd.Series(0.0, index=h.index))
         monkeypatch.setattr(ci, "review_width", lambda h, by="width", score=None: (-1.0, report))
         return ci.odds_rule(held, ("one",), "reach", base)
