@@ -46,12 +46,9 @@ LENGTHS_MM = (45.0, 60.0)
 #: Fewest calibration segments a group needs; smaller groups use the group of all segments with their rims.
 MIN_GROUP = 30
 #: A span between the planes (``signals["span_mm"]``) shorter than this share of the segment's known length stops
-#: short of an unseen end (:func:`known_length`; chosen on the calibration set, decision records 0144 and 0155).
+#: short of an unseen end (:func:`~colonbench.completion.known_extent.known_length`; chosen on the calibration set,
+#: decision records 0144 and 0155).
 SHORT_SHARE = 0.9
-#: A known length shorter than the segment's span between its planes over this share is refused as not the
-#: segment's: on the calibration set the span reaches 1.83 times the true length (planes pushed out past a cloud
-#: without rims); a length typed in cm for mm is a tenth of the true one.
-LONGEST_SHARE = 3.0
 #: A line between the planes longer than this many times the longest the intervals were calibrated on is named in
 #: ``review`` whatever the interval's width: a cloud longer than a segment (decision record 0160).
 LONG_SHARE = 1.5
@@ -73,8 +70,6 @@ SCALE_FEATURES = {
     "scaled2-colon-novel-misfit-shift": _MISFIT, "binned-colon-novel-misfit-shift": _MISFIT,
     "quant95-colon-novel-misfit-shift": _MISFIT, "quant90-colon-novel-misfit-shift": _MISFIT,
 }
-#: The known extent's extra features, per candidate of decision record 0163 (``K0``: the scheme's own).
-KNOWN_EXTRA = {"K0": (), "K1": ("share_off",)}
 #: A ``binned`` scheme's bands of the fitted scale: cut at these colon-weighted quantiles of it (decision 0161).
 BAND_QUANTILES = (0.25, 0.5, 0.75)
 #: Added to ``|true - estimated|`` before its log is fitted: a floor of the scale (fractions).
@@ -93,7 +88,7 @@ def features(coverage: float, signals: dict, names) -> np.ndarray:
     was found; ``depth``: the holes' depth (``hole_depth_mm``, :func:`colonbench.completion.novelty.hole_depth`) /
     10 mm; ``misfit``: how far the cloud lies from the completed wall's nearest vertices (``wall_misfit_mm``, mm,
     :func:`colonbench.completion.novelty.wall_misfit`); ``share_off``: ``|ln(length_share)|``, how far the span
-    between the planes is from a length given (:func:`known_length`), 0 where none is (a map's segment, whose planes
+    between the planes is from a length given (``length_share``), 0 where none is (a map's segment, whose planes
     are known; like every feature, then clipped into the range calibrated on)."""
     g = lambda k: float(signals.get(k, 0.0) or 0.0)          # noqa: E731
     length = g("length_mm")
@@ -193,7 +188,9 @@ class Intervals:
         maps (``scripts/map_intervals.py``); empty: the map's segments get :attr:`known`.
     known : dict
         ``{"low", "high", "n"}`` of segments whose extent is known (``signals["extent"] == "known"``: a length
-        given to :func:`known_length`, or planes the caller clips at, as ``colonbench map`` does).
+        given to :func:`known_extent.known_length <colonbench.completion.known_extent.known_length>`, or planes the
+        caller clips at, as ``colonbench map`` does); with ``short`` and ``full`` (decision records 0168 and 0222), the
+        groups of the estimates a length given shortened (``length_share`` under :data:`SHORT_SHARE`) and left.
     review_by : str
         What the review compares with :attr:`review_width` (:data:`~colonbench.completion.review.REVIEW_SCORES`:
         :func:`~colonbench.completion.review.review_score`'s, or ``odds``).
@@ -201,7 +198,7 @@ class Intervals:
         What it compares with :attr:`review_known` ("": :attr:`review_by`).
     review_known : float
         The review threshold of the intervals of known extent (fraction; 0: :attr:`review_width`): a segment whose
-        planes the caller gives (a map's) or whose length is given (:func:`known_length`; decision record 0163,
+        planes the caller gives (a map's) or whose length is given (a length given; decision record 0163,
         round 8), chosen as :attr:`review_width` is on the known-length intervals held out (decision record 0325).
     review_odds : dict
         ``{"features", "ranges", "weights"}``: the logistic fit whose log odds (:func:`features` clipped into
@@ -242,8 +239,11 @@ class Intervals:
             g = self.map["groups"].get(key) or self.map["groups"].get(key.split(",")[0])
             if g is not None:
                 return g["low"], g["high"]
-        if signals.get("extent") == "known" and self.known:
-            return _scale(self.known, coverage, signals)
+        if signals.get("extent") == "known" and self.known:     # a length given: shortened or not (0168, 0222)
+            share = signals.get("length_share")
+            split = share is not None and "short" in self.known
+            g = (self.known["short"] if float(share) < SHORT_SHARE else self.known["full"]) if split else self.known
+            return _scale(g, coverage, signals)
         for scheme in (self.scheme, self.scheme.split("+")[0], "marginal"):
             g = self.groups.get(group_key(coverage, signals, scheme))
             if g is not None:
@@ -397,31 +397,6 @@ def _fit_group(residual: np.ndarray, x: np.ndarray | None, names, level: float, 
     return out
 
 
-def length_share(span_mm: float, length_mm: float) -> float:
-    """``signals["length_share"]`` of a segment spanning ``span_mm`` between its planes whose length ``length_mm`` is
-    given (:func:`known_length`), to 4 decimals."""
-    return round(float(span_mm) / float(length_mm), 4)
-
-
-def known_length(est, length_mm: float) -> None:
-    """Use a segment's known arc length (mm): where the segment's span between its planes (``signals["span_mm"]``:
-    the method's line between them, run on straight to a plane beyond its end) is less than :data:`SHORT_SHARE`
-    of it, the cloud stops short of an end nobody saw, and the coverage is scaled by the share it spans (the rest
-    of the tube counted unobserved; decision record 0155). Marks the estimate's extent as known."""
-    if not (length_mm > 0 and np.isfinite(length_mm)):
-        raise InputError(f"a segment's length must be a positive number of mm, got {length_mm}")
-    span = float(est.signals["span_mm"])
-    if span > LONGEST_SHARE * float(length_mm):
-        raise InputError(f"a segment's length of {length_mm:g} mm cannot be this cloud's: it spans {span:.0f} mm "
-                         f"between its planes, more than {LONGEST_SHARE:g} times that (a length in cm, not mm?)")
-    share = span / float(length_mm)
-    est.signals.update(extent="known", length_share=length_share(span, length_mm))
-    if share < SHORT_SHARE and np.isfinite(est.coverage):
-        est.coverage = float(est.coverage) * share
-        est.review.append(f"the cloud spans {span:.0f} of the segment's {length_mm:g} mm: the rest is counted "
-                          "unobserved")
-
-
 def _unit_weights(scheme: str, weights, colons, n: int) -> tuple[np.ndarray | None, np.ndarray | None]:
     """The weights and colons a scheme fits with: a ``-colon`` scheme needs weights (the colon as the unit), a
     ``-shift`` one the colons too; any other scheme counts every segment once."""
@@ -443,8 +418,8 @@ def _unit_weights(scheme: str, weights, colons, n: int) -> tuple[np.ndarray | No
 def fit(true, estimated, signals: list, scheme: str, review_width: float, level: float = LEVEL,
         source=None, weights=None, colons=None) -> Intervals:
     """Calibrate intervals on segments' true and estimated coverages (fractions, (n,)) and their signals (n dicts);
-    add :attr:`Intervals.known` with :func:`fit_known`. ``weights`` ((n,)) and ``colons`` ((n,)): each segment's
-    weight and colon, for the schemes that take the colon as the unit (``...-colon...``)."""
+    add :attr:`Intervals.known` with :func:`colonbench.completion.known_extent.fit_known`. ``weights`` ((n,)) and
+    ``colons`` ((n,)): each segment's weight and colon, for the schemes that take the colon as the unit (``...-colon...``)."""
     true, estimated = np.asarray(true, float), np.asarray(estimated, float)
     residual = true - estimated
     scaled = _scaled(scheme)
@@ -461,22 +436,6 @@ def fit(true, estimated, signals: list, scheme: str, review_width: float, level:
                                               _two_sided(scaled), None if weights is None else weights[sel],
                                               None if colons is None else colons[sel], _binned(scaled), _tau(scaled))
     return Intervals(scheme, level, groups, review_width, dict(source or {}))
-
-
-def fit_known(cal: Intervals, true, estimated, signals: list | None = None, weights=None, colons=None,
-              extra=()) -> None:
-    """Calibrate :attr:`Intervals.known` on segments estimated with their lengths known (:func:`known_length`),
-    scaled and weighted as the calibration's scheme is (``signals``: the estimates' signals, needed then; with
-    ``length_share`` where the length was given), its scale with the features ``extra`` too (:data:`KNOWN_EXTRA`)."""
-    residual = np.asarray(true, float) - np.asarray(estimated, float)
-    scaled = _scaled(cal.scheme)
-    if extra and not scaled:
-        raise ValueError(f"interval scheme {cal.scheme!r} has no scale for the known extent's features {extra}")
-    names = SCALE_FEATURES[scaled] + tuple(extra) if scaled else ()
-    x = np.array([features(c, sig, names) for c, sig in zip(estimated, signals)]) if scaled else None
-    weights, colons = _unit_weights(cal.scheme, weights, colons, len(residual))
-    cal.known = _fit_group(residual, x, names, cal.level, _two_sided(scaled), weights, colons, _binned(scaled),
-                           _tau(scaled))
 
 
 def path_for(model: Path) -> Path:

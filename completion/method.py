@@ -25,10 +25,10 @@ from pathlib import Path
 
 import numpy as np
 
-from colonbench.completion import novelty, screening
+from colonbench.completion import known_extent, novelty, screening
 from colonbench.completion.gaps import GAP_VALLEY, reach_planes
 from colonbench.completion.heatmap_centerline import END_LEVEL, extract_centerline
-from colonbench.completion.intervals import known_length, load as load_intervals
+from colonbench.completion.intervals import load as load_intervals
 from colonbench.completion.modelfile import DEFAULT_MODEL, model_path, shipped_model, shipped_models  # noqa: F401
 from colonbench.completion.planes import line_between
 from colonbench.completion.steps import STEPS_VERSION, complete
@@ -410,7 +410,7 @@ class CompletionMethod:
 
         ``slab`` (:class:`colonbench.slab.Slab`): the segment's stretch of the map's centerline. Given one,
         the in-context model estimates (``context_model``, or ``model`` when that is one); a segment model
-        ignores it. ``length_mm``: the segment's arc length where known (``intervals.known_length``).
+        ignores it. ``length_mm``: the segment's arc length where known (``known_extent.known_length``).
         """
         t0 = time.perf_counter()
         pts = method_cloud(points, self.thin_above)
@@ -433,7 +433,7 @@ class CompletionMethod:
                                            est.mesh_vertices if self.misfit else None))
         est.seconds["novelty"] = time.perf_counter() - t
         if length_mm is not None:
-            known_length(est, length_mm)
+            known_extent.known_length(est, length_mm)
         if self.intervals is not None:
             self.intervals.apply(est)
         return est

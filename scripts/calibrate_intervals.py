@@ -14,8 +14,9 @@ those whose truth-inside share lies within 85-95 % in each cell (``V_wide``, ``V
 own, at each noise level), the one with the smallest mean width over the real colons; where none is, the scheme in use
 when decision record 0166 was written stays unless a candidate beats it by more than a cell's noise (0166's rule:
 every cell at or above 85 % and 1.6 points less above 95 %, or as little and 1.6 points narrower). The known-length
-interval's features (``K0``: the scheme's, ``K1``: with the share of the length the span covers) are chosen by the
-same rule on the held-out known-length intervals. The review rules, each a score of the interval and its threshold,
+interval's candidates (``K0``: the scheme's features, ``K1``: with the share of the length the span covers; ``K2``,
+``K3``: the same with a group of their own for the estimates the length shortened) are chosen by 0161's rule on the
+held-out known-length intervals, ``K0`` staying unless beaten by more than 2.1 points (decision record 0168). The review rules, each a score of the interval and its threshold,
 come from the same held-out intervals, for the segments and for the known extent (decision record 0163); the
 segments' review is by the fitted odds of a far-off estimate instead where, held out, those are right more often by
 more than 3 points (decision record 0167). The chosen
@@ -35,7 +36,7 @@ import numpy as np
 import pandas as pd
 
 from colonbench.benchmark.evaluate import noisy, select
-from colonbench.completion import intervals, review
+from colonbench.completion import intervals, known_extent, review
 from colonbench.completion.method import CompletionMethod, model_path, steps_version
 from colonbench.errors import ColonbenchError
 from colonbench.shards.dataset import generate
@@ -59,7 +60,12 @@ INCUMBENT, MARGIN = "scaled2-colon-novel-misfit-shift", 1.6
 #: Decision record 0167: by how many points of the lower real colon's precision the review by odds must beat the
 #: interval's score to replace it.
 ODDS_GAIN = 3.0
+#: Decision record 0168: the known extent's candidate in use, and by how many points of its lowest cell a candidate
+#: must beat it (one standard error of a share near 80 % over 352 estimates).
+KNOWN_INCUMBENT, KNOWN_MARGIN = "K0", 2.1
 NOISE_MM = (0.0, 0.5)
+#: Significant digits of every number the calibration file stores (:func:`rounded`).
+SIGNIFICANT = 9
 #: The signals an estimate's interval may be scaled by, as columns of the estimates' table.
 SIGNALS = ("rims", "rims_doubtful", "gap_share", "length_mm", "span_mm", "spread", "radius_mm", "extent_mm",
            "hole_depth_mm", "wall_misfit_mm")
@@ -122,7 +128,7 @@ def signals(df: pd.DataFrame) -> list[dict]:
 
 
 def known_estimates(df: pd.DataFrame) -> np.ndarray:
-    """The estimates with each segment's true length given, as :func:`intervals.known_length` scales them."""
+    """The estimates with each segment's true length given, as :func:`known_extent.known_length` scales them."""
     share = df["span_mm"] / df["segment_mm"]
     return np.where(share < intervals.SHORT_SHARE, df["estimate"] * share, df["estimate"]).astype(float)
 
@@ -138,15 +144,17 @@ def unit_weights(df: pd.DataFrame) -> np.ndarray:
 
 def known_signals(df: pd.DataFrame) -> list[dict]:
     """The estimates' signals with each segment's true length given: ``length_share`` as
-    :func:`intervals.known_length` sets it."""
-    return [{**s, "length_share": intervals.length_share(span, length)}
+    :func:`known_extent.known_length` sets it."""
+    return [{**s, "length_share": known_extent.length_share(span, length)}
             for s, span, length in zip(signals(df), df["span_mm"], df["segment_mm"])]
 
 
-def by_colon(df: pd.DataFrame, scheme: str, level: float, known: bool = False, extra=()) -> pd.DataFrame:
+def by_colon(df: pd.DataFrame, scheme: str, level: float, known: bool = False, extra=(), short: bool = False
+             ) -> pd.DataFrame:
     """``df`` with each row's interval (``low``, ``high``) from a calibration fitted on the other colons
     (leave-one-colon-out); ``known``: the known-length interval around the length-scaled estimate, its scale with
-    the features ``extra`` too (decision record 0163)."""
+    the features ``extra`` too (decision record 0163), ``short``: the estimates
+    the length shortened in a group of their own (decision record 0168)."""
     out = df.copy()
     est = known_estimates(df) if known else df["estimate"].to_numpy(float)
     out["estimate_used"] = est
@@ -159,7 +167,7 @@ def by_colon(df: pd.DataFrame, scheme: str, level: float, known: bool = False, e
         w, c = unit_weights(part), colons[fit_on]
         if known:
             cal = intervals.Intervals(scheme, level, {}, 1.0)
-            intervals.fit_known(cal, df["true"].to_numpy(float)[fit_on], est[fit_on], sig_fit, w, c, extra)
+            known_extent.fit_known(cal, df["true"].to_numpy(float)[fit_on], est[fit_on], sig_fit, w, c, extra, short)
         else:
             cal = intervals.fit(df["true"].to_numpy(float)[fit_on], est[fit_on], sig_fit, scheme, 1.0, level,
                                 weights=w, colons=c)
@@ -191,7 +199,8 @@ def choose(held: dict, level: float) -> tuple[str, dict]:
     each real colon on its own, each noise level), the narrowest over the real colons; else the one whose lowest cell
     is highest, counted only below 85 % (under-coverage first), then with the fewest cells above 95 %, then the
     narrowest over the real colons; but where :data:`INCUMBENT` is among the schemes, decision record 0166's
-    :func:`replace_incumbent` instead (the known extent's candidates, ``K0`` and ``K1``, keep 0161's rule). Also
+    :func:`replace_incumbent` instead (the known extent's candidates keep 0161's rule, with
+    0168's margin: :func:`choose_known`). Also
     the summary (with each scheme's ``excess`` where 0166's rule ran)."""
     summary, ok = {}, {}
     for scheme, h in held.items():
@@ -229,6 +238,18 @@ def replace_incumbent(summary: dict) -> str:
     for s in summary:
         summary[s]["excess"] = excess(s)
     return min(better, key=lambda s: (excess(s), summary[s]["real_width"])) if better else INCUMBENT
+
+
+def choose_known(held: dict, level: float) -> tuple[str, dict]:
+    """Decision record 0168's rule for the known extent's candidates: 0161's (:func:`choose`), but unless every
+    candidate holds every cell within 85-95 % (then the narrowest), :data:`KNOWN_INCUMBENT` stays unless the one
+    0161's keys rank first has a lowest cell (counted only below 85 %) higher by more than :data:`KNOWN_MARGIN`
+    points; also the summary."""
+    best, summary = choose(held, level)
+    if best == KNOWN_INCUMBENT or KNOWN_INCUMBENT not in held or all(v["ok"] for v in summary.values()):
+        return best, summary
+    gain = min(summary[best]["lowest"], 85.0) - min(summary[KNOWN_INCUMBENT]["lowest"], 85.0)
+    return (best if gain > KNOWN_MARGIN + 1e-9 else KNOWN_INCUMBENT), summary
 
 
 def review_cells(held: pd.DataFrame) -> list[str]:
@@ -356,15 +377,16 @@ def calibrate(df: pd.DataFrame, level: float, source: dict) -> intervals.Interva
     best, summary = choose(held, level)
     by, width, review_report, reviews = review_rule(held[best], best)
     odds = odds_rule(held[best], intervals.SCALE_FEATURES[best], by, review_report)
-    print("\nknown length, held out (decision record 0163's candidates):")
-    known_held = {k: by_colon(cal_df, best, level, known=True, extra=e) for k, e in intervals.KNOWN_EXTRA.items()}
-    known_choice, known_summary = choose(known_held, level)
+    print("\nknown length, held out (the candidates of decision records 0163 and 0168):")
+    known_held = {k: by_colon(cal_df, best, level, known=True, extra=e, short=k in known_extent.KNOWN_SHORT)
+                  for k, e in known_extent.KNOWN_EXTRA.items()}
+    known_choice, known_summary = choose_known(known_held, level)
     by_known, known_width, known_review, known_reviews = review_rule(known_held[known_choice],
                                                                      f"known length {known_choice}")
     w, c = unit_weights(cal_df), cal_df["colon"].to_numpy()
     cal = intervals.fit(cal_df["true"], cal_df["estimate"], signals(cal_df), best, width, level, weights=w, colons=c)
-    intervals.fit_known(cal, cal_df["true"], known_estimates(cal_df), known_signals(cal_df), w, c,
-                        intervals.KNOWN_EXTRA[known_choice])
+    known_extent.fit_known(cal, cal_df["true"], known_estimates(cal_df), known_signals(cal_df), w, c,
+                           known_extent.KNOWN_EXTRA[known_choice], known_choice in known_extent.KNOWN_SHORT)
     cal.review_known, cal.review_by, cal.review_by_known = known_width, by, by_known
     if odds is not None:
         cal.review_by, (cal.review_width, review_report) = "odds", odds
@@ -389,9 +411,21 @@ def calibrate(df: pd.DataFrame, level: float, source: dict) -> intervals.Interva
                                           for k, v in known_reviews.items()},
                   "known_held_out": {f"{s} {n:g} mm": {"inside": float(r["inside"]), "width": float(r["width"])}
                                      for (s, n), r in cells(known_held[known_choice]).iterrows()}}
+    cal = intervals.Intervals(**rounded(cal.to_json()))
     digest = hashlib.sha256(json.dumps(cal.to_json(), sort_keys=True).encode()).hexdigest()[:8]
     cal.source["id"] = f"{best}-{digest}"
     return cal
+
+
+def rounded(value, digits: int = SIGNIFICANT):
+    """``value`` (a calibration's JSON: dicts, lists, numbers, strings) with every float rounded to ``digits``
+    significant digits, so that the file and its id do not change with the last bits another machine's kernels give
+    the fits (decision record 0168: 1e-15 to 1e-12 of each weight under another BLAS)."""
+    if isinstance(value, dict):
+        return {k: rounded(v, digits) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [rounded(v, digits) for v in value]
+    return float(f"{value:.{digits}g}") if isinstance(value, float) else value
 
 
 def table(data: list[tuple[str, Path]], method: CompletionMethod, path: Path) -> pd.DataFrame:

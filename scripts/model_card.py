@@ -108,7 +108,9 @@ def intervals_rows(model: Path) -> list[str]:
               if cal.review_known else "") + ".", "",
            "| group | calibration estimates | interval around the estimate | scale weights |", "|---|---:|---|---|"]
     rows = [(k, g) for k, g in cal.groups.items() if k != "all" or scaled] + \
-        ([("extent known", cal.known)] if cal.known else [])
+        ([("extent known" + (" (a map's planes)" if "short" in cal.known else ""), cal.known)] if cal.known else []) + \
+        [(f"extent known, a length given that {how} the estimate", cal.known[k])
+         for k, how in (("full", "left"), ("short", "shortened")) if k in cal.known]
     for key, g in rows:
         two = "weights_low" in g                       # this group's scale for each end (``scaled2...``, ``quant...``)
         ends = (f"{g['low']:+.2f} s_low to {g['high']:+.2f} s_high" if two

@@ -12,7 +12,7 @@ pytest.importorskip("monai")
 
 from colonbench.completion.gaps import wall_gaps
 from colonbench.completion.heatmap_centerline import extract_centerline  # noqa: E402
-from colonbench.completion.intervals import known_length
+from colonbench.completion.known_extent import known_length
 from colonbench.completion.method import from_heatmap  # noqa: E402
 from colonbench.completion.planes import segment_planes
 from colonbench.completion.steps import complete

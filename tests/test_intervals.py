@@ -8,7 +8,8 @@ import pandas as pd
 import pytest
 
 from colonbench.cli import main
-from colonbench.completion import conformal, intervals
+from colonbench.completion import conformal, intervals, known_extent
+from colonbench.completion.modelfile import model_path
 from colonbench.errors import InputError
 from colonbench.estimate import Estimate, as_estimate
 
@@ -46,20 +47,20 @@ def test_a_calibration_covers_its_level_on_fresh_segments_of_the_same_kind():
 
 def test_a_known_length_counts_what_the_cloud_does_not_reach_as_unobserved():
     est = Estimate(0.9, np.zeros((0, 3)), np.zeros((0, 3)), "m", signals={"length_mm": 30.0, "span_mm": 30.0})
-    intervals.known_length(est, 60.0)
+    known_extent.known_length(est, 60.0)
     assert est.coverage == pytest.approx(0.45) and est.signals["extent"] == "known"
     assert "spans 30 of the segment's 60 mm" in est.review[0]
     near = Estimate(0.9, np.zeros((0, 3)), np.zeros((0, 3)), "m", signals={"length_mm": 57.0, "span_mm": 57.0})
-    intervals.known_length(near, 60.0)                 # a line a little short of the cut: the cloud reaches it
+    known_extent.known_length(near, 60.0)                 # a line a little short of the cut: the cloud reaches it
     assert near.coverage == 0.9 and not near.review
     # the network's line stops short, but the segment's planes (cut rims) lie at its ends: its span is not short
     short_line = Estimate(0.9, np.zeros((0, 3)), np.zeros((0, 3)), "m", signals={"length_mm": 20.0, "span_mm": 59.0})
-    intervals.known_length(short_line, 60.0)
+    known_extent.known_length(short_line, 60.0)
     assert short_line.coverage == 0.9 and short_line.signals["length_share"] == pytest.approx(59 / 60, abs=1e-4)
     with pytest.raises(ValueError, match="positive"):
-        intervals.known_length(near, -1.0)
+        known_extent.known_length(near, -1.0)
     with pytest.raises(InputError, match="cannot be this cloud's: it spans 59 mm.*in cm"):    # 6 cm typed as 6 mm
-        intervals.known_length(Estimate(0.9, np.zeros((0, 3)), np.zeros((0, 3)), "m",
+        known_extent.known_length(Estimate(0.9, np.zeros((0, 3)), np.zeros((0, 3)), "m",
                                         signals={"length_mm": 55.0, "span_mm": 59.0}), 6.0)
 
 
@@ -76,7 +77,7 @@ def test_review_fires_on_a_wide_interval_and_then_names_a_doubtful_rim_unless_th
     assert reasons[(0, None, 0.5)] == ["interval 50 points wide (more than 40)"]
     assert len(reasons[(1, None, 0.5)]) == 2 and "seen from one side" in reasons[(1, None, 0.5)][1]
     assert reasons[(1, "known", 0.5)] == [] and reasons[(1, None, 0.3)] == []   # 20 and 30 points: sure enough
-    # a known length's note (intervals.known_length) is a reason only where the interval is wide, too
+    # a known length's note (known_extent.known_length) is a reason only where the interval is wide, too
     for width, kept in ((0.3, False), (0.5, True)):
         cal.groups["length>=60"].update(low=-width / 2, high=width / 2)
         est = Estimate(0.5, np.zeros((0, 3)), np.zeros((0, 3)), "m", review=["the cloud spans 40 of 60 mm"],
@@ -325,7 +326,7 @@ def test_a_scale_is_never_extrapolated_past_the_calibrated_range_and_a_long_clou
     assert cal.longest_mm() == pytest.approx(90.0)
     at = {mm: cal.interval(0.5, {"length_mm": mm, "span_mm": mm, "rims": 2}) for mm in (90.0, 120.0, 300.0)}
     assert at[300.0] == at[120.0] == at[90.0] and at[90.0][1] - at[90.0][0] > 0.03
-    intervals.fit_known(cal, 0.5 + sign * np.where(short, 0.2, 0.02), np.full(n, 0.5), sig)   # the known group too
+    known_extent.fit_known(cal, 0.5 + sign * np.where(short, 0.2, 0.02), np.full(n, 0.5), sig)   # the known group too
     known = {mm: cal.interval(0.5, {"length_mm": mm, "span_mm": mm, "rims": 2, "extent": "known"}) for mm in (90, 300)}
     assert "ranges" in cal.known and known[300] == known[90]
     for mm, named in ((120.0, False), (300.0, True)):
@@ -453,3 +454,14 @@ def test_a_band_too_small_in_effect_gets_the_pooled_quantiles():
     assert (out["band_low"][0], out["band_high"][0]) == (out["low"], out["high"])
     assert (out["band_low"][1], out["band_high"][1]) == conformal.weighted_quantiles(z[50:100], w[50:100], 0.9)
     assert out["band_edges"] == [0.5, 1.5, 2.5]     # between the order statistics: no estimate lies on an edge
+
+
+def test_the_calibration_file_stores_numbers_the_last_bits_of_a_kernel_do_not_move(calibrate_intervals):
+    """Decision record 0168: another BLAS moves the fits' weights by 1e-15 to 1e-12 of themselves; the file keeps
+    9 significant digits, so it and its id come out the same there."""
+    r = calibrate_intervals.rounded
+    assert r({"w": [0.1234567891234, -2.0000000000004], "n": 3, "s": "x", "t": (1.0, 5e-20)}) == \
+        {"w": [0.123456789, -2.0], "n": 3, "s": "x", "t": [1.0, 5e-20]}
+    assert r(0.4516600607761735) == r(0.4516600607761776)            # two kernels' weight, as measured
+    shipped = json.loads(intervals.path_for(model_path(None)).read_text())
+    assert shipped == r(shipped)

@@ -9,7 +9,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from colonbench.completion import intervals, review
+from colonbench.completion import intervals, known_extent, review
 from colonbench.errors import InputError
 from colonbench.estimate import Estimate
 
@@ -69,7 +69,7 @@ def test_a_length_given_keeps_the_known_extents_width_rule_under_odds():
         cal = intervals.Intervals("marginal", 0.9, groups, 0.0, known={"low": -0.05, "high": 0.05, "n": 100},
                                   review_known=threshold, review_by="odds", review_by_known="width", review_odds=odds)
         est = _estimate(0.8, 30.0)
-        intervals.known_length(est, 30.0)
+        known_extent.known_length(est, 30.0)
         cal.apply(est)
         assert est.coverage_interval == pytest.approx((0.75, 0.85))
         assert bool(est.review) == flagged and (not flagged or "10 points wide" in est.review[0])

@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from colonbench.completion import intervals
+from colonbench.completion import intervals, known_extent
 from colonbench.errors import InputError
 from colonbench.estimate import Estimate
 
@@ -94,7 +94,7 @@ def test_the_known_extents_scale_learns_the_share_where_its_errors_grow_with_it(
     true = est + rng.normal(0, 0.03 * np.exp(3 * off))           # errors grow with |ln share|
     sig = [{"length_mm": 50.0, "span_mm": 50.0, "rims": 2, "length_share": float(s)} for s in share]
     cal = intervals.Intervals("scaled2", 0.9, {}, 0.3)
-    intervals.fit_known(cal, true, est, sig, extra=intervals.KNOWN_EXTRA["K1"])
+    known_extent.fit_known(cal, true, est, sig, extra=known_extent.KNOWN_EXTRA["K1"])
     assert cal.known["features"][-1] == "share_off"
     near = cal.quantiles(0.7, {**sig[0], "length_share": 1.0, "extent": "known"})
     far = cal.quantiles(0.7, {**sig[0], "length_share": 2.0, "extent": "known"})
@@ -102,11 +102,11 @@ def test_the_known_extents_scale_learns_the_share_where_its_errors_grow_with_it(
     # which about halves the slope it finds (the two-sided scale, decision record 0158)
     assert far[1] - far[0] > 2 * (near[1] - near[0])
     same = intervals.Intervals("scaled2", 0.9, {}, 0.3)
-    intervals.fit_known(same, true, est, sig)                   # K0: the share unseen, one interval for both
+    known_extent.fit_known(same, true, est, sig)                   # K0: the share unseen, one interval for both
     assert same.quantiles(0.7, {**sig[0], "length_share": 2.0, "extent": "known"}) == \
         same.quantiles(0.7, {**sig[0], "length_share": 1.0, "extent": "known"})
     with pytest.raises(ValueError, match="no scale for the known extent's features"):
-        intervals.fit_known(intervals.Intervals("length", 0.9, {}, 0.3), true, est, sig, extra=("share_off",))
+        known_extent.fit_known(intervals.Intervals("length", 0.9, {}, 0.3), true, est, sig, extra=("share_off",))
 
 
 def test_the_review_score_rule_prefers_precision_among_those_that_catch(calibrate_intervals):
@@ -134,6 +134,6 @@ def test_the_known_length_estimates_carry_the_share_known_length_gives(calibrate
                        "rims": [2, 2], "estimate": [0.9, 0.8]})
     sig = script.known_signals(df)
     est = Estimate(0.9, np.zeros((0, 3)), np.zeros((0, 3)), "m", signals={"length_mm": 30.0, "span_mm": 30.0})
-    intervals.known_length(est, 60.0)
+    known_extent.known_length(est, 60.0)
     assert sig[0]["length_share"] == est.signals["length_share"] == 0.5 and sig[1]["length_share"] == 1.1
     assert list(script.known_estimates(df)) == [pytest.approx(0.45), 0.8]
