@@ -198,8 +198,8 @@ class Intervals:
         What it compares with :attr:`review_known` ("": :attr:`review_by`).
     review_known : float
         The review threshold of the intervals of known extent (fraction; 0: :attr:`review_width`): a segment whose
-        planes the caller gives (a map's) or whose length is given (a length given; decision record 0163,
-        round 8), chosen as :attr:`review_width` is on the known-length intervals held out (decision record 0325).
+        planes the caller gives (a map's) or whose length is given (``known_extent.known_length``; decision record
+        0163, round 8), chosen as :attr:`review_width` is on the known-length intervals held out (decision record 0325).
     review_odds : dict
         ``{"features", "ranges", "weights"}``: the logistic fit whose log odds (:func:`features` clipped into
         ``ranges``, times ``weights``) a review by ``odds`` compares with :attr:`review_width` (decision record
@@ -240,9 +240,8 @@ class Intervals:
             if g is not None:
                 return g["low"], g["high"]
         if signals.get("extent") == "known" and self.known:     # a length given: shortened or not (0168, 0222)
-            share = signals.get("length_share")
-            split = share is not None and "short" in self.known
-            g = (self.known["short"] if float(share) < SHORT_SHARE else self.known["full"]) if split else self.known
+            split = "length_share" in signals and "short" in self.known
+            g = self.known["short" if shortened_by_length(signals) else "full"] if split else self.known
             return _scale(g, coverage, signals)
         for scheme in (self.scheme, self.scheme.split("+")[0], "marginal"):
             g = self.groups.get(group_key(coverage, signals, scheme))
@@ -397,6 +396,12 @@ def _fit_group(residual: np.ndarray, x: np.ndarray | None, names, level: float, 
     return out
 
 
+def shortened_by_length(signals: dict) -> bool:
+    """Whether a length given shortened an estimate (:func:`colonbench.completion.known_extent.known_length`): its
+    ``length_share``, as stored (4 decimals), under :data:`SHORT_SHARE`; no length given: no."""
+    return "length_share" in signals and float(signals["length_share"]) < SHORT_SHARE
+
+
 def _unit_weights(scheme: str, weights, colons, n: int) -> tuple[np.ndarray | None, np.ndarray | None]:
     """The weights and colons a scheme fits with: a ``-colon`` scheme needs weights (the colon as the unit), a
     ``-shift`` one the colons too; any other scheme counts every segment once."""
@@ -419,7 +424,8 @@ def fit(true, estimated, signals: list, scheme: str, review_width: float, level:
         source=None, weights=None, colons=None) -> Intervals:
     """Calibrate intervals on segments' true and estimated coverages (fractions, (n,)) and their signals (n dicts);
     add :attr:`Intervals.known` with :func:`colonbench.completion.known_extent.fit_known`. ``weights`` ((n,)) and
-    ``colons`` ((n,)): each segment's weight and colon, for the schemes that take the colon as the unit (``...-colon...``)."""
+    ``colons`` ((n,)): each segment's weight and colon, for the schemes that take the colon as the unit
+    (``...-colon...``)."""
     true, estimated = np.asarray(true, float), np.asarray(estimated, float)
     residual = true - estimated
     scaled = _scaled(scheme)

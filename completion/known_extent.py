@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from colonbench.completion.intervals import (SCALE_FEATURES, SHORT_SHARE, Intervals, _binned, _fit_group, _scaled,
-                                             _tau, _two_sided, _unit_weights, features)
+                                             _tau, _two_sided, _unit_weights, features, shortened_by_length)
 from colonbench.errors import InputError
 
 #: A known length shorter than the segment's span between its planes over this share is refused as not the
@@ -43,18 +43,17 @@ def known_length(est, length_mm: float) -> None:
     if span > LONGEST_SHARE * float(length_mm):
         raise InputError(f"a segment's length of {length_mm:g} mm cannot be this cloud's: it spans {span:.0f} mm "
                          f"between its planes, more than {LONGEST_SHARE:g} times that (a length in cm, not mm?)")
-    share = span / float(length_mm)
     est.signals.update(extent="known", length_share=length_share(span, length_mm))
-    if share < SHORT_SHARE and np.isfinite(est.coverage):
-        est.coverage = float(est.coverage) * share
+    if shortened_by_length(est.signals) and np.isfinite(est.coverage):      # decided on the share as stored
+        est.coverage = float(est.coverage) * span / float(length_mm)
         est.review.append(f"the cloud spans {span:.0f} of the segment's {length_mm:g} mm: the rest is counted "
                           "unobserved")
 
 
 def shortened(signals: list) -> np.ndarray:
-    """Whether :func:`known_length` shortened each estimate ((n,) bool): its ``length_share`` under
-    :data:`SHORT_SHARE` (none given, as a map's segment: no)."""
-    return np.array([float(s.get("length_share", 1.0)) < SHORT_SHARE for s in signals], bool)
+    """Whether :func:`known_length` shortened each estimate ((n,) bool;
+    :func:`~colonbench.completion.intervals.shortened_by_length`)."""
+    return np.array([shortened_by_length(s) for s in signals], bool)
 
 
 def fit_known(cal: Intervals, true, estimated, signals: list | None = None, weights=None, colons=None,
@@ -64,7 +63,9 @@ def fit_known(cal: Intervals, true, estimated, signals: list | None = None, weig
     ``length_share`` where the length was given), its scale with the features ``extra`` too (:data:`KNOWN_EXTRA`).
     ``short``: besides the group of all (``known``, which a map's segments get), the estimates the length shortened
     (:func:`shortened`) get a group of their own, ``known["short"]``, and the rest ``known["full"]`` (decision
-    records 0168 and 0222)."""
+    records 0168 and 0222). Each group keeps the estimates' ``weights`` of the whole fit (not made again within
+    it), and the features of ``known``, whose ranges hold theirs: what reads a calibration's features (the method's
+    costly signals, :meth:`Intervals.longest_mm`) looks at ``known`` only."""
     residual = np.asarray(true, float) - np.asarray(estimated, float)
     scaled = _scaled(cal.scheme)
     if extra and not scaled:

@@ -16,13 +16,13 @@ when decision record 0166 was written stays unless a candidate beats it by more 
 every cell at or above 85 % and 1.6 points less above 95 %, or as little and 1.6 points narrower). The known-length
 interval's candidates (``K0``: the scheme's features, ``K1``: with the share of the length the span covers; ``K2``,
 ``K3``: the same with a group of their own for the estimates the length shortened) are chosen by 0161's rule on the
-held-out known-length intervals, ``K0`` staying unless beaten by more than 2.1 points (decision record 0168). The review rules, each a score of the interval and its threshold,
-come from the same held-out intervals, for the segments and for the known extent (decision record 0163); the
-segments' review is by the fitted odds of a far-off estimate instead where, held out, those are right more often by
-more than 3 points (decision record 0167). The chosen
-scheme is fitted on all three sets and written beside the model (``<model>.intervals.json``), with the known-length
-interval fitted on the same segments with their true lengths.
-Prints every scheme's held-out table.
+held-out known-length intervals, ``K0`` staying unless beaten by more than 2.1 points (decision record 0168). The
+review rules, each a score of the interval and its threshold, come from the same held-out intervals, for the
+segments and for the known extent (decision record 0163); the segments' review is by the fitted odds of a far-off
+estimate instead where, held out, those are right more often by more than 3 points (decision record 0167). The
+chosen scheme is fitted on all three sets and written beside the model (``<model>.intervals.json``, every number to
+9 significant digits), with the known-length interval fitted on the same segments with their true lengths. Prints
+every scheme's held-out table.
 """
 
 from __future__ import annotations
@@ -130,7 +130,7 @@ def signals(df: pd.DataFrame) -> list[dict]:
 def known_estimates(df: pd.DataFrame) -> np.ndarray:
     """The estimates with each segment's true length given, as :func:`known_extent.known_length` scales them."""
     share = df["span_mm"] / df["segment_mm"]
-    return np.where(share < intervals.SHORT_SHARE, df["estimate"] * share, df["estimate"]).astype(float)
+    return np.where(known_extent.shortened(known_signals(df)), df["estimate"] * share, df["estimate"]).astype(float)
 
 
 def unit_weights(df: pd.DataFrame) -> np.ndarray:
@@ -149,8 +149,8 @@ def known_signals(df: pd.DataFrame) -> list[dict]:
             for s, span, length in zip(signals(df), df["span_mm"], df["segment_mm"])]
 
 
-def by_colon(df: pd.DataFrame, scheme: str, level: float, known: bool = False, extra=(), short: bool = False
-             ) -> pd.DataFrame:
+def by_colon(df: pd.DataFrame, scheme: str, level: float, known: bool = False, extra=(),
+             short: bool = False) -> pd.DataFrame:
     """``df`` with each row's interval (``low``, ``high``) from a calibration fitted on the other colons
     (leave-one-colon-out); ``known``: the known-length interval around the length-scaled estimate, its scale with
     the features ``extra`` too (decision record 0163), ``short``: the estimates
@@ -199,9 +199,8 @@ def choose(held: dict, level: float) -> tuple[str, dict]:
     each real colon on its own, each noise level), the narrowest over the real colons; else the one whose lowest cell
     is highest, counted only below 85 % (under-coverage first), then with the fewest cells above 95 %, then the
     narrowest over the real colons; but where :data:`INCUMBENT` is among the schemes, decision record 0166's
-    :func:`replace_incumbent` instead (the known extent's candidates keep 0161's rule, with
-    0168's margin: :func:`choose_known`). Also
-    the summary (with each scheme's ``excess`` where 0166's rule ran)."""
+    :func:`replace_incumbent` instead (the known extent's candidates keep 0161's rule, with 0168's margin:
+    :func:`choose_known`). Also the summary (with each scheme's ``excess`` where 0166's rule ran)."""
     summary, ok = {}, {}
     for scheme, h in held.items():
         c = cells(h[h["set"].isin(CALIBRATED)])
@@ -419,8 +418,9 @@ def calibrate(df: pd.DataFrame, level: float, source: dict) -> intervals.Interva
 
 def rounded(value, digits: int = SIGNIFICANT):
     """``value`` (a calibration's JSON: dicts, lists, numbers, strings) with every float rounded to ``digits``
-    significant digits, so that the file and its id do not change with the last bits another machine's kernels give
-    the fits (decision record 0168: 1e-15 to 1e-12 of each weight under another BLAS)."""
+    significant digits, so that the file and its id almost never change with the last bits another machine's kernels
+    give the fits (decision record 0168: 1e-15 to 1e-12 of each weight under another BLAS; a number within that of a
+    rounding boundary would still flip)."""
     if isinstance(value, dict):
         return {k: rounded(v, digits) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
