@@ -32,6 +32,7 @@ from pathlib import Path
 
 from colonbench.benchmark.c3vd_suite import json_digest
 from colonbench.errors import InputError
+from colonbench.shards.manifest import meshes_section
 from colonbench.shards.schema import sha256_file
 
 #: Seeds below this are refused: anyone could regenerate the suite with every smaller seed and compare inputs.
@@ -106,25 +107,19 @@ def _manifest(source) -> tuple[dict, str]:
 
 
 def _meshes_at(meshes, manifest) -> dict:
-    """A manifest's ``meshes`` with each mesh and centerline path made absolute (they are relative to the
-    manifest's folder, and the manifest is copied into the private folder), each file checked against the sha256
-    the manifest records.
+    """A manifest's ``meshes``, checked as every manifest's are
+    (:func:`colonbench.shards.manifest.meshes_section`), with each mesh and centerline path made absolute (they are
+    relative to the manifest's folder, and the manifest is copied into the private folder), each file checked
+    against the sha256 the manifest records.
 
     Raises
     ------
     InputError
-        An entry without its paths, a file missing, or one whose sha256 is not the recorded one (named).
+        A malformed entry, a file missing, or one whose sha256 is not the recorded one (named).
     """
     base = Path(manifest).resolve().parent
-    if not isinstance(meshes, dict):
-        raise InputError(f"{manifest}: meshes must map a name to {{id, mesh, mesh_sha256, centerline, "
-                         "centerline_sha256}")
     out = {}
-    for name, entry in meshes.items():
-        if not isinstance(entry, dict) or any(k not in entry for k in MESH_FILES + tuple(f"{k}_sha256"
-                                                                                         for k in MESH_FILES)):
-            raise InputError(f"{manifest}: meshes.{name} must give id, mesh, mesh_sha256, centerline and "
-                             "centerline_sha256")
+    for name, entry in meshes_section(meshes, str(manifest)).items():
         entry = dict(entry)
         for key in MESH_FILES:
             file = base / str(entry[key])

@@ -153,8 +153,9 @@ def _int(value, what: str, lo: int) -> int:
     return int(value)
 
 
-def _meshes(value, source: str) -> dict:
-    """The ``meshes`` section, checked: name -> {id, mesh, mesh_sha256, centerline, centerline_sha256}."""
+def meshes_section(value, source: str) -> dict:
+    """A manifest's ``meshes`` section, checked (``source`` names the manifest in errors): name -> {id, mesh,
+    mesh_sha256, centerline, centerline_sha256}; ``{}`` for none."""
     if value is None:
         return {}
     if not isinstance(value, dict):
@@ -219,7 +220,7 @@ def resolve(data: dict, source: str = "manifest") -> dict:
         raise InputError(f"{source}: grid.min_extent_mm {min_extent} is outside [0, 1000] mm")
     if size < 2 * margin + 4:
         raise InputError(f"{source}: grid.size {size} leaves no room inside a margin of {margin}")
-    meshes = _meshes(data.get("meshes"), source)
+    meshes = meshes_section(data.get("meshes"), source)
     splits_in = data["splits"]
     if not isinstance(splits_in, dict) or not splits_in:
         raise InputError(f"{source}: splits must map split names ({', '.join(SPLITS)}) to their settings")

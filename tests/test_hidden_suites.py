@@ -190,6 +190,21 @@ def test_a_mesh_that_is_not_the_manifests_is_refused(tmp_path, capsys):
     assert not (tmp_path / "p").exists() and not (tmp_path / "q").exists()
 
 
+def test_a_malformed_mesh_entry_is_refused_as_every_manifest_refuses_it(tmp_path, capsys):
+    import yaml
+
+    path, entry = _tube_manifest(tmp_path / "mine")
+    raw = yaml.safe_load(path.read_text())
+    for bad, says in (({k: v for k, v in entry.items() if k != "centerline_sha256"}, "expected the keys"),
+                      ({**entry, "mesh_sha256": "abc"}, "expected the file's sha256")):
+        path.write_text(yaml.safe_dump({**raw, "meshes": {"tube": bad}}))
+        rc = main(["suites", "build", "hidden", "--from", str(path), "--data", str(tmp_path / "p"), "--publish",
+                   str(tmp_path / "q")])
+        err = capsys.readouterr().err
+        assert rc == 2 and "meshes.tube" in err and says in err and "Traceback" not in err, err
+    assert not (tmp_path / "p").exists() and not (tmp_path / "q").exists()
+
+
 def test_a_c3vd_download_is_hidden(tmp_path, capsys):
     import importlib.util
 
