@@ -127,10 +127,12 @@ def signals(df: pd.DataFrame) -> list[dict]:
     return [signals_of(r) for _, r in df.iterrows()]
 
 
-def known_estimates(df: pd.DataFrame) -> np.ndarray:
-    """The estimates with each segment's true length given, as :func:`known_extent.known_length` scales them."""
+def known_estimates(df: pd.DataFrame, sig: list[dict] | None = None) -> np.ndarray:
+    """The estimates with each segment's true length given, as :func:`known_extent.known_length` scales them
+    (``sig``: their :func:`known_signals`, where already made)."""
     share = df["span_mm"] / df["segment_mm"]
-    return np.where(known_extent.shortened(known_signals(df)), df["estimate"] * share, df["estimate"]).astype(float)
+    sig = known_signals(df) if sig is None else sig
+    return np.where(known_extent.shortened(sig), df["estimate"] * share, df["estimate"]).astype(float)
 
 
 def unit_weights(df: pd.DataFrame) -> np.ndarray:
@@ -153,12 +155,12 @@ def by_colon(df: pd.DataFrame, scheme: str, level: float, known: bool = False, e
              short: bool = False) -> pd.DataFrame:
     """``df`` with each row's interval (``low``, ``high``) from a calibration fitted on the other colons
     (leave-one-colon-out); ``known``: the known-length interval around the length-scaled estimate, its scale with
-    the features ``extra`` too (decision record 0163), ``short``: the estimates
-    the length shortened in a group of their own (decision record 0168)."""
+    the features ``extra`` too (decision record 0163); ``short``: the estimates the length shortened in a group of
+    their own (decision record 0168)."""
     out = df.copy()
-    est = known_estimates(df) if known else df["estimate"].to_numpy(float)
-    out["estimate_used"] = est
     sig = known_signals(df) if known else signals(df)
+    est = known_estimates(df, sig) if known else df["estimate"].to_numpy(float)
+    out["estimate_used"] = est
     low, high = np.empty(len(df)), np.empty(len(df))
     colons = df["colon"].to_numpy()
     for colon in np.unique(colons):
@@ -384,7 +386,8 @@ def calibrate(df: pd.DataFrame, level: float, source: dict) -> intervals.Interva
                                                                      f"known length {known_choice}")
     w, c = unit_weights(cal_df), cal_df["colon"].to_numpy()
     cal = intervals.fit(cal_df["true"], cal_df["estimate"], signals(cal_df), best, width, level, weights=w, colons=c)
-    known_extent.fit_known(cal, cal_df["true"], known_estimates(cal_df), known_signals(cal_df), w, c,
+    known_sig = known_signals(cal_df)
+    known_extent.fit_known(cal, cal_df["true"], known_estimates(cal_df, known_sig), known_sig, w, c,
                            known_extent.KNOWN_EXTRA[known_choice], known_choice in known_extent.KNOWN_SHORT)
     cal.review_known, cal.review_by, cal.review_by_known = known_width, by, by_known
     if odds is not None:

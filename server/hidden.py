@@ -119,10 +119,9 @@ def _meshes_at(meshes, manifest) -> dict:
     """
     base = Path(manifest).resolve().parent
     out = {}
-    for name, entry in meshes_section(meshes, str(manifest)).items():
-        entry = dict(entry)
+    for name, entry in meshes_section(meshes, str(manifest)).items():    # fresh dicts, their paths str
         for key in MESH_FILES:
-            file = base / str(entry[key])
+            file = base / entry[key]
             if not file.is_file():
                 raise InputError(f"{manifest}: meshes.{name}.{key}: {file} is not a file (paths are relative to "
                                  "the manifest's folder)")
