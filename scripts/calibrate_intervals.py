@@ -4,8 +4,8 @@
 
 Generates the calibration's datasets where missing (``<data>/<manifest>``, the manifests' validation splits):
 data_manifests/calibration.yaml's widened colons (``V_wide``: no manifest trains on them; its segments of the real
-training colons are left out), calibration-paper.yaml's colons of the paper's generator (``V_paper``) and
-validation-real.yaml, the real validation colons gca00020 and gca00070 (``V_real``), with calibration-real.yaml's real
+training colons are left out), calibration-paper.yaml's and calibration-paper-more.yaml's colons of the paper's
+generator (``V_paper``) and validation-real.yaml, the real validation colons gca00020 and gca00070 (``V_real``), with calibration-real.yaml's real
 training colons, which are reported, never calibrated on (the network saw them). Estimates every segment with the
 completion method (its intervals off, every signal on) at 0 and 0.5 mm noise, as the suites do (cached per model
 and steps in ``<data>/<manifest>``), then chooses the scheme by decision record 0161's rule: every scheme is measured
@@ -45,8 +45,8 @@ from colonbench.shards.schema import sha256_file
 
 ROOT = Path(__file__).resolve().parents[1] / "data_manifests"
 #: The calibration's datasets: manifest name -> the set its segments belong to (``train_real``: reported only).
-MANIFESTS = {"calibration": "V_wide", "calibration-paper": "V_paper", "validation-real": "V_real",
-             "calibration-real": "train_real"}
+MANIFESTS = {"calibration": "V_wide", "calibration-paper": "V_paper", "calibration-paper-more": "V_paper",
+             "validation-real": "V_real", "calibration-real": "train_real"}
 CALIBRATED = ("V_wide", "V_paper", "V_real")
 #: Decision records 0325's, 0161's and 0165's candidates.
 SCHEMES = ("scaled", "scaled-colon", "scaled-colon-novel", "scaled-colon-novel-shift", "scaled2-colon-novel",

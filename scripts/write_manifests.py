@@ -176,6 +176,12 @@ dump("calibration-paper", "Paper-like colons of the interval calibration (script
      "paper.yaml's validation colons (no manifest trains on them; not train-cpu.yaml's), one segment per length, two "
      "hole draws, the paper's camera and sphere holes and a fifth video partials. Validation split only.", 20210901,
      {"validation": split(400, 24, 1, 2, CLEAN, {"camera": 0.4, "spheres": 0.4, "video": 0.2})})
+#: More of them, made as paper-v1 is (decision 0170, after 0169's probe): the calibration's paper-like colons
+#: without video partials, so that it sees how sure the method is on the paper's own protocol.
+dump("calibration-paper-more", "More paper-like colons of the interval calibration (scripts/calibrate_intervals.py, "
+     "with calibration-paper.yaml): paper.yaml's validation colons 424-439 (no manifest trains on them), three "
+     "segments per length, two hole draws, the paper's camera and sphere holes half each, as paper-v1. Validation "
+     "split only.", 20210901, {"validation": split(424, 16, 3, 2, CLEAN)})
 
 #: The real validation and calibration colons (issues 63 and 70): gca00020 and gca00070, which no manifest trains on
 #: and no suite is made of. Every choice of model, step or calibration is judged on data that includes them.
