@@ -106,9 +106,15 @@ def features(coverage: float, signals: dict, names) -> np.ndarray:
 
 
 def _scaled(scheme: str) -> str | None:
-    """The scaled factor of a scheme (``scaled`` or ``scaled+``), or None."""
-    last = scheme.split("+", 1)[-1] if scheme.startswith("length+") else scheme
+    """The scaled factor of a scheme (``scaled``, ``length+scaled`` or ``like<NN>+scaled``), or None."""
+    last = scheme.split("+", 1)[-1] if scheme.startswith(("length+", "like")) else scheme
     return last if last in SCALE_FEATURES else None
+
+
+def scale_features(scheme: str) -> tuple:
+    """The features a scheme's scale reads (:data:`SCALE_FEATURES` of its scaled factor); () where it has none."""
+    scaled = _scaled(scheme)
+    return SCALE_FEATURES[scaled] if scaled else ()
 
 
 def _binned(scaled: str | None) -> bool:
@@ -204,6 +210,10 @@ class Intervals:
         ``{"features", "ranges", "weights"}``: the logistic fit whose log odds (:func:`features` clipped into
         ``ranges``, times ``weights``) a review by ``odds`` compares with :attr:`review_width` (decision record
         0167); empty otherwise.
+    like : dict
+        A ``like<NN>+...`` scheme's classifier (:mod:`colonbench.completion.likeness`, decision record 0170):
+        ``{"features", "ranges", "weights", "threshold"}``; an estimate it finds like the paper's colons
+        (:func:`looks_like`) gets the group ``like=1``, any other ``like=0``. Empty otherwise.
     """
 
     scheme: str
@@ -217,6 +227,7 @@ class Intervals:
     review_by: str = "width"
     review_by_known: str = ""
     review_odds: dict = field(default_factory=dict)
+    like: dict = field(default_factory=dict)
 
     def __post_init__(self):
         if "odds" in (self.review_by, self.review_by_known) and not self.review_odds:
@@ -243,7 +254,11 @@ class Intervals:
             split = "length_share" in signals and "short" in self.known
             g = self.known["short" if shortened_by_length(signals) else "full"] if split else self.known
             return _scale(g, coverage, signals)
-        for scheme in (self.scheme, self.scheme.split("+")[0], "marginal"):
+        if self.like:                   # decision record 0170
+            g = self.groups.get(f"like={int(looks_like(self.like, coverage, signals))}")
+            if g is not None:
+                return _scale(g, coverage, signals)
+        for scheme in (self.scheme, "marginal" if self.like else self.scheme.split("+")[0], "marginal"):
             g = self.groups.get(group_key(coverage, signals, scheme))
             if g is not None:
                 return _scale(g, coverage, signals)
@@ -312,6 +327,8 @@ class Intervals:
             del out["review_by_known"]
         if not out["review_odds"]:         # reviewed by a score of the interval
             del out["review_odds"]
+        if not out["like"]:                # no likeness groups (decision record 0170)
+            del out["like"]
         return out
 
 
@@ -337,6 +354,13 @@ def linear_score(fitted: dict, f: np.ndarray, side: str = "") -> float:
         lo, hi = np.asarray(fitted["ranges"], float).T
         f = np.clip(f, lo, hi)
     return float(f @ np.asarray(fitted.get(f"weights_{side}", fitted.get("weights")), float))
+
+
+def looks_like(like: dict, coverage: float, signals: dict) -> bool:
+    """Whether a likeness classifier (:attr:`Intervals.like`) finds an estimate like the paper's colons: its chance
+    over the classifier's ``threshold``."""
+    odds = linear_score(like, features(coverage, signals, like["features"]))
+    return odds > math.log(like["threshold"] / (1.0 - like["threshold"]))
 
 
 def _scale(group: dict, coverage: float, signals: dict) -> tuple[float, float]:

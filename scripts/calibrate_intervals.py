@@ -36,7 +36,7 @@ import numpy as np
 import pandas as pd
 
 from colonbench.benchmark.evaluate import noisy, select
-from colonbench.completion import intervals, known_extent, review
+from colonbench.completion import intervals, known_extent, likeness, review
 from colonbench.completion.method import CompletionMethod, model_path, steps_version
 from colonbench.errors import ColonbenchError
 from colonbench.shards.dataset import generate
@@ -48,12 +48,13 @@ ROOT = Path(__file__).resolve().parents[1] / "data_manifests"
 MANIFESTS = {"calibration": "V_wide", "calibration-paper": "V_paper", "calibration-paper-more": "V_paper",
              "validation-real": "V_real", "calibration-real": "train_real"}
 CALIBRATED = ("V_wide", "V_paper", "V_real")
-#: Decision records 0325's, 0161's and 0165's candidates.
+#: Decision records 0325's, 0161's, 0165's, 0166's and 0170's candidates.
 SCHEMES = ("scaled", "scaled-colon", "scaled-colon-novel", "scaled-colon-novel-shift", "scaled2-colon-novel",
            "scaled2-colon-novel-shift", "binned-colon-novel", "binned-colon-novel-shift",
            "scaled2-colon-novel-gaps-shift", "binned-colon-novel-gaps-shift", "scaled2-colon-novel-depth-shift",
            "binned-colon-novel-depth-shift", "scaled2-colon-novel-misfit-shift", "binned-colon-novel-misfit-shift",
-           "quant95-colon-novel-misfit-shift", "quant90-colon-novel-misfit-shift")
+           "quant95-colon-novel-misfit-shift", "quant90-colon-novel-misfit-shift",
+           "like50+binned-colon-novel-depth-shift", "like80+binned-colon-novel-depth-shift")
 #: Decision record 0166: the scheme in use when it was written, and by how much (points) a candidate must beat it to
 #: replace it (about the standard error of a held-out cell's share inside).
 INCUMBENT, MARGIN = "scaled2-colon-novel-misfit-shift", 1.6
@@ -171,8 +172,7 @@ def by_colon(df: pd.DataFrame, scheme: str, level: float, known: bool = False, e
             cal = intervals.Intervals(scheme, level, {}, 1.0)
             known_extent.fit_known(cal, df["true"].to_numpy(float)[fit_on], est[fit_on], sig_fit, w, c, extra, short)
         else:
-            cal = intervals.fit(df["true"].to_numpy(float)[fit_on], est[fit_on], sig_fit, scheme, 1.0, level,
-                                weights=w, colons=c)
+            cal = fit_scheme(part, est[fit_on], sig_fit, scheme, 1.0, level, w, c)
         for k in test_on:
             s = {**sig[k], "extent": "known"} if known else sig[k]
             low[k], high[k] = cal.interval(est[k], s)
@@ -180,6 +180,18 @@ def by_colon(df: pd.DataFrame, scheme: str, level: float, known: bool = False, e
     out["inside"] = (out["low"] - 1e-12 <= out["true"]) & (out["true"] <= out["high"] + 1e-12)
     out["width"] = out["high"] - out["low"]
     return out
+
+
+def fit_scheme(part: pd.DataFrame, estimated: np.ndarray, sig: list[dict], scheme: str, review_width: float,
+               level: float, weights: np.ndarray, colons: np.ndarray) -> intervals.Intervals:
+    """A scheme calibrated on ``part``'s estimates (``estimated``, their signals ``sig``, weights and colons); a
+    likeness scheme (:mod:`colonbench.completion.likeness`) learns which of them are ``V_paper``'s (decision record
+    0170)."""
+    true = part["true"].to_numpy(float)
+    if likeness.split_scheme(scheme):
+        return likeness.fit(true, estimated, sig, scheme, review_width, level, weights, colons,
+                            (part["set"] == "V_paper").to_numpy())
+    return intervals.fit(true, estimated, sig, scheme, review_width, level, weights=weights, colons=colons)
 
 
 def cells(held: pd.DataFrame) -> pd.DataFrame:
@@ -377,7 +389,7 @@ def calibrate(df: pd.DataFrame, level: float, source: dict) -> intervals.Interva
     held = {scheme: by_colon(cal_df, scheme, level) for scheme in SCHEMES}
     best, summary = choose(held, level)
     by, width, review_report, reviews = review_rule(held[best], best)
-    odds = odds_rule(held[best], intervals.SCALE_FEATURES[best], by, review_report)
+    odds = odds_rule(held[best], intervals.scale_features(best), by, review_report)
     print("\nknown length, held out (the candidates of decision records 0163 and 0168):")
     known_held = {k: by_colon(cal_df, best, level, known=True, extra=e, short=k in known_extent.KNOWN_SHORT)
                   for k, e in known_extent.KNOWN_EXTRA.items()}
@@ -385,14 +397,14 @@ def calibrate(df: pd.DataFrame, level: float, source: dict) -> intervals.Interva
     by_known, known_width, known_review, known_reviews = review_rule(known_held[known_choice],
                                                                      f"known length {known_choice}")
     w, c = unit_weights(cal_df), cal_df["colon"].to_numpy()
-    cal = intervals.fit(cal_df["true"], cal_df["estimate"], signals(cal_df), best, width, level, weights=w, colons=c)
+    cal = fit_scheme(cal_df, cal_df["estimate"].to_numpy(float), signals(cal_df), best, width, level, w, c)
     known_sig = known_signals(cal_df)
     known_extent.fit_known(cal, cal_df["true"], known_estimates(cal_df, known_sig), known_sig, w, c,
                            known_extent.KNOWN_EXTRA[known_choice], known_choice in known_extent.KNOWN_SHORT)
     cal.review_known, cal.review_by, cal.review_by_known = known_width, by, by_known
     if odds is not None:
         cal.review_by, (cal.review_width, review_report) = "odds", odds
-        cal.review_odds = fit_odds(cal_df, intervals.SCALE_FEATURES[best])
+        cal.review_odds = fit_odds(cal_df, intervals.scale_features(best))
     reported = df[df["set"] == "train_real"]
     if len(reported):                    # never calibrated on: the calibration's intervals, held out by construction
         lo_hi = np.array([cal.interval(c, s) for c, s in zip(reported["estimate"], signals(reported))])

@@ -132,6 +132,11 @@ def intervals_rows(model: Path) -> list[str]:
         weights = ", ".join(f"{n} {w:+.2f}" for n, w in zip(o["features"], o["weights"]))
         out.append(f"| review: odds of off by > 15 points | {src.get('estimates')} | flagged above log odds "
                    f"{cal.review_width:+.2f} | {weights} |")
+    if cal.like:                                         # which group: the likeness classifier (decision record 0170)
+        o = cal.like
+        weights = ", ".join(f"{n} {w:+.2f}" for n, w in zip(o["features"], o["weights"]))
+        out.append(f"| which group: `like=1` (like the paper's colons) or `like=0` | {src.get('estimates')} | "
+                   f"`like=1` over a {100 * o['threshold']:.0f} % chance | {weights} |")
     for track, g in (cal.map.get("groups") or {}).items():
         out.append(f"| map segments, {track} | {g['n']} | {100 * g['low']:+.1f} to {100 * g['high']:+.1f} points | |")
     return out
