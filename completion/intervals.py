@@ -27,7 +27,7 @@ from __future__ import annotations
 import json
 import math
 import re
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -191,7 +191,9 @@ class Intervals:
     map : dict
         ``{"scheme", "groups"}``: the map's segments' own quantiles per group (``track=context``,
         ``track=segment-only``, ``...,below=<b>``; ``signals["map_track"]`` says a map segment's track), calibrated on
-        maps (``scripts/map_intervals.py``); empty: the map's segments get :attr:`known`.
+        maps (``scripts/map_intervals.py``); without groups the map's segments get :attr:`known`. ``review_width``:
+        the map's segments' own review threshold (a width, fraction), chosen on the validation maps (decision
+        record 0223); without it they are reviewed as any estimate of known extent.
     known : dict
         ``{"low", "high", "n"}`` of segments whose extent is known (``signals["extent"] == "known"``: a length
         given to :func:`known_extent.known_length <colonbench.completion.known_extent.known_length>`, or planes the
@@ -235,6 +237,11 @@ class Intervals:
         if self.review_by == "odds" and self.review_known > 0 and not self.review_by_known:
             raise InputError("a calibration reviewed by odds must name its known extent's score (review_by_known): "
                              "review_known is a width, not log odds")
+        like = self.like
+        if bool(like) != self.scheme.startswith("like") or like and not (0 < like.get("threshold", 0) < 1 and len(
+                like.get("weights", ())) == len(like.get("features", ()))):      # decision record 0170
+            raise InputError(f"a calibration's scheme {self.scheme!r} and its like (features, weights, threshold) "
+                             "clash")
         for by in (self.review_by, self.review_by_known or self.review_by):
             if by not in REVIEW_SCORES:
                 raise InputError(f"a calibration's review score must be one of {', '.join(REVIEW_SCORES)}, "
@@ -242,8 +249,9 @@ class Intervals:
 
     def quantiles(self, coverage: float, signals: dict) -> tuple[float, float]:
         """The residual quantiles of an estimate's group (the coarser scheme's group where its own had too few
-        calibration segments), times the estimate's scale in a scaled scheme."""
-        if signals.get("map_track") and self.map:
+        calibration segments; a likeness scheme's ``like=1`` or ``like=0`` by :func:`looks_like`, else ``all``),
+        times the estimate's scale in a scaled scheme."""
+        if signals.get("map_track") and self.map.get("groups"):
             key = f"track={signals['map_track']}"
             if self.map.get("scheme") == "track+band":
                 key += f",below={next(b for b in BANDS if coverage < b):g}"
@@ -304,6 +312,12 @@ class Intervals:
         if int(est.signals.get("rims_doubtful", 0)) and est.signals.get("extent") != "known":
             est.review.append("a cut rim crosses the line well inside the cloud: a cloud seen from one side may have "
                               "had its unseen side clipped off (over-estimated)")
+
+    def for_map(self) -> "Intervals":
+        """The calibration as a map's segments are reviewed by it: where :attr:`map` has a ``review_width`` (decision
+        record 0223), a copy whose known extent is reviewed by that width; else this one."""
+        width = self.map.get("review_width")
+        return replace(self, review_known=float(width), review_by_known="width") if width else self
 
     def longest_mm(self) -> float:
         """The longest line between the planes (mm) the scaled groups were calibrated on (their ``length``
@@ -450,6 +464,8 @@ def fit(true, estimated, signals: list, scheme: str, review_width: float, level:
     add :attr:`Intervals.known` with :func:`colonbench.completion.known_extent.fit_known`. ``weights`` ((n,)) and
     ``colons`` ((n,)): each segment's weight and colon, for the schemes that take the colon as the unit
     (``...-colon...``)."""
+    if scheme.startswith("like"):
+        raise ValueError(f"a likeness scheme ({scheme!r}) is fitted by colonbench.completion.likeness.fit")
     true, estimated = np.asarray(true, float), np.asarray(estimated, float)
     residual = true - estimated
     scaled = _scaled(scheme)

@@ -21,7 +21,7 @@ from colonbench.completion import intervals
 from colonbench.completion.review import fit_odds
 
 #: A likeness scheme's name: ``like<NN>+<scheme>``, NN the chance (%) over which an estimate is ``like=1``.
-PATTERN = re.compile(r"^like(\d{2})\+(.+)$")
+PATTERN = re.compile(r"^like(0[1-9]|[1-9]\d)\+(.+)$")
 
 
 def split_scheme(scheme: str) -> tuple[float, str] | None:
@@ -70,9 +70,10 @@ def fit(true, estimated, signals: list, scheme: str, review_width: float, level:
     if parts is None:
         raise ValueError(f"not a likeness scheme: {scheme!r} (like<NN>+<scheme>)")
     threshold, base = parts
+    if not intervals.scale_features(base) or split_scheme(base):
+        raise ValueError(f"a likeness scheme groups a scaled scheme's estimates, not {base!r} ({scheme!r})")
     cal = intervals.fit(true, estimated, signals, base, review_width, level, weights=weights, colons=colons)
-    scaled = intervals._scaled(base)
-    names = intervals.scale_features(base)
+    scaled, names = intervals._scaled(base), intervals.scale_features(base)
     estimated = np.asarray(estimated, float)
     x = np.array([intervals.features(c, s, names) for c, s in zip(estimated, signals)])
     w, c = intervals._unit_weights(base, weights, colons, len(estimated))

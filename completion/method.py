@@ -384,8 +384,8 @@ class CompletionMethod:
                                         if self.context_predictor is None else "context")
         self.version += f",intervals={self.intervals.source['id']}" if self.intervals is not None else ""
         used = set() if self.intervals is None else {
-            f for g in [*self.intervals.groups.values(), self.intervals.known, self.intervals.review_odds]
-            for f in g.get("features", ())}
+            f for g in [*self.intervals.groups.values(), self.intervals.known, self.intervals.review_odds,
+                        self.intervals.like] for f in g.get("features", ())}
         # the signals that cost a network pass (spread) or a search (hole depth, wall misfit): only where used
         self.spread, self.hole_depth, self.misfit = "spread" in used, "depth" in used, "misfit" in used
         self.meta = self.predictor.meta

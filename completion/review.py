@@ -45,8 +45,8 @@ def review_reason(width: float, score: float, threshold: float, by: str) -> str:
                 f"estimate is off by more than 15 points (flagged over {100 * chance(threshold):.1f} %); its interval "
                 f"is {100 * width:.0f} points wide")
     what = "reaches" if by == "reach" else "reaches down"
-    return (f"interval {100 * width:.0f} points wide: it {what} {100 * score:.0f} points from the estimate (more than "
-            f"{100 * threshold:.0f})")
+    return (f"interval {100 * width:.0f} points wide: it {what} {round(100 * score, 1):g} points from the estimate "
+            f"(more than {round(100 * threshold, 1):g})")
 
 
 def chance(log_odds: float) -> float:

@@ -120,14 +120,18 @@ def for_mapping(method, context_mm: float = 0.0):
     alone the mesh is not clipped to the segment's stretch either: there the line's ends on the core
     cost the segment-only track 3 points (docs/decisions/0204-method-steps-4-5-6-on-the-map-tracks.md), while in context, clipped to the stretch,
     they gained. An in-context model (``needs_slab``) is always clipped to its segment's stretch, so it keeps its
-    ends on the core. Such a method comes back as a shallow copy (sharing its loaded model); the caller's
-    object is left as it is.
+    ends on the core. A calibration with a review threshold of the map's own (completion's ``intervals``, decision
+    record 0223) reviews the segments by it. Such a method comes back as a shallow copy (sharing its loaded model);
+    the caller's object is left as it is.
     """
     changes = {}
     if getattr(method, "cut_rims", False):
         changes["cut_rims"] = False
     if context_mm <= 0 and not getattr(method, "needs_slab", False) and getattr(method, "end_level", None) is not None:
         changes["end_level"] = None
+    cal = getattr(method, "intervals", None)
+    if callable(getattr(cal, "for_map", None)) and cal.for_map() is not cal:   # the map's own review (decision 0223)
+        changes["intervals"] = cal.for_map()
     if not changes:
         return method
     mapped = copy.copy(method)

@@ -5,24 +5,23 @@
 Generates the calibration's datasets where missing (``<data>/<manifest>``, the manifests' validation splits):
 data_manifests/calibration.yaml's widened colons (``V_wide``: no manifest trains on them; its segments of the real
 training colons are left out), calibration-paper.yaml's and calibration-paper-more.yaml's colons of the paper's
-generator (``V_paper``) and validation-real.yaml, the real validation colons gca00020 and gca00070 (``V_real``), with calibration-real.yaml's real
-training colons, which are reported, never calibrated on (the network saw them). Estimates every segment with the
-completion method (its intervals off, every signal on) at 0 and 0.5 mm noise, as the suites do (cached per model
-and steps in ``<data>/<manifest>``), then chooses the scheme by decision record 0161's rule: every scheme is measured
-leave-one-colon-out (a colon's estimates get the intervals of a calibration fitted on all the other colons); of
-those whose truth-inside share lies within 85-95 % in each cell (``V_wide``, ``V_paper`` and each real colon on its
-own, at each noise level), the one with the smallest mean width over the real colons; where none is, the scheme in use
-when decision record 0166 was written stays unless a candidate beats it by more than a cell's noise (0166's rule:
+generator (``V_paper``) and validation-real.yaml, the real validation colons gca00020 and gca00070 (``V_real``), with
+calibration-real.yaml's real training colons, which are reported, never calibrated on (the network saw them). Estimates
+every segment with the completion method (its intervals off, every signal on) at 0 and 0.5 mm noise, as the suites do
+(cached per model and steps in ``<data>/<manifest>``), then chooses the scheme by decision record 0161's rule: every
+scheme is measured leave-one-colon-out (a colon's estimates get the intervals of a calibration fitted on all the other
+colons); of those whose truth-inside share lies within 85-95 % in each cell (``V_wide``, ``V_paper`` and each real colon
+on its own, at each noise level), the one with the smallest mean width over the real colons; where none is, the scheme
+in use when decision record 0166 was written stays unless a candidate beats it by more than a cell's noise (0166's rule:
 every cell at or above 85 % and 1.6 points less above 95 %, or as little and 1.6 points narrower). The known-length
 interval's candidates (``K0``: the scheme's features, ``K1``: with the share of the length the span covers; ``K2``,
 ``K3``: the same with a group of their own for the estimates the length shortened) are chosen by 0161's rule on the
-held-out known-length intervals, ``K0`` staying unless beaten by more than 2.1 points (decision record 0168). The
-review rules, each a score of the interval and its threshold, come from the same held-out intervals, for the
-segments and for the known extent (decision record 0163); the segments' review is by the fitted odds of a far-off
-estimate instead where, held out, those are right more often by more than 3 points (decision record 0167). The
-chosen scheme is fitted on all three sets and written beside the model (``<model>.intervals.json``, every number to
-9 significant digits), with the known-length interval fitted on the same segments with their true lengths. Prints
-every scheme's held-out table.
+held-out known-length intervals, ``K0`` staying unless beaten by more than 2.1 points (decision record 0168). The review
+rules, each a score of the interval and its threshold, come from the same held-out intervals, for the segments and for
+the known extent (decision record 0163); the segments' review is by the fitted odds of a far-off estimate instead where,
+held out, those are right more often by more than 3 points (decision record 0167). The chosen scheme is fitted on all
+three sets and written beside the model (``<model>.intervals.json``, every number to 9 significant digits), with the
+known-length interval fitted on the same segments with their true lengths. Prints every scheme's held-out table.
 """
 
 from __future__ import annotations

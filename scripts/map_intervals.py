@@ -13,8 +13,10 @@ segments get from the model's calibration file, and split-conformal quantiles of
 ``track`` and per ``track+band`` (the map's coverage below 0.8). Of those within 85-95 % in each cell (M_proc and
 each real colon, each track, noise levels pooled), the narrowest on ``M_real`` (else the one whose worst cell lies
 closest to 90 %). Prints how the map's own ``review`` flags did per cell: the share of the segments off by more
-than 15 points it flags, and of its flags right. With ``--write``, a chosen map candidate is fitted on all the maps
-and written into the model's calibration file (``map``), which ``colonbench map`` then uses.
+than 15 points it flags, and of its flags right, and chooses the map's own review threshold by decision record 0223's
+rule (:func:`review_threshold`). With ``--write``, a chosen map candidate is fitted on all the maps and written
+into the model's calibration file (``map``), with the review threshold where it is adopted, which ``colonbench map``
+then uses.
 """
 
 from __future__ import annotations
@@ -38,6 +40,9 @@ ROOT = Path(__file__).resolve().parents[1] / "data_manifests"
 #: The maps' datasets: manifest name -> the set its maps belong to.
 DATASETS = {"colon-val": "M_proc", "colon-val-real": "M_real"}
 SCHEMES = ("known", "track", "track+band")
+#: Decision record 0223 (0325's rule on the maps): the map's review threshold catches at least this share of the
+#: segments off by more than BIG in each real validation colon.
+REVIEW_RECALL, BIG = 0.75, 0.15
 
 
 def map_segments(root: Path, name: str, model, cal_id: str, workers: int) -> pd.DataFrame:
@@ -115,6 +120,25 @@ def flags(seg: pd.DataFrame) -> pd.DataFrame:
     return out
 
 
+def review_threshold(held: pd.DataFrame) -> float | None:
+    """Decision record 0223's map review threshold: the largest interval width (fraction) at which flagging the
+    segments of ``held`` (:func:`by_colon`'s) whose interval is wider catches at least :data:`REVIEW_RECALL` of the
+    segments off by more than :data:`BIG` in each real validation colon (its tracks and noise levels pooled), less
+    1e-6 so that a segment of exactly that width is flagged; None where no width catches that many."""
+    big = (held["estimate"] - held["true"]).abs() > BIG
+    real = [held["cell"] == c for c in sorted(held.loc[held["set"] == "M_real", "cell"].unique())]
+    for w in np.unique(np.round(held["width"], 4))[::-1]:
+        flag = held["width"] > w - 1e-12
+        if all((flag & big & c).sum() >= REVIEW_RECALL * (big & c).sum() for c in real):
+            return float(w) - 1e-6
+    return None
+
+
+def review_report(held: pd.DataFrame, threshold: float) -> pd.DataFrame:
+    """:func:`flags` of ``held`` were its segments flagged where their interval is wider than ``threshold``."""
+    return flags(held.assign(review=(held["width"] > threshold).astype(int)))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", default="data", help="folder holding (or to hold) the two datasets (default: data)")
@@ -151,6 +175,13 @@ def main() -> None:
         if scheme == "known":
             print(f"the map's review flags (a segment's interval wider than its calibration's):\n"
                   f"{flags(held).to_string()}")
+            threshold = review_threshold(held)
+            adopted = threshold is not None and threshold > cal.review_known
+            print(f"\nthe map's own review threshold (decision record 0223): "
+                  + (f"{100 * threshold:.1f} points, against the known extent's {100 * cal.review_known:.1f}: "
+                     f"{'adopted' if adopted else 'not adopted (no larger)'}\n"
+                     f"{review_report(held, threshold).to_string()}"
+                     if threshold is not None else "none catches 75 % in each real colon"))
     passing = [s for s in SCHEMES if summary[s]["ok"]]
     best = min(passing, key=lambda s: summary[s]["real_width"]) if passing else \
         min(SCHEMES, key=lambda s: summary[s]["worst"])
@@ -158,6 +189,8 @@ def main() -> None:
     if args.write:
         data = json.loads(path.read_text())
         data["map"] = {} if best == "known" else {"scheme": best, "groups": fit(seg, best, cal.level)}
+        if adopted:
+            data["map"]["review_width"] = round(threshold, 6)
         data["source"].pop("id", None)                 # the calibration's id covers its map part too
         digest = hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()[:8]
         data["source"]["id"] = f"{data['scheme']}-{digest}"

@@ -7,81 +7,113 @@ import pandas as pd
 import pytest
 
 from colonbench.completion import intervals, likeness
+from colonbench.errors import InputError
 
 SCHEME = "like50+binned-colon-novel"
 
 
-def population(n_like: int, n_other: int):
-    """Estimates at 0.5 of two kinds the network's self-disagreement tells apart (``spread`` 0 or 0.02), every other
-    signal the same: the paper-like ones off by exactly +-0.02, the others by +-0.2, signs alternating."""
-    n = n_like + n_other
-    like = np.arange(n) < n_like
-    sign = np.where(np.arange(n) % 2 == 0, 1.0, -1.0)
-    m = np.where(like, 0.02, 0.2)
-    sig = [{"length_mm": 60.0, "span_mm": 60.0, "rims": 2, "spread": 0.0 if k else 0.02} for k in like]
+def crossed(n: int = 200):
+    """Estimates at 0.5 of two kinds the network's self-disagreement tells apart (``spread`` 0: paper-like, 0.02:
+    not), every other signal the same but the line's length: the paper-like kind is off by +-0.01 on a 40 mm line and
+    +-0.2 on an 80 mm one, the other kind the other way round (signs alternating). One log-linear scale cannot follow
+    a length effect whose sign turns with the kind; a group per kind follows it exactly."""
+    k = np.arange(n)
+    like, long = k < n // 2, (k // 2) % 2 == 1
+    m = np.where(like == long, 0.2, 0.01)
+    sign = np.where(k % 2 == 0, 1.0, -1.0)
+    sig = [{"length_mm": 80.0 if lo else 40.0, "span_mm": 80.0 if lo else 40.0, "rims": 2,
+            "spread": 0.0 if li else 0.02} for li, lo in zip(like, long)]
     return 0.5 + sign * m, np.full(n, 0.5), sig, like
 
 
-def test_each_group_gets_its_own_quantiles_and_the_file_keeps_the_classifier():
-    """Within a group every feature is the same, so its fitted scale is its residuals' size plus the floor exactly,
-    and its interval is +-0.02 or +-0.2: each holds every truth of its own kind. The classifier sorts every estimate
-    into its kind; the calibration comes back from its JSON the same."""
-    true, est, sig, like = population(100, 100)
+def test_each_kind_gets_its_own_exact_interval_where_one_scale_cannot():
+    """Within a kind the fitted scale is its residuals' size plus the floor exactly (two line lengths, two values of
+    log(m + 0.005)), each length falls in a band of its own, and the band's quantiles give +-m: every truth inside,
+    at the narrowest interval that holds them. One scale over both kinds (``scaled-colon-novel``) fits no length
+    effect at all (the two cancel), and gives every estimate +-0.2."""
+    true, est, sig, like = crossed()
     w = np.full(len(true), 1.0 / len(true))
     cal = likeness.fit(true, est, sig, SCHEME, 0.3, 0.9, w, None, like)
-    assert cal.scheme == SCHEME and cal.like["threshold"] == 0.5
-    assert cal.like["features"] == list(intervals.scale_features(SCHEME))
-    assert {"all", "like=1", "like=0"} <= set(cal.groups)
     assert [intervals.looks_like(cal.like, 0.5, s) for s in sig] == list(like)
-    assert cal.interval(0.5, sig[0]) == (pytest.approx(0.48), pytest.approx(0.52))
-    assert cal.interval(0.5, sig[-1]) == (pytest.approx(0.3), pytest.approx(0.7))
-    pooled = intervals.fit(true, est, sig, "binned-colon-novel", 0.3, weights=w)
+    short_like, long_like, short_other = sig[0], sig[2], sig[-4]
+    assert (short_like["length_mm"], long_like["length_mm"], short_other["length_mm"]) == (40.0, 80.0, 40.0)
+    assert cal.interval(0.5, short_like) == (pytest.approx(0.49), pytest.approx(0.51))
+    assert cal.interval(0.5, long_like) == (pytest.approx(0.3), pytest.approx(0.7))
+    assert cal.interval(0.5, short_other) == (pytest.approx(0.3), pytest.approx(0.7))
+    pooled = intervals.fit(true, est, sig, "scaled-colon-novel", 0.3, weights=w)      # one scale, one quantile
+    assert pooled.interval(0.5, short_like) == (pytest.approx(0.3), pytest.approx(0.7))
     back = intervals.Intervals(**json.loads(json.dumps(cal.to_json())))
-    assert back.like == cal.like
-    assert [back.interval(0.5, s) for s in sig[::17]] == [cal.interval(0.5, s) for s in sig[::17]]
+    assert back.like == cal.like and [back.interval(0.5, s) for s in sig] == [cal.interval(0.5, s) for s in sig]
     assert "like" not in pooled.to_json()          # a calibration without the groups writes no classifier
 
 
-def test_the_groups_part_what_one_quantile_pools():
-    """One quantile over both kinds (``scaled-colon-novel``): the scale fits each kind's size exactly (``m + 0.005``),
-    so the scaled residuals are +-0.8 (paper-like) and +-0.976 (others), and the 90 % quantile is the others'
-    0.2 / 0.205, which widens the paper-like interval to +-0.976 * 0.025 = +-0.0244. Grouped, it is +-0.02."""
-    true, est, sig, like = population(100, 100)
+def test_the_classifier_routes_each_estimate_and_a_missing_group_falls_back_to_all():
+    """A calibration made by hand: groups of +-0.02 (``like=1``), +-0.2 (``like=0``) and +-0.3 (``all``); log odds
+    ``1 - 10 * (10 spread)``: spread 0 is a 73 % chance (``like=1``), spread 0.02 a 27 % one (``like=0``)."""
+    groups = {"all": {"low": -0.3, "high": 0.3, "n": 100}, "like=1": {"low": -0.02, "high": 0.02, "n": 50},
+              "like=0": {"low": -0.2, "high": 0.2, "n": 50}}
+    like = {"features": ["one", "spread"], "ranges": [[1.0, 1.0], [0.0, 1.0]], "weights": [1.0, -10.0],
+            "threshold": 0.5}
+    cal = intervals.Intervals("like50+binned-colon-novel", 0.9, groups, 0.5, like=like)
+    assert cal.interval(0.5, {"spread": 0.0}) == (pytest.approx(0.48), pytest.approx(0.52))
+    assert cal.interval(0.5, {"spread": 0.02}) == (pytest.approx(0.3), pytest.approx(0.7))
+    without = intervals.Intervals("like50+binned-colon-novel", 0.9, {k: v for k, v in groups.items() if k != "like=1"},
+                                  0.5, like=like)
+    assert without.interval(0.5, {"spread": 0.0}) == (pytest.approx(0.2), pytest.approx(0.8))
+    higher = intervals.Intervals("like80+binned-colon-novel", 0.9, groups, 0.5, like={**like, "threshold": 0.8})
+    assert higher.interval(0.5, {"spread": 0.0}) == (pytest.approx(0.3), pytest.approx(0.7))    # 73 % < 80 %
+    with pytest.raises(InputError, match="clash"):
+        intervals.Intervals("like50+binned-colon-novel", 0.9, groups, 0.5)              # no classifier
+    with pytest.raises(InputError, match="clash"):
+        intervals.Intervals("binned-colon-novel", 0.9, groups, 0.5, like=like)           # a classifier, no groups
+    with pytest.raises(InputError, match="clash"):
+        intervals.Intervals("like50+binned-colon-novel", 0.9, groups, 0.5, like={**like, "threshold": 1.0})
+
+
+def test_a_group_is_fitted_as_its_scheme_fits_those_estimates_alone_with_the_whole_fits_weights():
+    """With colon weights and the shift term: the ``like=1`` group is exactly what the scheme fits on the paper-like
+    estimates alone with their weights and colons; a kind too small in effect (10 estimates, under MIN_GROUP) gets
+    no group, and its estimates the pooled group ``all``, the scheme's own fit on all."""
+    true, est, sig, like = crossed()
+    colons = np.arange(len(true)) // 10
     w = np.full(len(true), 1.0 / len(true))
-    cal = likeness.fit(true, est, sig, "like80+binned-colon-novel", 0.3, 0.9, w, None, like)
-    pooled = intervals.fit(true, est, sig, "scaled-colon-novel", 0.3, weights=w)
-    assert np.diff(cal.interval(0.5, sig[0]))[0] == pytest.approx(0.04)
-    assert np.diff(pooled.interval(0.5, sig[0]))[0] == pytest.approx(2 * 0.2 / 0.205 * 0.025)
+    scheme = "like50+binned-colon-novel-shift"
+    cal = likeness.fit(true, est, sig, scheme, 0.3, 0.9, w, colons, like)
+    alone = intervals.fit(true[like], est[like], [s for s, k in zip(sig, like) if k], "binned-colon-novel-shift", 0.3,
+                          weights=w[like], colons=colons[like])
+    assert cal.groups["like=1"] == alone.groups["all"]
+    keep = np.r_[np.arange(10), np.arange(100, 200)]
+    few = likeness.fit(true[keep], est[keep], [sig[k] for k in keep], scheme, 0.3, 0.9, w[keep], colons[keep],
+                       like[keep])
+    assert "like=1" not in few.groups and "like=0" in few.groups
+    pooled = intervals.fit(true[keep], est[keep], [sig[k] for k in keep], "binned-colon-novel-shift", 0.3,
+                           weights=w[keep], colons=colons[keep])
+    assert few.groups["all"] == pooled.groups["all"]
+    assert few.interval(0.5, sig[0]) == pooled.interval(0.5, sig[0])
 
 
-def test_a_group_too_small_gets_the_pooled_quantiles():
-    """Ten paper-like estimates (effective size 10, under MIN_GROUP) get no group of their own: they take the
-    pooled group ``all``, fitted as the scheme without the likeness fits it."""
-    true, est, sig, like = population(10, 100)
-    w = np.full(len(true), 1.0 / len(true))
-    cal = likeness.fit(true, est, sig, SCHEME, 0.3, 0.9, w, None, like)
-    assert "like=1" not in cal.groups and "like=0" in cal.groups
-    pooled = intervals.fit(true, est, sig, "binned-colon-novel", 0.3, weights=w)
-    assert cal.interval(0.5, sig[0]) == pooled.interval(0.5, sig[0])
-
-
-def test_likeness_schemes_are_named_and_fitted_only_with_both_kinds():
+def test_likeness_schemes_are_named_and_fitted_only_with_both_kinds_on_a_scaled_scheme():
     assert likeness.split_scheme("like80+binned-colon-novel-depth-shift") == (0.8, "binned-colon-novel-depth-shift")
     assert likeness.split_scheme("binned-colon-novel-depth-shift") is None
+    assert likeness.split_scheme("like00+binned-colon-novel") is None                # a chance of 0 groups nothing
     assert intervals.scale_features("like80+binned-colon-novel-depth-shift") == \
         intervals.scale_features("binned-colon-novel-depth-shift")
-    true, est, sig, like = population(40, 40)
+    true, est, sig, like = crossed(80)
     w = np.full(80, 1 / 80)
     with pytest.raises(ValueError, match="not a likeness scheme"):
         likeness.fit(true, est, sig, "binned-colon-novel", 0.3, 0.9, w, None, like)
     with pytest.raises(ValueError, match="paper-like set and of others"):
         likeness.fit(true, est, sig, SCHEME, 0.3, 0.9, w, None, np.ones(80, bool))
+    with pytest.raises(ValueError, match="scaled scheme"):
+        likeness.fit(true, est, sig, "like50+marginal", 0.3, 0.9, w, None, like)
+    with pytest.raises(ValueError, match="likeness.fit"):
+        intervals.fit(true, est, sig, SCHEME, 0.3, weights=w)
 
 
 def test_the_calibration_script_tells_the_classifier_which_estimates_are_paper_like(calibrate_intervals):
     """``fit_scheme`` labels an estimate paper-like by its set (``V_paper``), and fits any other scheme as
     :func:`intervals.fit` does."""
-    true, est, sig, like = population(60, 60)
+    true, est, sig, like = crossed(120)
     part = pd.DataFrame({"true": true, "set": np.where(like, "V_paper", "V_real")})
     w = np.full(120, 1 / 120)
     cal = calibrate_intervals.fit_scheme(part, est, sig, SCHEME, 0.3, 0.9, w, None)
