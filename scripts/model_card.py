@@ -76,7 +76,7 @@ def _flags(by: str, threshold: float) -> str:
                 f"log odds of a logistic fit of its signals over {threshold:.2f})")
     where = {"width": "wider than", "reach": "reaching from its estimate more than",
              "drop": "reaching below its estimate more than"}[by]
-    return f"an interval {where} {100 * threshold:.0f} points"
+    return f"an interval {where} {round(100 * threshold, 1):g} points"
 
 
 def intervals_rows(model: Path) -> list[str]:
@@ -95,7 +95,8 @@ def intervals_rows(model: Path) -> list[str]:
            + (", a scale for each end" if two_sided else "") if scaled else f"grouped by {cal.scheme}")
     if any("ranges" in g for g in cal.groups.values()):
         how += f", each clipped into the range calibrated on (the line up to {cal.longest_mm():.0f} mm)"
-    held = src.get("held_out")
+    held, map_width = src.get("held_out"), cal.map.get("review_width")
+    who = "a length given" if map_width else "a map's segment or a length given"
     out = ["", "## Coverage intervals", "",
            f"`{intervals.path_for(model).name}` (id `{src.get('id')}`): {cal.level:.0%} split-conformal intervals "
            f"for {src.get('steps')}, {how}, calibrated by `python scripts/calibrate_intervals.py` on "
@@ -103,9 +104,11 @@ def intervals_rows(model: Path) -> list[str]:
            f"{src.get('estimates')} estimates at noise {', '.join(f'{x:g}' for x in src.get('noise_mm', []))} mm"
            + (f" (chosen {held}; left out: {src.get('not_calibrated_on')})" if held else "")
            + f"; {_flags(cal.review_by, cal.review_width)} flags its estimate for review"
-           + (f" (an estimate of known extent, a map's segment or a length given: "
-              f"{_flags(cal.review_by_known or cal.review_by, cal.review_known)})"
-              if cal.review_known else "") + ".", "",
+           + (f" (an estimate of known extent, {who}: "
+              f"{_flags(cal.review_by_known or cal.review_by, cal.review_known)}"
+              + (f"; a map's segment: {_flags('width', map_width)}, chosen on the validation maps by "
+                 "`python scripts/map_intervals.py --write`" if map_width else "")
+              + ")" if cal.review_known else "") + ".", "",
            "| group | calibration estimates | interval around the estimate | scale weights |", "|---|---:|---|---|"]
     rows = [(k, g) for k, g in cal.groups.items() if k != "all" or scaled] + \
         ([("extent known" + (" (a map's planes)" if "short" in cal.known else ""), cal.known)] if cal.known else []) + \
@@ -136,7 +139,7 @@ def intervals_rows(model: Path) -> list[str]:
         o = cal.like
         weights = ", ".join(f"{n} {w:+.2f}" for n, w in zip(o["features"], o["weights"]))
         out.append(f"| which group: `like=1` (like the paper's colons) or `like=0` | {src.get('estimates')} | "
-                   f"`like=1` over a {100 * o['threshold']:.0f} % chance | {weights} |")
+                   f"`like=1` over a {100 * o['threshold']:.0f} % chance | log odds: {weights} |")
     for track, g in (cal.map.get("groups") or {}).items():
         out.append(f"| map segments, {track} | {g['n']} | {100 * g['low']:+.1f} to {100 * g['high']:+.1f} points | |")
     return out
