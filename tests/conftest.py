@@ -9,16 +9,26 @@ import pytest
 REAL = Path(__file__).resolve().parents[1] / "data_manifests" / "meshes"
 
 
-@pytest.fixture(scope="session")
-def calibrate_intervals():
-    """scripts/calibrate_intervals.py as a module (a script, not part of the package)."""
+def script(name: str):
+    """scripts/<name>.py as a module (a script, not part of the package)."""
     import importlib.util
 
-    spec = importlib.util.spec_from_file_location(
-        "calibrate_intervals", Path(__file__).resolve().parents[1] / "scripts" / "calibrate_intervals.py")
+    spec = importlib.util.spec_from_file_location(name, Path(__file__).resolve().parents[1] / "scripts" / f"{name}.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
+
+
+@pytest.fixture(scope="session")
+def calibrate_intervals():
+    """scripts/calibrate_intervals.py as a module."""
+    return script("calibrate_intervals")
+
+
+@pytest.fixture(scope="session")
+def map_intervals():
+    """scripts/map_intervals.py as a module."""
+    return script("map_intervals")
 
 
 @pytest.fixture(scope="session")

@@ -1,7 +1,5 @@
 """The map's own review threshold, chosen on the validation maps (decision record 0223)."""
 
-import importlib.util
-from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -11,16 +9,6 @@ import pytest
 from colonbench.completion import intervals
 from colonbench.estimate import Estimate
 from colonbench.mapping.colonmap import for_mapping
-
-
-@pytest.fixture(scope="module")
-def map_intervals():
-    """scripts/map_intervals.py as a module (a script, not part of the package)."""
-    spec = importlib.util.spec_from_file_location(
-        "map_intervals", Path(__file__).resolve().parents[1] / "scripts" / "map_intervals.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def calibration(map_part: dict) -> intervals.Intervals:
