@@ -39,7 +39,7 @@ def review_reason(width: float, score: float, threshold: float, by: str) -> str:
     """The review's reason for an estimate whose score exceeds its threshold (interval scores: fractions, said in
     points; ``odds``: log odds, said as a chance)."""
     if by == "width":
-        return f"interval {100 * width:.0f} points wide (more than {100 * threshold:.0f})"
+        return f"interval {100 * width:.0f} points wide (more than {round(100 * threshold, 1):g})"
     if by == "odds":
         return (f"a {100 * chance(score):.1f} % chance, as the calibration's fit of its signals reads them, that the "
                 f"estimate is off by more than 15 points (flagged over {100 * chance(threshold):.1f} %); its interval "

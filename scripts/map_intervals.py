@@ -124,7 +124,9 @@ def review_threshold(held: pd.DataFrame) -> float | None:
     """Decision record 0223's map review threshold: the largest interval width (fraction) at which flagging the
     segments of ``held`` (:func:`by_colon`'s) whose interval is wider catches at least :data:`REVIEW_RECALL` of the
     segments off by more than :data:`BIG` in each real validation colon (its tracks and noise levels pooled), less
-    1e-6 so that a segment of exactly that width is flagged; None where no width catches that many."""
+    1e-6. The widths tried are the segments' to 4 decimals, as the segments' review threshold is chosen
+    (``scripts/calibrate_intervals.py``); a width within 5e-5 under one of them may go unflagged. None where no
+    width catches that many."""
     big = (held["estimate"] - held["true"]).abs() > BIG
     real = [held["cell"] == c for c in sorted(held.loc[held["set"] == "M_real", "cell"].unique())]
     for w in np.unique(np.round(held["width"], 4))[::-1]:
@@ -175,17 +177,17 @@ def main() -> None:
         if scheme == "known":
             print(f"the map's review flags (a segment's interval wider than its calibration's):\n"
                   f"{flags(held).to_string()}")
-            threshold = review_threshold(held)
-            adopted = threshold is not None and threshold > cal.review_known
-            print(f"\nthe map's own review threshold (decision record 0223): "
-                  + (f"{100 * threshold:.1f} points, against the known extent's {100 * cal.review_known:.1f}: "
-                     f"{'adopted' if adopted else 'not adopted (no larger)'}\n"
-                     f"{review_report(held, threshold).to_string()}"
-                     if threshold is not None else "none catches 75 % in each real colon"))
     passing = [s for s in SCHEMES if summary[s]["ok"]]
     best = min(passing, key=lambda s: summary[s]["real_width"]) if passing else \
         min(SCHEMES, key=lambda s: summary[s]["worst"])
     print(f"\nchosen: {best}")
+    held = by_colon(seg, best, cal.level)              # the review threshold on the chosen intervals (0223)
+    threshold = review_threshold(held)
+    adopted = threshold is not None and threshold > cal.review_known
+    print(f"\nthe map's own review threshold (decision record 0223): "
+          + (f"{100 * threshold:.1f} points, against the known extent's {100 * cal.review_known:.1f}: "
+             f"{'adopted' if adopted else 'not adopted (no larger)'}\n{review_report(held, threshold).to_string()}"
+             if threshold is not None else "none catches 75 % in each real colon"))
     if args.write:
         data = json.loads(path.read_text())
         data["map"] = {} if best == "known" else {"scheme": best, "groups": fit(seg, best, cal.level)}

@@ -106,6 +106,8 @@ def test_likeness_schemes_are_named_and_fitted_only_with_both_kinds_on_a_scaled_
         likeness.fit(true, est, sig, SCHEME, 0.3, 0.9, w, None, np.ones(80, bool))
     with pytest.raises(ValueError, match="scaled scheme"):
         likeness.fit(true, est, sig, "like50+marginal", 0.3, 0.9, w, None, like)
+    with pytest.raises(ValueError, match="scaled scheme"):
+        likeness.fit(true, est, sig, "like50+like80+binned-colon-novel", 0.3, 0.9, w, None, like)
     with pytest.raises(ValueError, match="likeness.fit"):
         intervals.fit(true, est, sig, SCHEME, 0.3, weights=w)
 

@@ -56,3 +56,20 @@ def test_the_threshold_is_the_widest_that_catches_three_quarters_of_each_real_co
     report = map_intervals.review_report(held.assign(track_kind="context"), map_intervals.review_threshold(held))
     assert report.loc[("gca00020", "context"), "caught"] == 3 and report.loc[("gca00070", "context"), "caught"] == 3
     assert report.loc[("gca00020", "context"), "flagged"] == 4          # the near one of width 0.6 too
+
+
+def test_a_map_part_with_only_a_threshold_leaves_the_map_segments_the_known_extents_interval():
+    """A calibration whose map part holds a review threshold and no groups: a map segment (its track named) gets the
+    known extent's interval, and a reason that says the threshold to a tenth of a point."""
+    cal = calibration({"review_width": 0.2037}).for_map()
+    est = Estimate(0.5, np.zeros((0, 3)), np.zeros((0, 3)), "m", signals={"extent": "known", "map_track": "context"})
+    cal.apply(est)
+    assert est.coverage_interval == (pytest.approx(0.35), pytest.approx(0.65))
+    assert est.review == ["interval 30 points wide (more than 20.4)"]
+
+
+def test_mapping_swaps_only_the_calibration_where_nothing_else_changes():
+    cal = calibration({"review_width": 0.35})
+    method = SimpleNamespace(cut_rims=False, end_level=None, intervals=cal)
+    mapped = for_mapping(method, 0.0)
+    assert mapped is not method and mapped.intervals.review_known == 0.35 and method.intervals.review_known == 0.2
