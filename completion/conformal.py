@@ -62,6 +62,12 @@ def weighted_quantiles(values, weights, level: float) -> tuple[float, float]:
     return low, high
 
 
+def effective_size(weights) -> float:
+    """Kish's effective sample size of weights ((n,), >= 0): ``(sum w)^2 / sum w^2``; 0 for none."""
+    w = np.asarray(weights, float)
+    return float(w.sum() ** 2 / max(float(np.sum(w ** 2)), 1e-300))
+
+
 def weighted_quantile(values, weights, q: float = 0.5, between: bool = False) -> float:
     """The weighted ``q``-quantile of ``values`` (the first value at which the weights below reach ``q``);
     ``between``: the midpoint of it and the next larger order statistic, a cut no value lies on unless tied."""
@@ -106,8 +112,7 @@ def band_quantiles(z: np.ndarray, log_scale: np.ndarray, level: float, weights, 
     for k in range(len(edges) + 1):
         sel = band == k
         low, high = out["low"], out["high"]
-        size = w[sel].sum() ** 2 / max(float(np.sum(w[sel] ** 2)), 1e-300)
-        if size >= min_size:
+        if effective_size(w[sel]) >= min_size:
             low, high, _ = shifted_quantiles(z[sel], level, None if weights is None else w[sel],
                                       None if colons is None else np.asarray(colons)[sel])
         out["band_low"].append(low), out["band_high"].append(high), out["band_n"].append(int(sel.sum()))

@@ -370,10 +370,10 @@ def linear_score(fitted: dict, f: np.ndarray, side: str = "") -> float:
     return float(f @ np.asarray(fitted.get(f"weights_{side}", fitted.get("weights")), float))
 
 
-def looks_like(like: dict, coverage: float, signals: dict) -> bool:
+def looks_like(like: dict, coverage: float, signals: dict, f: np.ndarray | None = None) -> bool:
     """Whether a likeness classifier (:attr:`Intervals.like`) finds an estimate like the paper's colons: its chance
-    over the classifier's ``threshold``."""
-    odds = linear_score(like, features(coverage, signals, like["features"]))
+    over the classifier's ``threshold`` (``f``: its features ``like["features"]``, where already made)."""
+    odds = linear_score(like, features(coverage, signals, like["features"]) if f is None else f)
     return odds > math.log(like["threshold"] / (1.0 - like["threshold"]))
 
 

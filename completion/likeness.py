@@ -18,6 +18,7 @@ import re
 import numpy as np
 
 from colonbench.completion import intervals
+from colonbench.completion.conformal import effective_size
 from colonbench.completion.review import fit_odds
 
 #: A likeness scheme's name: ``like<NN>+<scheme>``, NN the chance (%) over which an estimate is ``like=1``.
@@ -78,12 +79,11 @@ def fit(true, estimated, signals: list, scheme: str, review_width: float, level:
     x = np.array([intervals.features(c, s, names) for c, s in zip(estimated, signals)])
     w, c = intervals._unit_weights(base, weights, colons, len(estimated))
     cal.scheme, cal.like = scheme, fit_like(x, like, np.ones(len(x)) if w is None else w, names, threshold)
-    group = np.array([intervals.looks_like(cal.like, e, s) for e, s in zip(estimated, signals)])
+    group = np.array([intervals.looks_like(cal.like, e, s, f) for e, s, f in zip(estimated, signals, x)])
     residual = np.asarray(true, float) - estimated
     for value in (1, 0):
         sel = group == value
-        size = 0.0 if not sel.any() else (sel.sum() if w is None else w[sel].sum() ** 2 / np.sum(w[sel] ** 2))
-        if size >= intervals.MIN_GROUP:
+        if effective_size(np.ones(sel.sum()) if w is None else w[sel]) >= intervals.MIN_GROUP:
             cal.groups[f"like={value}"] = intervals._fit_group(
                 residual[sel], x[sel], names, level, intervals._two_sided(scaled), None if w is None else w[sel],
                 None if c is None else c[sel], intervals._binned(scaled), intervals._tau(scaled))

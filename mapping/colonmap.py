@@ -130,8 +130,9 @@ def for_mapping(method, context_mm: float = 0.0):
     if context_mm <= 0 and not getattr(method, "needs_slab", False) and getattr(method, "end_level", None) is not None:
         changes["end_level"] = None
     cal = getattr(method, "intervals", None)
-    if callable(getattr(cal, "for_map", None)) and cal.for_map() is not cal:   # the map's own review (decision 0223)
-        changes["intervals"] = cal.for_map()
+    mapped_cal = cal.for_map() if callable(getattr(cal, "for_map", None)) else cal   # the map's own review (0223)
+    if mapped_cal is not cal:
+        changes["intervals"] = mapped_cal
     if not changes:
         return method
     mapped = copy.copy(method)

@@ -162,9 +162,9 @@ def main() -> None:
     print(f"{len(seg)} map segments of {seg['colon'].nunique()} colons; MAE per set and track (points):")
     print((100 * (seg["estimate"] - seg["true"]).abs()).groupby([seg["set"], seg["context_mm"] > 0]).mean().round(2)
           .to_string())
-    summary = {}
+    summary, helds = {}, {}
     for scheme in SCHEMES:
-        held = by_colon(seg, scheme, cal.level)
+        held = helds[scheme] = by_colon(seg, scheme, cal.level)
         cells = held.groupby(["cell", "track_kind"]).agg(n=("inside", "size"), inside=("inside", "mean"),
                                                           width=("width", "mean"))
         ok = bool(((cells["inside"] >= 0.85) & (cells["inside"] <= 0.95)).all())
@@ -181,7 +181,7 @@ def main() -> None:
     best = min(passing, key=lambda s: summary[s]["real_width"]) if passing else \
         min(SCHEMES, key=lambda s: summary[s]["worst"])
     print(f"\nchosen: {best}")
-    held = by_colon(seg, best, cal.level)              # the review threshold on the chosen intervals (0223)
+    held = helds[best]                                 # the review threshold on the chosen intervals (0223)
     threshold = review_threshold(held)
     adopted = threshold is not None and threshold > cal.review_known
     print(f"\nthe map's own review threshold (decision record 0223): "
