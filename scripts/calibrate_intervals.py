@@ -8,20 +8,19 @@ training colons are left out), calibration-paper.yaml's and calibration-paper-mo
 generator (``V_paper``) and validation-real.yaml, the real validation colons gca00020 and gca00070 (``V_real``), with
 calibration-real.yaml's real training colons, which are reported, never calibrated on (the network saw them). Estimates
 every segment with the completion method (its intervals off, every signal on) at 0 and 0.5 mm noise, as the suites do
-(cached per model and steps in ``<data>/<manifest>``), then chooses the scheme by decision record 0161's rule: every
-scheme is measured leave-one-colon-out (a colon's estimates get the intervals of a calibration fitted on all the other
-colons); of those whose truth-inside share lies within 85-95 % in each cell (``V_wide``, ``V_paper`` and each real colon
-on its own, at each noise level), the one with the smallest mean width over the real colons; where none is, the scheme
-in use when decision record 0166 was written stays unless a candidate beats it by more than a cell's noise (0166's rule:
-every cell at or above 85 % and 1.6 points less above 95 %, or as little and 1.6 points narrower). The known-length
-interval's candidates (``K0``: the scheme's features, ``K1``: with the share of the length the span covers; ``K2``,
-``K3``: the same with a group of their own for the estimates the length shortened) are chosen by 0161's rule on the
-held-out known-length intervals, ``K0`` staying unless beaten by more than 2.1 points (decision record 0168). The review
-rules, each a score of the interval and its threshold, come from the same held-out intervals, for the segments and for
-the known extent (decision record 0163); the segments' review is by the fitted odds of a far-off estimate instead where,
-held out, those are right more often by more than 3 points (decision record 0167). The chosen scheme is fitted on all
-three sets and written beside the model (``<model>.intervals.json``, every number to 9 significant digits), with the
-known-length interval fitted on the same segments with their true lengths. Prints every scheme's held-out table.
+(cached per model and steps in ``<data>/<manifest>``), then chooses by decision record 0172's rule. Every scheme is
+measured leave-one-colon-out (a colon's estimates get the intervals of a calibration fitted on all the other colons),
+and so is each known-length candidate on it (``K0``: the scheme's features, ``K1``: with the share of the length the
+span covers; ``K2``, ``K3``: the same with a group of their own for the estimates the length shortened). Each (scheme,
+known extent) pair has sixteen cells (``V_wide``, ``V_paper`` and each real colon on its own, at each noise level, for
+both intervals); a cell holds within 85-95 % inside, each edge moved out by its binomial standard error. Of the pairs
+whose cells all hold, the scheme narrowest over the real colons with its narrowest known extent; else the pair the
+least outside. The review rules, each a score of the interval and its threshold, come from the same held-out
+intervals, for the segments and for the known extent (decision record 0163); the segments' review is by the fitted odds
+of a far-off estimate instead where, held out, those are right more often by more than 3 points (decision record
+0167). The chosen scheme is fitted on all three sets and written beside the model (``<model>.intervals.json``, every
+number to 9 significant digits), with the known-length interval fitted on the same segments with their true lengths.
+Prints every scheme's held-out table.
 """
 
 from __future__ import annotations
@@ -29,6 +28,7 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -47,22 +47,19 @@ ROOT = Path(__file__).resolve().parents[1] / "data_manifests"
 MANIFESTS = {"calibration": "V_wide", "calibration-paper": "V_paper", "calibration-paper-more": "V_paper",
              "validation-real": "V_real", "calibration-real": "train_real"}
 CALIBRATED = ("V_wide", "V_paper", "V_real")
-#: Decision records 0325's, 0161's, 0165's, 0166's and 0170's candidates.
+#: Decision records 0325's, 0161's, 0165's, 0166's, 0170's and 0172's candidates.
 SCHEMES = ("scaled", "scaled-colon", "scaled-colon-novel", "scaled-colon-novel-shift", "scaled2-colon-novel",
            "scaled2-colon-novel-shift", "binned-colon-novel", "binned-colon-novel-shift",
            "scaled2-colon-novel-gaps-shift", "binned-colon-novel-gaps-shift", "scaled2-colon-novel-depth-shift",
            "binned-colon-novel-depth-shift", "scaled2-colon-novel-misfit-shift", "binned-colon-novel-misfit-shift",
            "quant95-colon-novel-misfit-shift", "quant90-colon-novel-misfit-shift",
-           "like50+binned-colon-novel-depth-shift", "like80+binned-colon-novel-depth-shift")
-#: Decision record 0166: the scheme in use when it was written, and by how much (points) a candidate must beat it to
-#: replace it (about the standard error of a held-out cell's share inside).
-INCUMBENT, MARGIN = "scaled2-colon-novel-misfit-shift", 1.6
+           "like50+binned-colon-novel-depth-shift", "like80+binned-colon-novel-depth-shift",
+           "like50+scaled2-colon-novel-misfit-shift", "like80+scaled2-colon-novel-misfit-shift")
 #: Decision record 0167: by how many points of the lower real colon's precision the review by odds must beat the
 #: interval's score to replace it.
 ODDS_GAIN = 3.0
-#: Decision record 0168: the known extent's candidate in use, and by how many points of its lowest cell a candidate
-#: must beat it (one standard error of a share near 80 % over 352 estimates).
-KNOWN_INCUMBENT, KNOWN_MARGIN = "K0", 2.1
+#: Decision record 0172: a held-out cell holds within these shares inside (%), each moved out by its standard error.
+EDGES = (85.0, 95.0)
 NOISE_MM = (0.0, 0.5)
 #: Significant digits of every number the calibration file stores (:func:`rounded`).
 SIGNIFICANT = 9
@@ -207,61 +204,72 @@ def real_width(held: pd.DataFrame) -> float:
     return round(100 * float(real.groupby("cell")["width"].mean().mean()), 2) if len(real) else float("nan")
 
 
-def choose(held: dict, level: float) -> tuple[str, dict]:
-    """0161's rule on held-out intervals per scheme: of the schemes within 85-95 % in every cell (each calibrated set,
-    each real colon on its own, each noise level), the narrowest over the real colons; else the one whose lowest cell
-    is highest, counted only below 85 % (under-coverage first), then with the fewest cells above 95 %, then the
-    narrowest over the real colons; but where :data:`INCUMBENT` is among the schemes, decision record 0166's
-    :func:`replace_incumbent` instead (the known extent's candidates keep 0161's rule, with 0168's margin:
-    :func:`choose_known`). Also the summary (with each scheme's ``excess`` where 0166's rule ran)."""
-    summary, ok = {}, {}
-    for scheme, h in held.items():
+def summarise(held: dict, level: float, show: bool = True) -> dict:
+    """Each candidate's held-out cells (truth inside, width and count per calibrated set or real colon and noise level,
+    :func:`cells`), its mean width over the real colons and its :func:`shortfall`; ``show``: printed too."""
+    summary = {}
+    for name, h in held.items():
         c = cells(h[h["set"].isin(CALIBRATED)])
-        worst = float((c["inside"] / 100 - level).abs().max())
-        ok[scheme] = bool(((c["inside"] >= 85) & (c["inside"] <= 95)).all())
-        summary[scheme] = {"cells": {f"{s} {n:g} mm": {"n": int(r["n"]), "inside": float(r["inside"]),
-                                                       "width": float(r["width"])} for (s, n), r in c.iterrows()},
-                           "ok": ok[scheme], "worst_off": round(100 * worst, 1), "real_width": real_width(h),
-                           "lowest": float(c["inside"].min()), "over_95": int((c["inside"] > 95).sum())}
-        print(f"\n{scheme}: every cell within 85-95 %: {ok[scheme]}; real colons' mean width "
-              f"{summary[scheme]['real_width']} points\n{c.to_string()}")
-    passing = [s for s in held if ok[s]]
-    if passing:
-        return min(passing, key=lambda s: summary[s]["real_width"]), summary
-    best = min(held, key=lambda s: (-min(summary[s]["lowest"], 85.0), summary[s]["over_95"],
-                                    summary[s]["real_width"]))
-    return (replace_incumbent(summary) if INCUMBENT in held else best), summary
+        summary[name] = {"cells": {f"{s} {n:g} mm": {"n": int(r["n"]), "inside": float(r["inside"]),
+                                                     "width": float(r["width"])} for (s, n), r in c.iterrows()},
+                         "ok": bool(((c["inside"] >= 85) & (c["inside"] <= 95)).all()),
+                         "worst_off": round(float((c["inside"] - 100 * level).abs().max()), 1),
+                         "real_width": real_width(h), "lowest": float(c["inside"].min())}
+        summary[name]["shortfall"] = shortfall(summary[name])
+        if show:
+            print(f"\n{name}: every cell within 85-95 %: {summary[name]['ok']}; outside its band by "
+                  f"{summary[name]['shortfall']} points; real colons' mean width {summary[name]['real_width']} "
+                  f"points\n{c.to_string()}")
+    return summary
 
 
-def replace_incumbent(summary: dict) -> str:
-    """Decision record 0166's rule where no scheme holds every cell within 85-95 %: a scheme replaces
-    :data:`INCUMBENT` only where every cell of its holds at least 85 %, and its excess (the points its cells lie above
-    95 %, summed) is smaller than the incumbent's by more than :data:`MARGIN`, or no larger while it is narrower over
-    the real colons by more than :data:`MARGIN`; of several, the smallest excess, then the narrowest."""
-    def excess(s):
-        return round(sum(max(c["inside"] - 95.0, 0.0) for c in summary[s]["cells"].values()), 1)
-
-    def beats(s):                  # by more than the margin: a gain of exactly MARGIN does not
-        less = excess(INCUMBENT) - excess(s)
-        narrower = summary[INCUMBENT]["real_width"] - summary[s]["real_width"]
-        return less > MARGIN + 1e-9 or (less >= -1e-9 and narrower > MARGIN + 1e-9)
-
-    better = [s for s in summary if s != INCUMBENT and summary[s]["lowest"] >= 85.0 and beats(s)]
-    for s in summary:
-        summary[s]["excess"] = excess(s)
-    return min(better, key=lambda s: (excess(s), summary[s]["real_width"])) if better else INCUMBENT
+def band(n: int) -> tuple[float, float]:
+    """Decision record 0172's band of a cell of ``n`` estimates (% inside): :data:`EDGES`, each moved out by the
+    binomial standard error of a share at that edge over ``n``."""
+    lo, hi = (p / 100.0 for p in EDGES)
+    return (EDGES[0] - 100 * math.sqrt(lo * (1 - lo) / n), EDGES[1] + 100 * math.sqrt(hi * (1 - hi) / n))
 
 
-def choose_known(held: dict, level: float) -> tuple[str, dict]:
-    """Decision record 0168's rule for the known extent's candidates: 0161's (:func:`choose`), but unless every
-    candidate holds every cell within 85-95 % (then the narrowest), :data:`KNOWN_INCUMBENT` stays unless the one
-    0161's keys rank first has a lowest cell (counted only below 85 %) higher by more than :data:`KNOWN_MARGIN`
-    points; also the summary."""
-    best, summary = choose(held, level)
-    if best == KNOWN_INCUMBENT or KNOWN_INCUMBENT not in held or all(v["ok"] for v in summary.values()):
-        return best, summary
-    gain = min(summary[best]["lowest"], 85.0) - min(summary[KNOWN_INCUMBENT]["lowest"], 85.0)
-    return (best if gain > KNOWN_MARGIN + 1e-9 else KNOWN_INCUMBENT), summary
+def shortfall(summary: dict) -> float:
+    """The points by which a candidate's cells (:func:`summarise`) lie outside their bands (:func:`band`), summed."""
+    total = 0.0
+    for c in summary["cells"].values():
+        lo, hi = band(c["n"])
+        total += max(lo - c["inside"], 0.0) + max(c["inside"] - hi, 0.0)
+    return round(total, 2)
+
+
+def choose_pair(schemes: dict, known: dict) -> tuple[str, str, list]:
+    """Decision record 0172's rule: every (scheme, known extent) pair is a candidate, judged on its sixteen held-out
+    cells (the scheme's and its known-length intervals', each within its :func:`band`). Of the pairs whose cells all
+    hold, the scheme narrowest over the real colons, with its known extent narrowest over them among its pairs that
+    hold; if none holds, the pair with the smallest :func:`shortfall`, then the narrowest scheme, then the narrowest
+    known extent. Equals keep the first in ``schemes``' and ``known``'s order.
+
+    Parameters
+    ----------
+    schemes : dict
+        Scheme -> its summary (:func:`summarise`).
+    known : dict
+        Scheme -> known-extent candidate (:data:`known_extent.KNOWN_EXTRA`) -> its summary, the scheme's known-length
+        intervals.
+
+    Returns
+    -------
+    scheme, known extent : str
+    pairs : list of dict
+        Every pair's ``scheme``, ``known``, ``shortfall`` (points, both parts) and the two real widths (points).
+    """
+    pairs = [{"scheme": s, "known": k, "shortfall": round(schemes[s]["shortfall"] + known[s][k]["shortfall"], 2),
+              "width": schemes[s]["real_width"], "known_width": known[s][k]["real_width"]}
+             for s in schemes for k in known[s]]
+    holding = [p for p in pairs if p["shortfall"] == 0]
+    if holding:
+        scheme = min(holding, key=lambda p: p["width"])["scheme"]
+        pick = min((p for p in holding if p["scheme"] == scheme), key=lambda p: p["known_width"])
+    else:
+        pick = min(pairs, key=lambda p: (p["shortfall"], p["width"], p["known_width"]))
+    return pick["scheme"], pick["known"], pairs
 
 
 def review_cells(held: pd.DataFrame) -> list[str]:
@@ -386,13 +394,24 @@ def calibrate(df: pd.DataFrame, level: float, source: dict) -> intervals.Interva
               f"{100 * (g['estimate'] - g['true']).abs().mean():.2f} points, bias "
               f"{100 * (g['estimate'] - g['true']).mean():+.2f}")
     held = {scheme: by_colon(cal_df, scheme, level) for scheme in SCHEMES}
-    best, summary = choose(held, level)
+    summary = summarise(held, level)
+    known_held, known_summaries = {}, {}
+    for scheme in SCHEMES:          # the known extent reads the scale of a likeness scheme's base (0170)
+        base = (likeness.split_scheme(scheme) or (None, scheme))[1]
+        if base not in known_held:
+            known_held[base] = {k: by_colon(cal_df, base, level, known=True, extra=e,
+                                            short=k in known_extent.KNOWN_SHORT)
+                                for k, e in known_extent.KNOWN_EXTRA.items()}
+            known_summaries[base] = summarise(known_held[base], level, show=False)
+        known_summaries[scheme] = known_summaries[base]
+    best, known_choice, pairs = choose_pair(summary, known_summaries)
+    print("\nthe pairs nearest to holding every cell (decision record 0172: shortfall, then real widths, points):\n"
+          + pd.DataFrame(pairs).sort_values(["shortfall", "width", "known_width"], kind="stable").head(12).to_string())
+    known_held, known_summary = known_held[(likeness.split_scheme(best) or (None, best))[1]], known_summaries[best]
+    print(f"\nchosen: {best} with the known extent {known_choice}\nknown length, held out:")
+    summarise({known_choice: known_held[known_choice]}, level)
     by, width, review_report, reviews = review_rule(held[best], best)
     odds = odds_rule(held[best], intervals.scale_features(best), by, review_report)
-    print("\nknown length, held out (the candidates of decision records 0163 and 0168):")
-    known_held = {k: by_colon(cal_df, best, level, known=True, extra=e, short=k in known_extent.KNOWN_SHORT)
-                  for k, e in known_extent.KNOWN_EXTRA.items()}
-    known_choice, known_summary = choose_known(known_held, level)
     by_known, known_width, known_review, known_reviews = review_rule(known_held[known_choice],
                                                                      f"known length {known_choice}")
     w, c = unit_weights(cal_df), cal_df["colon"].to_numpy()
@@ -420,6 +439,7 @@ def calibrate(df: pd.DataFrame, level: float, source: dict) -> intervals.Interva
                   "review_odds_held_out": "adopted (decision record 0167)" if odds else "not adopted",
                   "review_known_for": "a map's segments and a length given (decision record 0163, round 8)",
                   "known_features": known_choice, "known_candidates": known_summary,
+                  "pairs": "decision record 0172: each (scheme, known extent) pair's cells within their bands",
                   "known_review_scores": {k: {"threshold": round(float(v[0]), 6), "cells": v[1]}
                                           for k, v in known_reviews.items()},
                   "known_held_out": {f"{s} {n:g} mm": {"inside": float(r["inside"]), "width": float(r["width"])}

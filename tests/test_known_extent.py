@@ -1,10 +1,9 @@
 """Decision record 0168: the known extent's interval with a group of its own for the estimates a given length
-shortened (colonbench.completion.known_extent), and the rule in scripts/calibrate_intervals.py that chooses it."""
+shortened (colonbench.completion.known_extent); tests/test_pair_choice.py tests the rule that chooses it (0172)."""
 
 import json
 
 import numpy as np
-import pandas as pd
 import pytest
 
 from colonbench.completion import conformal, intervals, known_extent
@@ -98,34 +97,6 @@ def test_a_split_needs_both_kinds_of_estimate_and_their_signals():
     with pytest.raises(ValueError, match="signals"):
         known_extent.fit_known(cal, true, est, None, short=True)
     assert list(known_extent.shortened([{"length_share": 0.8999}, {"length_share": 0.9}, {}])) == [True, False, False]
-
-
-def _held(lowest: float, width: float = 0.2) -> pd.DataFrame:
-    """Held-out intervals of one candidate: gca00020 holds ``lowest`` % at 0 mm (1000 estimates), every other cell
-    90 %."""
-    rows = []
-    for set_, cell in (("V_real", "V_real gca00020"), ("V_real", "V_real gca00070"), ("V_wide", "V_wide"),
-                       ("V_paper", "V_paper")):
-        for noise in (0.0, 0.5):
-            share = lowest if (cell == "V_real gca00020" and noise == 0.0) else 90.0
-            k = int(round(10 * share))
-            rows += [{"set": set_, "cell": cell, "noise_mm": noise, "inside": i < k, "width": width}
-                     for i in range(1000)]
-    return pd.DataFrame(rows)
-
-
-def test_the_known_extent_in_use_stays_unless_beaten_by_more_than_the_margin(calibrate_intervals):
-    ci = calibrate_intervals
-    assert ci.KNOWN_INCUMBENT == "K0" and ci.KNOWN_MARGIN == 2.1
-    # a gain of the margin (72.2 - 70.1 = 2.1000000000000085 in floats) keeps K0 though 0161's keys rank K2
-    # first; a little more replaces it
-    assert 72.2 - 70.1 > ci.KNOWN_MARGIN
-    assert ci.choose_known({"K0": _held(70.1), "K2": _held(72.2)}, 0.9)[0] == "K0"
-    assert ci.choose_known({"K0": _held(70.1), "K2": _held(72.4)}, 0.9)[0] == "K2"
-    # a cell at or above 85 % counts as 85: from 84 to 90 is a gain of 1 point, kept
-    assert ci.choose_known({"K0": _held(84.0), "K2": _held(90.0, width=0.1)}, 0.9)[0] == "K0"
-    # every cell within 85-95 %: the narrowest, without the margin
-    assert ci.choose_known({"K0": _held(88.0), "K2": _held(89.0, width=0.1)}, 0.9)[0] == "K2"
 
 
 def test_a_share_just_under_the_cut_is_decided_once_on_the_share_as_stored():

@@ -63,29 +63,3 @@ def test_a_tail_fitted_scale_leaves_its_tail_above_it():
         intervals._tau("quant975-colon-novel-misfit-shift")
     with pytest.raises(ValueError, match="weights"):
         quantile_regression(np.ones((3, 1)), np.arange(3.0), 0.5, [1.0, -1.0, 1.0])
-
-
-def test_a_candidate_replaces_the_scheme_in_use_only_by_more_than_the_margin(calibrate_intervals):
-    """replace_incumbent: the scheme in use has 3.0 points above 95 %. A candidate 1.5 below it stays out (within the
-    margin); one 2.8 below replaces it, unless a cell of its is under 85 %; at the same excess, one 1.7 points
-    narrower replaces it and one 1.5 narrower does not; exactly 1.6 better is not more than the margin."""
-    ci = calibrate_intervals
-
-    def summary(cells, real_width):
-        return {"cells": {f"c{k}": {"inside": v} for k, v in enumerate(cells)}, "lowest": min(cells),
-                "real_width": real_width}
-
-    inc = summary([97.2, 95.8, 90, 88], 38.0)
-    assert ci.replace_incumbent({ci.INCUMBENT: inc, "near": summary([95.7, 95.8, 90, 88], 38.0)}) == ci.INCUMBENT
-    assert ci.replace_incumbent({ci.INCUMBENT: inc, "better": summary([95.1, 95.1, 90, 88], 45.0)}) == "better"
-    assert ci.replace_incumbent({ci.INCUMBENT: inc, "short": summary([93, 94, 90, 84.9], 30.0)}) == ci.INCUMBENT
-    assert ci.replace_incumbent({ci.INCUMBENT: inc, "narrow": summary([97.2, 95.8, 90, 88], 36.3)}) == "narrow"
-    assert ci.replace_incumbent({ci.INCUMBENT: inc, "narrow": summary([97.2, 95.8, 90, 88], 36.5)}) == ci.INCUMBENT
-    # exactly the margin is not more than it: 1.6 points less above 95 %, or 1.6 points narrower
-    assert ci.replace_incumbent({ci.INCUMBENT: inc, "edge": summary([95.6, 95.8, 90, 88], 38.0)}) == ci.INCUMBENT
-    assert ci.replace_incumbent({ci.INCUMBENT: summary([97.2, 95.8], 16.01),
-                                 "edge": summary([97.2, 95.8], 14.41)}) == ci.INCUMBENT
-    # narrower by more than the margin but further above 95 %: not better
-    assert ci.replace_incumbent({ci.INCUMBENT: inc, "wide": summary([97.3, 95.8, 90, 88], 30.0)}) == ci.INCUMBENT
-    two = {ci.INCUMBENT: inc, "wide": summary([95.1, 95.1, 90, 88], 45.0), "less": summary([95.1, 95.1, 90, 88], 44.0)}
-    assert ci.replace_incumbent(two) == "less" and two["wide"]["excess"] == 0.2
