@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import copy
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -237,19 +237,21 @@ def join_pieces(pieces: list) -> JoinedLine:
                       interruptions, unseen)
 
 
-def moved_interval(method, est, coverage: float) -> list[float]:
-    """The method's interval around the map's coverage of a segment, which differs from the estimate's where the map
-    clips the completed surface to the segment's stretch (in context).
+def mapped_interval(method, est, coverage: float) -> tuple[list[float], list[str]]:
+    """The method's interval around the map's coverage of a segment, and its review decided on that interval: the map's
+    coverage differs from the estimate's where the map clips the completed surface to the segment's stretch or counts
+    a stretch no point reached.
 
     Parameters
     ----------
     method : object
         The method as the map runs it; a method with a calibration (completion's ``intervals``, an
-        :class:`~colonbench.completion.intervals.Intervals`) gives its interval around ``coverage`` again
-        (:meth:`~colonbench.completion.intervals.Intervals.interval` with the estimate's signals: for the map's
-        segments, whose extent is known, the known-extent quantiles).
+        :class:`~colonbench.completion.intervals.Intervals`) gives its interval around ``coverage`` again and
+        reviews the segment on it (:meth:`~colonbench.completion.intervals.Intervals.apply` with the estimate's
+        signals: for the map's segments, whose extent is known, the known-extent quantiles and the map's review
+        threshold); one with only ``interval(coverage, signals)`` gives the interval and keeps the estimate's review.
     est : colonbench.estimate.Estimate
-        The method's estimate of the segment, with its ``coverage_interval``.
+        The method's estimate of the segment, with its ``coverage_interval``; left as it is.
     coverage : float
         The map's coverage of the segment, fraction.
 
@@ -257,14 +259,23 @@ def moved_interval(method, est, coverage: float) -> list[float]:
     -------
     [low, high] : list of float
         Fractions in [0, 1]. A method without a calibration gets its own interval moved by ``coverage -
-        est.coverage`` and clipped to [0, 1]; an end it had clipped at 1 moves with it. The estimate's review
-        reasons are kept as they are, decided on the interval around the estimate's own coverage.
+        est.coverage`` and clipped to [0, 1]; an end it had clipped at 1 moves with it. A ``coverage`` that is not
+        finite gets the estimate's interval and review as they are.
+    review : list of str
+        The segment's review reasons: a calibrated method's decided on the interval around ``coverage``, the interval
+        the map reports; any other method's its estimate's, as it gave them.
     """
     cal = getattr(method, "intervals", None)
-    if callable(getattr(cal, "interval", None)):
-        return [float(x) for x in cal.interval(coverage, est.signals)]
+    if not np.isfinite(coverage):                       # no coverage to put an interval around: the estimate's
+        return [float(x) for x in est.coverage_interval], list(est.review)
+    if callable(getattr(cal, "apply", None)):
+        seg = replace(est, coverage=float(coverage), review=[], signals=dict(est.signals))
+        cal.apply(seg)
+        return [float(x) for x in seg.coverage_interval], list(seg.review)
+    if callable(getattr(cal, "interval", None)):        # a calibration that gives intervals, no review
+        return [float(x) for x in cal.interval(coverage, est.signals)], list(est.review)
     shift = coverage - est.coverage
-    return [float(np.clip(x + shift, 0, 1)) for x in est.coverage_interval]
+    return [float(np.clip(x + shift, 0, 1)) for x in est.coverage_interval], list(est.review)
 
 
 def map_colon(points: np.ndarray, method, segment_mm: float = SEGMENT_MM, positions: np.ndarray | None = None,
@@ -415,10 +426,10 @@ def map_colon(points: np.ndarray, method, segment_mm: float = SEGMENT_MM, positi
             seg.mesh = (est.mesh_vertices[used], index[faces], est.hole_vertices[used])
         if seg.unreconstructed_mm > 0:
             add_unreconstructed(seg, radius)
-        if est.coverage_interval is not None:  # the method's interval, around the segment's own coverage
-            est.signals["map_track"] = "context" if context_mm > 0 else "segment-only"   # a calibration's map part
-            seg.coverage_interval = moved_interval(method, est, seg.coverage)
         seg.review = list(est.review)
+        if est.coverage_interval is not None:  # the method's interval and review, around the segment's own coverage
+            est.signals["map_track"] = "context" if context_mm > 0 else "segment-only"   # a calibration's map part
+            seg.coverage_interval, seg.review = mapped_interval(method, est, seg.coverage)
         out.append(seg)
     seconds["estimate"] = time.perf_counter() - t0
     return {"segments": out, "centerline": line, "arclength": arc, "interruptions": joined.interruptions,

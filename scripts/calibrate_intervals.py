@@ -28,7 +28,6 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
-import math
 from pathlib import Path
 
 import numpy as np
@@ -36,6 +35,7 @@ import pandas as pd
 
 from colonbench.benchmark.evaluate import noisy, select
 from colonbench.completion import intervals, known_extent, likeness, review
+from colonbench.completion.choice import choose_pair, shortfall
 from colonbench.completion.method import CompletionMethod, model_path, steps_version
 from colonbench.errors import ColonbenchError
 from colonbench.shards.dataset import generate
@@ -58,8 +58,6 @@ SCHEMES = ("scaled", "scaled-colon", "scaled-colon-novel", "scaled-colon-novel-s
 #: Decision record 0167: by how many points of the lower real colon's precision the review by odds must beat the
 #: interval's score to replace it.
 ODDS_GAIN = 3.0
-#: Decision record 0172: a held-out cell holds within these shares inside (%), each moved out by its standard error.
-EDGES = (85.0, 95.0)
 NOISE_MM = (0.0, 0.5)
 #: Significant digits of every number the calibration file stores (:func:`rounded`).
 SIGNIFICANT = 9
@@ -205,8 +203,24 @@ def real_width(held: pd.DataFrame) -> float:
 
 
 def summarise(held: dict, level: float, show: bool = True) -> dict:
-    """Each candidate's held-out cells (truth inside, width and count per calibrated set or real colon and noise level,
-    :func:`cells`), its mean width over the real colons and its :func:`shortfall`; ``show``: printed too."""
+    """Each candidate's held-out cells, as :mod:`colonbench.completion.choice` reads them.
+
+    Parameters
+    ----------
+    held : dict
+        Candidate -> its held-out intervals (:func:`by_colon`).
+    level : float
+        The intervals' level (``worst_off``: the cell furthest from it, points).
+    show : bool
+        Print each candidate's table too.
+
+    Returns
+    -------
+    dict
+        Candidate -> ``cells`` (truth inside %, width in points and count per calibrated set or real colon and noise
+        level, :func:`cells`), ``ok`` (every cell within 85-95 % as 0161 had it), ``worst_off``, ``real_width``
+        (points), ``lowest`` (%) and ``shortfall`` (decision record 0172, points).
+    """
     summary = {}
     for name, h in held.items():
         c = cells(h[h["set"].isin(CALIBRATED)])
@@ -217,59 +231,9 @@ def summarise(held: dict, level: float, show: bool = True) -> dict:
                          "real_width": real_width(h), "lowest": float(c["inside"].min())}
         summary[name]["shortfall"] = shortfall(summary[name])
         if show:
-            print(f"\n{name}: every cell within 85-95 %: {summary[name]['ok']}; outside its band by "
-                  f"{summary[name]['shortfall']} points; real colons' mean width {summary[name]['real_width']} "
-                  f"points\n{c.to_string()}")
+            print(f"\n{name}: outside its cells' bands by {summary[name]['shortfall']} points (decision record "
+                  f"0172); real colons' mean width {summary[name]['real_width']} points\n{c.to_string()}")
     return summary
-
-
-def band(n: int) -> tuple[float, float]:
-    """Decision record 0172's band of a cell of ``n`` estimates (% inside): :data:`EDGES`, each moved out by the
-    binomial standard error of a share at that edge over ``n``."""
-    lo, hi = (p / 100.0 for p in EDGES)
-    return (EDGES[0] - 100 * math.sqrt(lo * (1 - lo) / n), EDGES[1] + 100 * math.sqrt(hi * (1 - hi) / n))
-
-
-def shortfall(summary: dict) -> float:
-    """The points by which a candidate's cells (:func:`summarise`) lie outside their bands (:func:`band`), summed."""
-    total = 0.0
-    for c in summary["cells"].values():
-        lo, hi = band(c["n"])
-        total += max(lo - c["inside"], 0.0) + max(c["inside"] - hi, 0.0)
-    return round(total, 2)
-
-
-def choose_pair(schemes: dict, known: dict) -> tuple[str, str, list]:
-    """Decision record 0172's rule: every (scheme, known extent) pair is a candidate, judged on its sixteen held-out
-    cells (the scheme's and its known-length intervals', each within its :func:`band`). Of the pairs whose cells all
-    hold, the scheme narrowest over the real colons, with its known extent narrowest over them among its pairs that
-    hold; if none holds, the pair with the smallest :func:`shortfall`, then the narrowest scheme, then the narrowest
-    known extent. Equals keep the first in ``schemes``' and ``known``'s order.
-
-    Parameters
-    ----------
-    schemes : dict
-        Scheme -> its summary (:func:`summarise`).
-    known : dict
-        Scheme -> known-extent candidate (:data:`known_extent.KNOWN_EXTRA`) -> its summary, the scheme's known-length
-        intervals.
-
-    Returns
-    -------
-    scheme, known extent : str
-    pairs : list of dict
-        Every pair's ``scheme``, ``known``, ``shortfall`` (points, both parts) and the two real widths (points).
-    """
-    pairs = [{"scheme": s, "known": k, "shortfall": round(schemes[s]["shortfall"] + known[s][k]["shortfall"], 2),
-              "width": schemes[s]["real_width"], "known_width": known[s][k]["real_width"]}
-             for s in schemes for k in known[s]]
-    holding = [p for p in pairs if p["shortfall"] == 0]
-    if holding:
-        scheme = min(holding, key=lambda p: p["width"])["scheme"]
-        pick = min((p for p in holding if p["scheme"] == scheme), key=lambda p: p["known_width"])
-    else:
-        pick = min(pairs, key=lambda p: (p["shortfall"], p["width"], p["known_width"]))
-    return pick["scheme"], pick["known"], pairs
 
 
 def review_cells(held: pd.DataFrame) -> list[str]:

@@ -241,26 +241,39 @@ def test_the_shift_term_widens_by_the_colons_typical_shift():
     assert intervals.features(0.7, {"length_mm": 50.0}, ("line_extent",))[0] == 0.0
 
 
-def test_a_map_segment_gets_the_interval_around_its_own_coverage():
-    # the map clips the completed surface to the segment's stretch, so its coverage differs from the estimate's:
-    # completion's interval is made again around it (not the estimate's, clipped at 1, moved down)
-    from colonbench.mapping.colonmap import moved_interval
+def test_a_map_segment_gets_the_interval_and_review_around_its_own_coverage():
+    # the map clips the completed surface to the segment's stretch, or counts a stretch no point reached, so its
+    # coverage differs from the estimate's: completion's interval is made again around it (not the estimate's,
+    # clipped at 1, moved down), and its review is decided on that interval, the one the map reports
+    from colonbench.mapping.colonmap import mapped_interval
 
     cal = intervals.fit([0.8] * 40, [0.8] * 40, [{"length_mm": 70.0}] * 40, "length", 0.4)
     cal.known = {"low": -0.08, "high": 0.1, "n": 40}
+    cal.review_known, cal.review_by_known = 0.2, "width"
     est = Estimate(0.97, np.zeros((0, 3)), np.zeros((0, 3)), "m", signals={"length_mm": 70.0, "extent": "known"})
     cal.apply(est)
-    assert est.coverage_interval == pytest.approx((0.89, 1.0))
+    assert est.coverage_interval == pytest.approx((0.89, 1.0)) and est.review == []    # 0.11 wide: not flagged
 
     class Method:
         intervals = cal
 
-    assert moved_interval(Method, est, 0.95) == pytest.approx([0.87, 1.0])     # moved, it would end at 0.98
+    low_high, review = mapped_interval(Method, est, 0.95)
+    assert low_high == pytest.approx([0.87, 1.0]) and review == []                     # moved, it would end at 0.98
+    cal.known = {"low": -0.3, "high": 0.1, "n": 40}         # a segment the map reads at 0.5: [0.2, 0.6], 0.4 wide
+    low_high, review = mapped_interval(Method, est, 0.5)
+    assert low_high == pytest.approx([0.2, 0.6]) and review == ["interval 40 points wide (more than 20)"]
+    assert est.coverage == 0.97 and est.review == [] and est.coverage_interval == pytest.approx((0.89, 1.0))
 
     class Other:                                                               # a method without a calibration
         pass
 
-    assert moved_interval(Other, est, 0.95) == pytest.approx([0.87, 0.98])
+    class IntervalOnly:                                       # a calibration that gives intervals and no review
+        intervals = type("C", (), {"interval": lambda self, c, s: (c - 0.3, c + 0.3)})()
+
+    est.review = ["its own reason"]
+    assert mapped_interval(Other, est, 0.95) == (pytest.approx([0.87, 0.98]), ["its own reason"])
+    assert mapped_interval(IntervalOnly, est, 0.5) == (pytest.approx([0.2, 0.8]), ["its own reason"])
+    assert mapped_interval(Method, est, float("nan")) == (pytest.approx([0.89, 1.0]), ["its own reason"])
 
 
 def test_a_calibrated_method_gives_each_segment_its_interval_around_the_maps_coverage():

@@ -1,17 +1,19 @@
 """Decision record 0172: every (scheme, known extent) pair a candidate, each held-out cell judged within its binomial
-standard error at 85 and 95 % (scripts/calibrate_intervals.py: band, shortfall, summarise, choose_pair)."""
+standard error at 85 and 95 % (colonbench.completion.choice; scripts/calibrate_intervals.py's summarise)."""
 
 import math
 
 import pandas as pd
 import pytest
 
+from colonbench.completion import choice
+
 CELLS = (("V_real", "V_real gca00020"), ("V_real", "V_real gca00070"), ("V_wide", "V_wide"), ("V_paper", "V_paper"))
 
 
 def held(shares: dict, width: float = 0.2, n: int = 400) -> pd.DataFrame:
     """Held-out intervals of one candidate: ``n`` estimates per cell and noise level, of which ``shares[cell]`` %
-    (90 % where not given) hold the truth, each ``width`` wide (the real colons' widths as given)."""
+    (90 % where not given) hold the truth, each ``width`` wide."""
     rows = []
     for set_, cell in CELLS:
         for noise in (0.0, 0.5):
@@ -21,31 +23,44 @@ def held(shares: dict, width: float = 0.2, n: int = 400) -> pd.DataFrame:
 
 
 def test_a_cells_band_is_85_to_95_moved_out_by_its_standard_error(calibrate_intervals):
-    ci = calibrate_intervals
-    lo, hi = ci.band(400)           # 100 sqrt(0.85 * 0.15 / 400) = 1.785, 100 sqrt(0.95 * 0.05 / 400) = 1.090
+    lo, hi = choice.band(400)           # 100 sqrt(0.85 * 0.15 / 400) = 1.785, 100 sqrt(0.95 * 0.05 / 400) = 1.090
     assert lo == pytest.approx(85 - 100 * math.sqrt(0.1275 / 400)) and lo == pytest.approx(83.2147, abs=1e-4)
     assert hi == pytest.approx(95 + 100 * math.sqrt(0.0475 / 400)) and hi == pytest.approx(96.0897, abs=1e-4)
-    assert ci.band(212)[0] == pytest.approx(82.548, abs=1e-3)        # gca00070's cell: [82.5, 96.5]
-    assert ci.band(212)[1] == pytest.approx(96.497, abs=1e-3)
-    # a cell 2 points under its band (at both noise levels) and one 0.91 over it (at one): 2 + 2 + 0.91
-    summary = ci.summarise({"x": held({"V_real gca00070": 81.25})}, 0.9, show=False)["x"]
+    assert choice.band(212) == pytest.approx((82.548, 96.497), abs=1e-3)        # gca00070's cell: [82.5, 96.5]
+    # a cell 2.01 points under its band at both noise levels: 4.03 points in all
+    summary = calibrate_intervals.summarise({"x": held({"V_real gca00070": 81.25})}, 0.9, show=False)["x"]
     assert summary["cells"]["V_real gca00070 0 mm"] == {"n": 400, "inside": 81.2, "width": 20.0}
-    assert summary["shortfall"] == pytest.approx(2 * (83.2147 - 81.2), abs=0.01) and not summary["ok"]
-    over = dict(summary, cells={"a": {"n": 400, "inside": 97.0}, "b": {"n": 400, "inside": 96.0}})
-    assert ci.shortfall(over) == pytest.approx(97.0 - 96.0897, abs=0.01)
+    assert summary["shortfall"] == pytest.approx(2 * (83.2147 - 81.2), abs=0.01) and not choice.holds(summary)
+    over = {"cells": {"a": {"n": 400, "inside": 97.0}, "b": {"n": 400, "inside": 96.0}}}
+    assert choice.shortfall(over) == pytest.approx(97.0 - 96.0897, abs=0.01) and not choice.holds(over)
+    assert choice.holds({"cells": {"a": {"n": 400, "inside": 83.3}, "b": {"n": 400, "inside": 96.0}}})
 
 
-def test_the_narrowest_holding_pair_wins_with_no_margin_for_the_scheme_in_use(calibrate_intervals):
+def test_a_cell_a_hair_outside_its_band_does_not_hold_though_its_shortfall_rounds_to_0():
+    lo = choice.band(400)[0]
+    hair = {"cells": {"a": {"n": 400, "inside": lo - 0.004}}}
+    assert choice.shortfall(hair) == 0.0 and not choice.holds(hair)
+    plain = {"cells": {"a": {"n": 400, "inside": 90.0}}, "shortfall": 0.0, "real_width": 40.0}
+    hair.update(shortfall=0.0, real_width=10.0)
+    # the narrower scheme's cell lies 0.004 outside: the wider one, which holds, is chosen
+    assert choice.choose_pair({"hair": hair, "plain": plain}, {"hair": {"K0": plain}, "plain": {"K0": plain}})[0] \
+        == "plain"
+
+
+def test_the_narrowest_holding_scheme_wins_then_its_narrowest_holding_known_extent(calibrate_intervals):
     """A scheme whose cell lies 1 point under 85 % (within its noise) holds, and the narrower of two holding schemes
-    wins; its known extent is the narrowest of its own that hold, though a narrower one does not."""
+    wins, though the wider one has a narrower known extent that holds; its known extent is the narrowest of its own
+    that hold, though a narrower one does not; the scheme in use gets no margin."""
     ci = calibrate_intervals
     schemes = ci.summarise({"in-use": held({"V_paper": 97.5}, 0.30), "near": held({"V_real gca00070": 84.0}, 0.35),
                             "wide": held({}, 0.50)}, 0.9, show=False)
-    assert schemes["near"]["shortfall"] == 0 and schemes["in-use"]["shortfall"] > 0
+    assert choice.holds(schemes["near"]) and not choice.holds(schemes["in-use"])
     known = ci.summarise({"K0": held({}, 0.25), "K1": held({}, 0.20), "K2": held({"V_real gca00020": 80.0}, 0.10)},
                          0.9, show=False)
-    scheme, k, pairs = ci.choose_pair(schemes, {s: known for s in schemes})
+    narrowest = ci.summarise({"K0": held({}, 0.05)}, 0.9, show=False)
+    scheme, k, pairs = choice.choose_pair(schemes, {"in-use": known, "near": known, "wide": {**known, **narrowest}})
     assert (scheme, k) == ("near", "K1") and len(pairs) == 9
+    assert [p["holds"] for p in pairs if p["scheme"] == "near"] == [True, True, False]
     assert {p["known"]: p["shortfall"] for p in pairs if p["scheme"] == "near"}["K2"] > 0
 
 
@@ -58,10 +73,10 @@ def test_where_no_pair_holds_the_least_outside_wins(calibrate_intervals):
     assert schemes["over"]["shortfall"] < schemes["short"]["shortfall"]
     known = {"short": ci.summarise({"K0": held({}, 0.2)}, 0.9, show=False),
              "over": ci.summarise({"K0": held({"V_real gca00070": 70.0}, 0.2)}, 0.9, show=False)}
-    scheme, k, pairs = ci.choose_pair(schemes, known)
+    scheme, k, pairs = choice.choose_pair(schemes, known)
     assert (scheme, k) == ("short", "K0")
     assert min(p["shortfall"] for p in pairs) == pairs[0]["shortfall"] > 0
     # equal shortfall: the narrower scheme
     same = ci.summarise({"a": held({"V_paper": 98.0}, 0.40), "b": held({"V_paper": 98.0}, 0.30)}, 0.9, show=False)
     plain = ci.summarise({"K0": held({}, 0.2)}, 0.9, show=False)
-    assert ci.choose_pair(same, {"a": plain, "b": plain})[0] == "b"
+    assert choice.choose_pair(same, {"a": plain, "b": plain})[0] == "b"
