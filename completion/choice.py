@@ -50,7 +50,8 @@ def shortfall(summary: dict) -> float:
     Returns
     -------
     float
-        Points; 0 where every cell holds, or lies within 0.005 points in all of its band.
+        Points; 0 where every cell holds, or where they lie outside by under 0.005 points in all (:func:`holds`
+        tells those apart).
     """
     return round(sum(outside(c) for c in summary["cells"].values()), 2)
 

@@ -300,9 +300,21 @@ def test_a_calibrated_method_gives_each_segment_its_interval_around_the_maps_cov
 
     from colonbench.mapping.colonmap import map_colon
 
-    for method, expected in ((Sure(), [0.7, 0.9]), (Calibrated(), [0.75, 1.0])):
+    class Reviewing(Calibration):                 # a calibration that reviews too (as completion's Intervals)
+        def apply(self, est):
+            est.coverage_interval = self.interval(est.coverage, est.signals)
+            est.review = [f"reviewed at {est.coverage:.2f}, {est.signals['map_track']}"]
+
+    class Reviewed(Sure):
+        intervals = Reviewing()
+
+    reviews = {}
+    for method, expected in ((Sure(), [0.7, 0.9]), (Calibrated(), [0.75, 1.0]), (Reviewed(), [0.75, 1.0])):
         result = map_colon(pts, method, segment_mm=60.0, positions=line.points[::-20], progress=False)
         assert [s.coverage_interval for s in result["segments"]] == [pytest.approx(expected)] * 3
+        reviews[method.__class__.__name__] = [s.review for s in result["segments"]]
+    assert reviews["Calibrated"] == reviews["Sure"] and ["odd"] in reviews["Sure"]       # the estimate's, kept
+    assert reviews["Reviewed"] == [["reviewed at 0.80, segment-only"]] * 3              # decided by the calibration
 
 
 def test_a_scaled_interval_follows_the_scale_its_signals_give():
