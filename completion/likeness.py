@@ -32,6 +32,13 @@ def split_scheme(scheme: str) -> tuple[float, str] | None:
     return (int(m.group(1)) / 100.0, m.group(2)) if m else None
 
 
+def base(scheme: str) -> str:
+    """The scheme a ``like<NN>+<scheme>`` scheme fits each group with (its scale, and its known extent's); any other
+    scheme itself."""
+    parts = split_scheme(scheme)
+    return parts[1] if parts else scheme
+
+
 def fit_like(x: np.ndarray, like: np.ndarray, weights: np.ndarray, names, threshold: float) -> dict:
     """The likeness classifier: a weighted logistic regression (:func:`colonbench.completion.review.fit_odds`) of
     ``like`` on the features ``x``.

@@ -361,7 +361,7 @@ def calibrate(df: pd.DataFrame, level: float, source: dict) -> intervals.Interva
     summary = summarise(held, level)
     known_held, known_summaries = {}, {}
     for scheme in SCHEMES:          # the known extent reads the scale of a likeness scheme's base (0170)
-        base = (likeness.split_scheme(scheme) or (None, scheme))[1]
+        base = likeness.base(scheme)
         if base not in known_held:
             known_held[base] = {k: by_colon(cal_df, base, level, known=True, extra=e,
                                             short=k in known_extent.KNOWN_SHORT)
@@ -371,7 +371,7 @@ def calibrate(df: pd.DataFrame, level: float, source: dict) -> intervals.Interva
     best, known_choice, pairs = choose_pair(summary, known_summaries)
     print("\nthe pairs nearest to holding every cell (decision record 0172: shortfall, then real widths, points):\n"
           + pd.DataFrame(pairs).sort_values(["shortfall", "width", "known_width"], kind="stable").head(12).to_string())
-    known_held, known_summary = known_held[(likeness.split_scheme(best) or (None, best))[1]], known_summaries[best]
+    known_held, known_summary = known_held[likeness.base(best)], known_summaries[best]
     print(f"\nchosen: {best} with the known extent {known_choice}\nknown length, held out:")
     summarise({known_choice: known_held[known_choice]}, level)
     by, width, review_report, reviews = review_rule(held[best], best)

@@ -96,6 +96,8 @@ def test_likeness_schemes_are_named_and_fitted_only_with_both_kinds_on_a_scaled_
     assert likeness.split_scheme("like80+binned-colon-novel-depth-shift") == (0.8, "binned-colon-novel-depth-shift")
     assert likeness.split_scheme("binned-colon-novel-depth-shift") is None
     assert likeness.split_scheme("like00+binned-colon-novel") is None                # a chance of 0 groups nothing
+    assert likeness.base("like80+binned-colon-novel-depth-shift") == "binned-colon-novel-depth-shift"
+    assert likeness.base("binned-colon-novel-depth-shift") == "binned-colon-novel-depth-shift"
     assert intervals.scale_features("like80+binned-colon-novel-depth-shift") == \
         intervals.scale_features("binned-colon-novel-depth-shift")
     true, est, sig, like = crossed(80)
