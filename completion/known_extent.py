@@ -2,7 +2,7 @@
 
 Where the cloud spans less than :data:`~colonbench.completion.intervals.SHORT_SHARE` of a length given, it stops
 short of an end nobody saw, and :func:`known_length` scales the coverage by the share it spans (decision record
-0155), counting the cloud its planes clip away (decision record 0173). :func:`fit_known` calibrates :attr:`~colonbench.completion.intervals.Intervals.known`, the interval of the
+0155). :func:`fit_known` calibrates :attr:`~colonbench.completion.intervals.Intervals.known`, the interval of the
 estimates whose extent is known (a length given, or a map's planes): one group over all of them, and (decision
 records 0168 and 0222) with a length given, a group of the estimates it shortened (``short``) and one of those it
 left as they were (``full``).
@@ -26,39 +26,28 @@ KNOWN_EXTRA = {"K0": (), "K1": ("share_off",), "K2": (), "K3": ("share_off",)}
 KNOWN_SHORT = ("K2", "K3")
 
 
-def spanned(span_mm: float, length_mm: float, inside_share: float = 1.0) -> float:
-    """The share of a segment of known length ``length_mm`` that its cloud spans (decision record 0173): the span
-    between its planes, ``span_mm``, over the length, divided by the share of the cloud's points between the planes,
-    ``inside_share`` (the points are area-sampled, so a cloud whose planes hold a share ``h`` of it saw ``1 / h``
-    times the wall it saw between them). An ``inside_share`` that is not in (0, 1] counts as 1."""
-    inside = float(inside_share)
-    return float(span_mm) / float(length_mm) / (inside if 0.0 < inside <= 1.0 else 1.0)
-
-
-def length_share(span_mm: float, length_mm: float, inside_share: float = 1.0) -> float:
-    """``signals["length_share"]`` of a segment spanning ``span_mm`` between its planes, which hold ``inside_share``
-    of its cloud, whose length ``length_mm`` is given (:func:`known_length`): :func:`spanned`, to 4 decimals."""
-    return round(spanned(span_mm, length_mm, inside_share), 4)
+def length_share(span_mm: float, length_mm: float) -> float:
+    """``signals["length_share"]`` of a segment spanning ``span_mm`` between its planes whose length ``length_mm`` is
+    given (:func:`known_length`), to 4 decimals."""
+    return round(float(span_mm) / float(length_mm), 4)
 
 
 def known_length(est, length_mm: float) -> None:
-    """Use a segment's known arc length (mm): where the share of it the cloud spans (:func:`spanned`: the span between
-    its planes, ``signals["span_mm"]``, the method's line between them run on straight to a plane beyond its end,
-    with the cloud the planes clip away, ``signals["inside_share"]``) is less than :data:`SHORT_SHARE`, the cloud
-    stops short of an end nobody saw, and the coverage is scaled by that share (the rest of the tube counted
-    unobserved; decision records 0155 and 0173). Marks the estimate's extent as known."""
+    """Use a segment's known arc length (mm): where the segment's span between its planes (``signals["span_mm"]``:
+    the method's line between them, run on straight to a plane beyond its end) is less than :data:`SHORT_SHARE`
+    of it, the cloud stops short of an end nobody saw, and the coverage is scaled by the share it spans (the rest
+    of the tube counted unobserved; decision record 0155). Marks the estimate's extent as known."""
     if not (length_mm > 0 and np.isfinite(length_mm)):
         raise InputError(f"a segment's length must be a positive number of mm, got {length_mm}")
     span = float(est.signals["span_mm"])
     if span > LONGEST_SHARE * float(length_mm):
         raise InputError(f"a segment's length of {length_mm:g} mm cannot be this cloud's: it spans {span:.0f} mm "
                          f"between its planes, more than {LONGEST_SHARE:g} times that (a length in cm, not mm?)")
-    share = spanned(span, length_mm, est.signals.get("inside_share", 1.0))
-    est.signals.update(extent="known", length_share=round(share, 4))
+    est.signals.update(extent="known", length_share=length_share(span, length_mm))
     if shortened_by_length(est.signals) and np.isfinite(est.coverage):      # decided on the share as stored
-        est.coverage = float(est.coverage) * share
-        est.review.append(f"the cloud spans {share * float(length_mm):.0f} of the segment's {length_mm:g} mm: the "
-                          "rest is counted unobserved")
+        est.coverage = float(est.coverage) * span / float(length_mm)
+        est.review.append(f"the cloud spans {span:.0f} of the segment's {length_mm:g} mm: the rest is counted "
+                          "unobserved")
 
 
 def shortened(signals: list) -> np.ndarray:

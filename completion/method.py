@@ -30,7 +30,7 @@ from colonbench.completion.gaps import GAP_VALLEY, reach_planes
 from colonbench.completion.heatmap_centerline import END_LEVEL, extract_centerline
 from colonbench.completion.intervals import load as load_intervals
 from colonbench.completion.modelfile import DEFAULT_MODEL, model_path, shipped_model, shipped_models  # noqa: F401
-from colonbench.completion.planes import RIM_BAND, inside_planes, line_between
+from colonbench.completion.planes import line_between
 from colonbench.completion.steps import STEPS_VERSION, complete
 from colonbench.completion.symmetry import averaged, check_tta
 from colonbench.completion.surface import SHELL_LEVEL, cloud_density
@@ -484,14 +484,14 @@ def from_heatmap(heatmap: np.ndarray, grid: Grid, points, method: str = "complet
     cl_vox = extract_centerline(heatmap) if centerline_vox is None else centerline_vox
     t1 = time.perf_counter()
     pts = np.asarray(points, dtype=float)
-    vox = grid.to_voxel(pts)
-    comp = complete(heatmap, cl_vox, vox, hole_distance, cut_rims, shell_level, gaps, valley, voxel_mm=grid.voxel_size)
-    t2, verts = time.perf_counter(), grid.to_mm(comp.vertices) if len(comp.vertices) else np.zeros((0, 3))
-    held = inside_planes(vox, comp.planes, -RIM_BAND).mean()       # within a rim's band of a plane: on it
+    comp = complete(heatmap, cl_vox, grid.to_voxel(pts), hole_distance, cut_rims, shell_level, gaps, valley,
+                    voxel_mm=grid.voxel_size)
+    t2 = time.perf_counter()
+    verts = grid.to_mm(comp.vertices) if len(comp.vertices) else np.zeros((0, 3))
     inside = line_between(cl_vox, comp.planes)
     cl = resample(grid.to_mm(inside), CENTERLINE_SPACING_MM) if len(inside) else np.zeros((0, 3))
     signals = {"rims": int(comp.rims), "rims_doubtful": int(getattr(comp.planes, "doubtful", 0)),
-               "gap_share": round(comp.gap_share, 4), "inside_share": round(float(held), 4),
+               "gap_share": round(comp.gap_share, 4),
                "length_mm": round(float(arc_length(cl)[-1]), 2) if len(cl) else 0.0,
                "span_mm": round(float(arc_length(reach_planes(inside, comp.planes))[-1]) * grid.voxel_size, 2),
                **({} if cut_rims else {"extent": "known"})}     # a caller clipping at planes it knows its ends

@@ -55,8 +55,6 @@ SCHEMES = ("scaled", "scaled-colon", "scaled-colon-novel", "scaled-colon-novel-s
            "quant95-colon-novel-misfit-shift", "quant90-colon-novel-misfit-shift",
            "like50+binned-colon-novel-depth-shift", "like80+binned-colon-novel-depth-shift",
            "like50+scaled2-colon-novel-misfit-shift", "like80+scaled2-colon-novel-misfit-shift")
-#: Decision record 0173: the scheme in use, kept unless some (scheme, known extent) pair holds all sixteen cells.
-KEEP = "like50+binned-colon-novel-depth-shift"
 #: Decision record 0167: by how many points of the lower real colon's precision the review by odds must beat the
 #: interval's score to replace it.
 ODDS_GAIN = 3.0
@@ -64,8 +62,8 @@ NOISE_MM = (0.0, 0.5)
 #: Significant digits of every number the calibration file stores (:func:`rounded`).
 SIGNIFICANT = 9
 #: The signals an estimate's interval may be scaled by, as columns of the estimates' table.
-SIGNALS = ("rims", "rims_doubtful", "gap_share", "length_mm", "span_mm", "inside_share", "spread", "radius_mm",
-           "extent_mm", "hole_depth_mm", "wall_misfit_mm")
+SIGNALS = ("rims", "rims_doubtful", "gap_share", "length_mm", "span_mm", "spread", "radius_mm", "extent_mm",
+           "hole_depth_mm", "wall_misfit_mm")
 #: The review rule (decision record 0325): flag at least this share of the estimates off by more than BIG in each
 #: real colon held out and in V_wide.
 REVIEW_RECALL, BIG = 0.75, 0.15
@@ -127,7 +125,7 @@ def signals(df: pd.DataFrame) -> list[dict]:
 def known_estimates(df: pd.DataFrame, sig: list[dict] | None = None) -> np.ndarray:
     """The estimates with each segment's true length given, as :func:`known_extent.known_length` scales them
     (``sig``: their :func:`known_signals`, where already made)."""
-    share = np.array([known_extent.spanned(*a) for a in zip(df["span_mm"], df["segment_mm"], df["inside_share"])])
+    share = df["span_mm"] / df["segment_mm"]
     sig = known_signals(df) if sig is None else sig
     return np.where(known_extent.shortened(sig), df["estimate"] * share, df["estimate"]).astype(float)
 
@@ -144,8 +142,8 @@ def unit_weights(df: pd.DataFrame) -> np.ndarray:
 def known_signals(df: pd.DataFrame) -> list[dict]:
     """The estimates' signals with each segment's true length given: ``length_share`` as
     :func:`known_extent.known_length` sets it."""
-    return [{**s, "length_share": known_extent.length_share(span, length, inside)}
-            for s, span, length, inside in zip(signals(df), df["span_mm"], df["segment_mm"], df["inside_share"])]
+    return [{**s, "length_share": known_extent.length_share(span, length)}
+            for s, span, length in zip(signals(df), df["span_mm"], df["segment_mm"])]
 
 
 def by_colon(df: pd.DataFrame, scheme: str, level: float, known: bool = False, extra=(),
@@ -370,9 +368,8 @@ def calibrate(df: pd.DataFrame, level: float, source: dict) -> intervals.Interva
                                 for k, e in known_extent.KNOWN_EXTRA.items()}
             known_summaries[base] = summarise(known_held[base], level, show=False)
         known_summaries[scheme] = known_summaries[base]
-    best, known_choice, pairs = choose_pair(summary, known_summaries, KEEP)
-    print("\nthe pairs nearest to holding every cell (decision records 0172 and 0173: shortfall, then real widths, "
-          "points):\n"
+    best, known_choice, pairs = choose_pair(summary, known_summaries)
+    print("\nthe pairs nearest to holding every cell (decision record 0172: shortfall, then real widths, points):\n"
           + pd.DataFrame(pairs).sort_values(["shortfall", "width", "known_width"], kind="stable").head(12).to_string())
     known_held, known_summary = known_held[likeness.base(best)], known_summaries[best]
     print(f"\nchosen: {best} with the known extent {known_choice}\nknown length, held out:")
@@ -433,7 +430,7 @@ def table(data: list[tuple[str, Path]], method: CompletionMethod, path: Path) ->
     """Every calibration dataset's estimates, each row with its ``set``."""
     parts = []
     for name, folder in data:
-        cache = folder / f"completion-estimates-{sha256_file(path)[:12]}-{steps_version()}-signals5.csv"
+        cache = folder / f"completion-estimates-{sha256_file(path)[:12]}-{steps_version()}-signals4.csv"
         part = estimates(folder, method, cache).assign(manifest=name, set=MANIFESTS[name])
         if name == "calibration":         # its segments of the real training colons: seen by the network
             part.loc[part["colon_id"] >= REAL_IDS, "set"] = "train_real"

@@ -135,26 +135,6 @@ def test_a_known_length_is_compared_with_the_span_between_the_planes_not_with_a_
     assert longer.coverage == pytest.approx(0.5, abs=0.02) and "spans 40 of the segment's 80 mm" in longer.review[0]
 
 
-def test_a_known_length_counts_the_cloud_the_planes_clip_away():
-    """Decision record 0173: a 40 mm segment (z = 10-50) whose planes hold only its line's stretch (z = 22-38,
-    cut rims off): 19 of its 40 mm lie within a rim's band (1.5 voxels) of the planes or between them, so
-    ``inside_share`` is 0.475, and with its length given the cloud spans 16 / 0.475 = 33.7 mm of the 40, not 16."""
-    _, grid, tube_pts, hm = tube_heatmaps(straight(63.0), UNIT)
-    cut = tube_pts[(tube_pts[:, 2] >= 10.0) & (tube_pts[:, 2] <= 50.0)]
-    line = extract_centerline(hm.target)
-    clipped = from_heatmap(hm.target, grid, cut, centerline_vox=line[(line[:, 2] >= 22.0) & (line[:, 2] <= 38.0)],
-                           cut_rims=False)
-    assert clipped.signals["span_mm"] == pytest.approx(16.0, abs=1.0)
-    assert clipped.signals["inside_share"] == pytest.approx(19.0 / 40.0, abs=0.02)
-    whole = from_heatmap(hm.target, grid, cut)              # its rims found: every point between its planes
-    assert whole.signals["inside_share"] == 1.0
-    coverage = clipped.coverage
-    known_length(clipped, 40.0)
-    share = clipped.signals["span_mm"] / 40.0 / clipped.signals["inside_share"]
-    assert clipped.signals["length_share"] == pytest.approx(share, abs=1e-4) and 0.8 < share < 0.9
-    assert clipped.coverage == pytest.approx(coverage * share)
-
-
 def test_marching_cubes_on_a_cylinder_heatmap_gives_its_area():
     colon, grid, pts, hm = tube_heatmaps(straight(63.0), UNIT)
     comp = complete(hm.target, extract_centerline(hm.target), grid.to_voxel(pts))

@@ -111,18 +111,3 @@ def test_a_share_just_under_the_cut_is_decided_once_on_the_share_as_stored():
         assert est.coverage == pytest.approx(coverage)
         assert cal.quantiles(est.coverage, est.signals) == ends
         assert known_extent.shortened([est.signals])[0] == (span < 89.99)
-
-
-def test_the_share_a_cloud_spans_counts_the_cloud_its_planes_clip_away():
-    """Decision record 0173: a cloud whose planes hold half its points spans twice the share its planes do; a share
-    held that is not in (0, 1] (none, or an old estimate's signals without it) counts as 1."""
-    assert known_extent.spanned(30.0, 60.0) == 0.5
-    assert known_extent.spanned(30.0, 60.0, 0.5) == 1.0 and known_extent.length_share(20.0, 60.0, 0.75) == 0.4444
-    assert known_extent.spanned(30.0, 60.0, 0.0) == known_extent.spanned(30.0, 60.0, float("nan")) == 0.5
-    half = Estimate(0.8, np.zeros((0, 3)), np.zeros((0, 3)), "m", signals={"span_mm": 20.0, "inside_share": 0.5})
-    known_extent.known_length(half, 50.0)               # 20 mm held half the cloud: it spans 40 of the 50 mm
-    assert half.coverage == pytest.approx(0.8 * 0.8) and half.signals["length_share"] == 0.8
-    assert "spans 40 of the segment's 50 mm" in half.review[0]
-    whole = Estimate(0.8, np.zeros((0, 3)), np.zeros((0, 3)), "m", signals={"span_mm": 40.0, "inside_share": 0.9})
-    known_extent.known_length(whole, 40.0)              # 40 mm held 0.9 of it: the whole length, nothing scaled
-    assert whole.coverage == 0.8 and whole.signals["length_share"] == 1.1111 and not whole.review

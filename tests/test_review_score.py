@@ -130,16 +130,10 @@ def test_the_known_length_estimates_carry_the_share_known_length_gives(calibrate
     script = calibrate_intervals
     import pandas as pd
 
-    # the third: its planes hold 0.6 of its cloud, which spans 30 / 0.6 = 50 of the 60 mm (decision record 0173)
-    df = pd.DataFrame({"span_mm": [30.0, 66.0, 30.0], "segment_mm": [60.0, 60.0, 60.0], "length_mm": [30.0, 70.0, 30.0],
-                       "inside_share": [1.0, 1.0, 0.6], "rims": [2, 2, 2], "estimate": [0.9, 0.8, 0.9]})
+    df = pd.DataFrame({"span_mm": [30.0, 66.0], "segment_mm": [60.0, 60.0], "length_mm": [30.0, 70.0],
+                       "rims": [2, 2], "estimate": [0.9, 0.8]})
     sig = script.known_signals(df)
     est = Estimate(0.9, np.zeros((0, 3)), np.zeros((0, 3)), "m", signals={"length_mm": 30.0, "span_mm": 30.0})
     known_extent.known_length(est, 60.0)
     assert sig[0]["length_share"] == est.signals["length_share"] == 0.5 and sig[1]["length_share"] == 1.1
-    clipped = Estimate(0.9, np.zeros((0, 3)), np.zeros((0, 3)), "m",
-                       signals={"length_mm": 30.0, "span_mm": 30.0, "inside_share": 0.6})
-    known_extent.known_length(clipped, 60.0)
-    assert sig[2]["length_share"] == clipped.signals["length_share"] == 0.8333
-    assert list(script.known_estimates(df)) == [pytest.approx(0.45), 0.8, pytest.approx(clipped.coverage)]
-    assert clipped.coverage == pytest.approx(0.75)
+    assert list(script.known_estimates(df)) == [pytest.approx(0.45), 0.8]
