@@ -1,25 +1,22 @@
 """How sure the completion method is: a calibrated interval around each coverage estimate, and when to look again.
 
 Split-conformal prediction (Vovk et al.; Angelopoulos and Bates, "A gentle introduction to conformal prediction",
-2021), by group (Mondrian): the segments of a calibration set are estimated by the method, and per group the
-residuals ``true - estimated`` give two quantiles; an estimate ``c`` in that group gets the interval
-``[c + q_low, c + q_high]`` (clipped to [0, 1]), which holds the truth for a share ``level`` of segments like the
-calibration set's (exchangeable with it). The quantiles are the finite-sample ones: rank ``floor((n + 1) a)`` for
-the low tail ``a = (1 - level) / 2`` and ``ceil((n + 1) (1 - a))`` for the high one. Intervals are asymmetric: the
-method over-estimates where most of the wall is missing, so the interval reaches further down.
-
-A group is a key of the method's own signals (:func:`group_key`): how many of the segment's ends were found at a
-cut rim (an end without one is where the segment may go on unseen) and the estimate's band. In a *scaled* scheme
-(decision record 0156) the residuals are divided by a scale ``exp(w . f)`` of the estimate's features
-(:func:`features`) before their quantiles are taken, and an estimate's quantiles are multiplied by its own scale;
-each feature is first clipped into the range the calibration saw (decision record 0160). A two-sided scheme
-(``scaled2...``, decision record 0158) fits a scale for each end; a ``-colon`` scheme weighs every colon the same
-(decision record 0325), a ``-shift`` one adds a colon-level shift term; a ``binned`` one takes its quantiles per
-band of the scale (decision record 0161); a ``quant<NN>`` one fits each end's scale at the ``NN`` % quantile of the
-log residual, not by least squares (decision record 0166). The shipped calibration names its scheme. The calibration
-(groups, quantiles, weights, ranges, the data it came from) is a JSON file beside the model
-(``<model>.intervals.json``), made by ``scripts/calibrate_intervals.py``, which also chooses the scheme and the
-review's rules (:mod:`colonbench.completion.review`).
+2021), by group (Mondrian): the segments of a calibration set are estimated by the method, and per group the residuals
+``true - estimated`` give two quantiles; an estimate ``c`` in that group gets the interval ``[c+q_low, c+q_high]``
+(clipped to [0, 1]), which holds the truth for a share ``level`` of segments like the calibration set's (exchangeable
+with it). The quantiles are the finite-sample ones: rank ``floor((n + 1) a)`` for the low tail ``a = (1-level)/2`` and
+``ceil((n + 1) (1 - a))`` for the high one. Intervals are asymmetric: the method over-estimates where most of the wall
+is missing, so the interval reaches further down. A group is a key of the method's own signals (:func:`group_key`): how
+many of the segment's ends were found at a cut rim (an end without one is where the segment may go on unseen) and the
+estimate's band. In a *scaled* scheme (decision record 0156) the residuals are divided by a scale ``exp(w . f)`` of the
+estimate's features (:func:`features`) before their quantiles are taken, and an estimate's quantiles are multiplied by
+its own scale; each feature is first clipped into the range the calibration saw (decision record 0160). A two-sided
+scheme (``scaled2...``, decision record 0158) fits a scale for each end; a ``-colon`` scheme weighs every colon the
+same (decision record 0325), a ``-shift`` one adds a colon-level shift term; a ``binned`` one takes its quantiles per
+band of the scale (decision record 0161); a ``quant<NN>`` one fits each end's scale at the ``NN`` % quantile of the log
+residual, not by least squares (decision record 0166). The calibration (its scheme, groups, quantiles, weights, ranges,
+the data it came from) is a JSON file beside the model (``<model>.intervals.json``), made by
+``scripts/calibrate_intervals.py``, which also chooses the review's rules (:mod:`colonbench.completion.review`).
 """
 
 from __future__ import annotations
@@ -68,8 +65,7 @@ SCALE_FEATURES = {
     "scaled2-colon-novel-gaps-shift": _GAPS, "binned-colon-novel-gaps-shift": _GAPS,
     "scaled2-colon-novel-depth-shift": _DEPTH, "binned-colon-novel-depth-shift": _DEPTH,
     "scaled2-colon-novel-misfit-shift": _MISFIT, "binned-colon-novel-misfit-shift": _MISFIT,
-    "quant95-colon-novel-misfit-shift": _MISFIT, "quant90-colon-novel-misfit-shift": _MISFIT,
-}
+    "quant95-colon-novel-misfit-shift": _MISFIT, "quant90-colon-novel-misfit-shift": _MISFIT}
 #: A ``binned`` scheme's bands of the fitted scale: cut at these colon-weighted quantiles of it (decision 0161).
 BAND_QUANTILES = (0.25, 0.5, 0.75)
 #: Added to ``|true - estimated|`` before its log is fitted: a floor of the scale (fractions).
@@ -239,9 +235,10 @@ class Intervals:
                              "review_known is a width, not log odds")
         like = self.like
         if bool(like) != self.scheme.startswith("like") or like and not (0 < like.get("threshold", 0) < 1 and len(
-                like.get("weights", ())) == len(like.get("features", ()))):      # decision record 0170
-            raise InputError(f"a calibration's scheme {self.scheme!r} and its like (features, weights, threshold) "
-                             "clash")
+                like.get("weights", ())) == len(like.get("features", ())) == len(like.get("ranges", ())) and all(
+                len(r) == 2 and r[0] <= r[1] for r in like["ranges"])):      # decision record 0170
+            raise InputError(f"a calibration's scheme {self.scheme!r} and its like (features, ranges as [low, high], "
+                             "weights, threshold) clash")
         for by in (self.review_by, self.review_by_known or self.review_by):
             if by not in REVIEW_SCORES:
                 raise InputError(f"a calibration's review score must be one of {', '.join(REVIEW_SCORES)}, "
@@ -496,5 +493,8 @@ def load(model: Path, steps: str | None) -> Intervals | None:
     path = path_for(model)
     if not path.is_file():
         return None
-    cal = Intervals(**json.loads(path.read_text()))
+    try:
+        cal = Intervals(**json.loads(path.read_text()))
+    except (ValueError, TypeError) as exc:          # not JSON, not a calibration's fields, or fields that clash
+        raise InputError(f"{path.name} beside the model is not a calibration colonbench can read: {exc}") from None
     return cal if steps is None or cal.source.get("steps") == steps else None
