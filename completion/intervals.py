@@ -2,30 +2,30 @@
 
 Split-conformal prediction (Vovk et al.; Angelopoulos and Bates, "A gentle introduction to conformal prediction",
 2021), by group (Mondrian): the segments of a calibration set are estimated by the method, and per group the residuals
-``true - estimated`` give two quantiles; an estimate ``c`` in that group gets the interval ``[c+q_low, c+q_high]``
+``true - estimated`` give two quantiles; an estimate ``c`` in that group gets the interval ``[c + q_low, c + q_high]``
 (clipped to [0, 1]), which holds the truth for a share ``level`` of segments like the calibration set's (exchangeable
-with it). The quantiles are the finite-sample ones: rank ``floor((n + 1) a)`` for the low tail ``a = (1-level)/2`` and
-``ceil((n + 1) (1 - a))`` for the high one. Intervals are asymmetric: the method over-estimates where most of the wall
-is missing, so the interval reaches further down. A group is a key of the method's own signals (:func:`group_key`): how
-many of the segment's ends were found at a cut rim (an end without one is where the segment may go on unseen) and the
-estimate's band. In a *scaled* scheme (decision record 0156) the residuals are divided by a scale ``exp(w . f)`` of the
-estimate's features (:func:`features`) before their quantiles are taken, and an estimate's quantiles are multiplied by
-its own scale; each feature is first clipped into the range the calibration saw (decision record 0160). A two-sided
-scheme (``scaled2...``, decision record 0158) fits a scale for each end; a ``-colon`` scheme weighs every colon the
-same (decision record 0325), a ``-shift`` one adds a colon-level shift term; a ``binned`` one takes its quantiles per
-band of the scale (decision record 0161); a ``quant<NN>`` one fits each end's scale at the ``NN`` % quantile of the log
-residual, not by least squares (decision record 0166). The calibration (its scheme, groups, quantiles, weights, ranges,
-the data it came from) is a JSON file beside the model (``<model>.intervals.json``), made by
-``scripts/calibrate_intervals.py``, which also chooses the review's rules (:mod:`colonbench.completion.review`).
+with it). The quantiles are the finite-sample ones: rank ``floor((n + 1) a)`` for the low tail ``a = (1 - level) / 2``
+and ``ceil((n + 1) (1 - a))`` for the high one. Intervals are asymmetric: the method over-estimates where most of the
+wall is missing, so the interval reaches further down.
+
+A group is a key of the method's own signals (:func:`group_key`): how many of the segment's ends were found at a cut
+rim (an end without one is where the segment may go on unseen) and the estimate's band. In a *scaled* scheme
+(decision record 0156) the residuals are divided by a scale ``exp(w . f)`` of the estimate's features (:func:`features`)
+before their quantiles are taken, and an estimate's quantiles are multiplied by its own scale; each feature is first
+clipped into the range the calibration saw (decision record 0160). A two-sided scheme (``scaled2...``, decision record
+0158) fits a scale for each end; a ``-colon`` scheme weighs every colon the same (decision record 0325), a ``-shift``
+one adds a colon-level shift term; a ``binned`` one takes its quantiles per band of the scale (decision record 0161);
+a ``quant<NN>`` one fits each end's scale at the ``NN`` % quantile of the log residual, not by least squares (decision
+record 0166). The calibration (its scheme, groups, quantiles, weights, ranges, the data it came from) is a JSON file
+beside the model (:mod:`colonbench.completion.calfile`), made by ``scripts/calibrate_intervals.py``, which also chooses
+the scheme and the review's rules (:mod:`colonbench.completion.review`).
 """
 
 from __future__ import annotations
 
-import json
 import math
 import re
 from dataclasses import asdict, dataclass, field, replace
-from pathlib import Path
 
 import numpy as np
 
@@ -49,8 +49,6 @@ SHORT_SHARE = 0.9
 #: A line between the planes longer than this many times the longest the intervals were calibrated on is named in
 #: ``review`` whatever the interval's width: a cloud longer than a segment (decision record 0160).
 LONG_SHARE = 1.5
-#: Suffix of a model's calibration file.
-SUFFIX = ".intervals.json"
 #: The features of an estimate its interval is scaled by, per scaled scheme (:func:`features`; decision records 0156
 #: and 0158; 0156's measurement also tried features the method does not compute, kept in its session script).
 _SIGNALS = ("one", "estimate", "length", "span_ratio", "no_rim", "one_rim", "doubtful")
@@ -65,7 +63,8 @@ SCALE_FEATURES = {
     "scaled2-colon-novel-gaps-shift": _GAPS, "binned-colon-novel-gaps-shift": _GAPS,
     "scaled2-colon-novel-depth-shift": _DEPTH, "binned-colon-novel-depth-shift": _DEPTH,
     "scaled2-colon-novel-misfit-shift": _MISFIT, "binned-colon-novel-misfit-shift": _MISFIT,
-    "quant95-colon-novel-misfit-shift": _MISFIT, "quant90-colon-novel-misfit-shift": _MISFIT}
+    "quant95-colon-novel-misfit-shift": _MISFIT, "quant90-colon-novel-misfit-shift": _MISFIT,
+}
 #: A ``binned`` scheme's bands of the fitted scale: cut at these colon-weighted quantiles of it (decision 0161).
 BAND_QUANTILES = (0.25, 0.5, 0.75)
 #: Added to ``|true - estimated|`` before its log is fitted: a floor of the scale (fractions).
@@ -233,10 +232,8 @@ class Intervals:
         if self.review_by == "odds" and self.review_known > 0 and not self.review_by_known:
             raise InputError("a calibration reviewed by odds must name its known extent's score (review_by_known): "
                              "review_known is a width, not log odds")
-        like = self.like
-        if bool(like) != self.scheme.startswith("like") or like and not (0 < like.get("threshold", 0) < 1 and len(
-                like.get("weights", ())) == len(like.get("features", ())) == len(like.get("ranges", ())) and all(
-                len(r) == 2 and r[0] <= r[1] for r in like["ranges"])):      # decision record 0170
+        if not isinstance(self.like, dict) or bool(self.like) != self.scheme.startswith("like") or \
+                self.like and not _like_fits(self.like):                                 # decision record 0170
             raise InputError(f"a calibration's scheme {self.scheme!r} and its like (features, ranges as [low, high], "
                              "weights, threshold) clash")
         for by in (self.review_by, self.review_by_known or self.review_by):
@@ -367,6 +364,17 @@ def linear_score(fitted: dict, f: np.ndarray, side: str = "") -> float:
     return float(f @ np.asarray(fitted.get(f"weights_{side}", fitted.get("weights")), float))
 
 
+def _like_fits(like: dict) -> bool:
+    """Whether a likeness classifier's fields fit together: ``p`` features and weights, (p, 2) finite ``ranges`` each
+    low <= high, a ``threshold`` in (0, 1)."""
+    try:
+        p, ranges = len(like.get("features", ())), np.asarray(like.get("ranges"), float)
+        return 0 < float(like.get("threshold", 0)) < 1 and len(like.get("weights", ())) == p and \
+            ranges.shape == (p, 2) and bool(np.isfinite(ranges).all() and (ranges[:, 0] <= ranges[:, 1]).all())
+    except (TypeError, ValueError):
+        return False
+
+
 def looks_like(like: dict, coverage: float, signals: dict, f: np.ndarray | None = None) -> bool:
     """Whether a likeness classifier (:attr:`Intervals.like`) finds an estimate like the paper's colons: its chance
     over the classifier's ``threshold`` (``f``: its features ``like["features"]``, where already made)."""
@@ -480,21 +488,3 @@ def fit(true, estimated, signals: list, scheme: str, review_width: float, level:
                                               None if colons is None else colons[sel], _binned(scaled), _tau(scaled))
     return Intervals(scheme, level, groups, review_width, dict(source or {}))
 
-
-def path_for(model: Path) -> Path:
-    """The calibration file of a model file: ``<model stem>.intervals.json`` beside it."""
-    model = Path(model)
-    return model.with_name(model.name.removesuffix(".safetensors") + SUFFIX)
-
-
-def load(model: Path, steps: str | None) -> Intervals | None:
-    """A model's calibration for the steps ``steps`` (``steps=10``, as a method's version names them; None: whatever
-    steps), or None where it has none: a user's own model before it is calibrated, or other steps than its own."""
-    path = path_for(model)
-    if not path.is_file():
-        return None
-    try:
-        cal = Intervals(**json.loads(path.read_text()))
-    except (ValueError, TypeError) as exc:          # not JSON, not a calibration's fields, or fields that clash
-        raise InputError(f"{path.name} beside the model is not a calibration colonbench can read: {exc}") from None
-    return cal if steps is None or cal.source.get("steps") == steps else None

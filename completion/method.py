@@ -28,7 +28,7 @@ import numpy as np
 from colonbench.completion import known_extent, novelty, screening
 from colonbench.completion.gaps import GAP_VALLEY, reach_planes
 from colonbench.completion.heatmap_centerline import END_LEVEL, extract_centerline
-from colonbench.completion.intervals import load as load_intervals
+from colonbench.completion.calfile import load as load_intervals
 from colonbench.completion.modelfile import DEFAULT_MODEL, model_path, shipped_model, shipped_models  # noqa: F401
 from colonbench.completion.planes import line_between
 from colonbench.completion.steps import STEPS_VERSION, complete

@@ -34,7 +34,7 @@ import numpy as np
 import pandas as pd
 
 from colonbench.benchmark.evaluate import noisy, select
-from colonbench.completion import intervals, known_extent, likeness, review
+from colonbench.completion import calfile, intervals, known_extent, likeness, review
 from colonbench.completion.choice import choose_pair, shortfall
 from colonbench.completion.method import CompletionMethod, model_path, steps_version
 from colonbench.errors import ColonbenchError
@@ -453,7 +453,7 @@ def main() -> None:
               "manifests": {f"{m}.yaml": sha256_file(ROOT / f"{m}.yaml") for m in MANIFESTS},
               "noise_mm": list(NOISE_MM), "estimates": int(df["set"].isin(CALIBRATED).sum())}
     cal = calibrate(df, args.level, source)
-    out = intervals.path_for(path)
+    out = calfile.path_for(path)
     out.write_text(json.dumps(cal.to_json(), indent=1) + "\n")
     print(f"\nwrote {out} (id {cal.source['id']})")
 

@@ -31,7 +31,7 @@ import pandas as pd
 
 from colonbench.benchmark.colon_evaluate import evaluate_colons
 from colonbench.benchmark.runfolder import read_rows
-from colonbench.completion import conformal, intervals
+from colonbench.completion import calfile, conformal, intervals
 from colonbench.completion.method import model_path, steps_version
 from colonbench.shards.dataset import generate
 from colonbench.shards.schema import sha256_file
@@ -148,8 +148,8 @@ def main() -> None:
     ap.add_argument("--write", action="store_true", help="write the chosen map interval into the calibration file")
     ap.add_argument("--workers", type=int, default=2, help="processes generating the data")
     args = ap.parse_args()
-    path = intervals.path_for(model_path(args.model))
-    cal = intervals.load(model_path(args.model), steps=None)
+    path = calfile.path_for(model_path(args.model))
+    cal = calfile.load(model_path(args.model), steps=None)
     if cal is None or not cal.known:
         raise SystemExit("the model has no calibration file with a known-extent interval: run "
                          "scripts/calibrate_intervals.py first")

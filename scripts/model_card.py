@@ -81,9 +81,9 @@ def _flags(by: str, threshold: float) -> str:
 
 def intervals_rows(model: Path) -> list[str]:
     """The card's section on the model's coverage intervals, from its calibration file (none: no section)."""
-    from colonbench.completion import intervals
+    from colonbench.completion import calfile
 
-    cal = intervals.load(model, steps=None) if intervals.path_for(model).is_file() else None
+    cal = calfile.load(model, steps=None) if calfile.path_for(model).is_file() else None
     if cal is None:
         return []
     src = cal.source
@@ -98,7 +98,7 @@ def intervals_rows(model: Path) -> list[str]:
     held, map_width = src.get("held_out"), cal.map.get("review_width")
     who = "a length given" if map_width else "a map's segment or a length given"
     out = ["", "## Coverage intervals", "",
-           f"`{intervals.path_for(model).name}` (id `{src.get('id')}`): {cal.level:.0%} split-conformal intervals "
+           f"`{calfile.path_for(model).name}` (id `{src.get('id')}`): {cal.level:.0%} split-conformal intervals "
            f"for {src.get('steps')}, {how}, calibrated by `python scripts/calibrate_intervals.py` on "
            f"{' and '.join(f'`{name}` (sha256 `{sha[:16]}...`)' for name, sha in manifests.items())}, "
            f"{src.get('estimates')} estimates at noise {', '.join(f'{x:g}' for x in src.get('noise_mm', []))} mm"

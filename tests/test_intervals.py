@@ -8,7 +8,7 @@ import pandas as pd
 import pytest
 
 from colonbench.cli import main
-from colonbench.completion import conformal, intervals, known_extent
+from colonbench.completion import calfile, conformal, intervals, known_extent
 from colonbench.completion.modelfile import model_path
 from colonbench.errors import InputError
 from colonbench.estimate import Estimate, as_estimate
@@ -136,14 +136,14 @@ def test_estimate_writes_the_interval_and_takes_a_known_length(demo_data, tmp_pa
     assert a["coverage_interval_level"] == 0.9 and isinstance(a["review"], list)
     assert a["signals"]["span_mm"] >= a["signals"]["length_mm"] - 0.5     # the line, run on to its planes
     # the costly signals only where the shipped calibration's features use them (its groups', known extent's, odds')
-    cal = intervals.load(model_path(None), None)
+    cal = calfile.load(model_path(None), None)
     used = {f for g in [*cal.groups.values(), cal.known, cal.review_odds] for f in g.get("features", ())}
     for feature, signal in (("spread", "spread"), ("depth", "hole_depth_mm"), ("misfit", "wall_misfit_mm")):
         assert (signal in a["signals"]) == (feature in used), signal
     assert main(["estimate", str(tmp_path / "seg.npy"), "--out-dir", str(tmp_path / "b"), "--length-mm", "500"]) == 0
     b = json.loads((tmp_path / "b" / "seg.json").read_text())
     assert b["coverage"] < 0.2 and b["signals"]["extent"] == "known"
-    cal = intervals.load(model_path(None), steps_version())
+    cal = calfile.load(model_path(None), steps_version())
     assert b["coverage_interval"] == pytest.approx(cal.interval(b["coverage"], b["signals"]), abs=2e-6)
     # the known-extent interval (its own quantiles), not the one of an estimate whose length is unknown
     assert b["coverage_interval"] != pytest.approx(cal.interval(b["coverage"], {**b["signals"], "extent": None}))
@@ -488,5 +488,5 @@ def test_the_calibration_file_stores_numbers_the_last_bits_of_a_kernel_do_not_mo
     assert r({"w": [0.1234567891234, -2.0000000000004], "n": 3, "s": "x", "t": (1.0, 5e-20)}) == \
         {"w": [0.123456789, -2.0], "n": 3, "s": "x", "t": [1.0, 5e-20]}
     assert r(0.4516600607761735) == r(0.4516600607761776)            # two kernels' weight, as measured
-    shipped = json.loads(intervals.path_for(model_path(None)).read_text())
+    shipped = json.loads(calfile.path_for(model_path(None)).read_text())
     assert shipped == r(shipped)

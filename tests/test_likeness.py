@@ -6,7 +6,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from colonbench.completion import intervals, likeness
+from colonbench.completion import calfile, intervals, likeness
 from colonbench.errors import InputError
 
 SCHEME = "like50+binned-colon-novel"
@@ -68,27 +68,35 @@ def test_the_classifier_routes_each_estimate_and_a_missing_group_falls_back_to_a
         intervals.Intervals("binned-colon-novel", 0.9, groups, 0.5, like=like)           # a classifier, no groups
     with pytest.raises(InputError, match="clash"):
         intervals.Intervals("like50+binned-colon-novel", 0.9, groups, 0.5, like={**like, "threshold": 1.0})
-    for ranges in ([[1.0, 1.0]], [[1.0, 1.0], [1.0, 0.0]], [[1.0, 1.0], [0.0]]):      # one short, reversed, not a pair
+    # one short, reversed, not a pair, flat, not numbers, not finite; a classifier that is not an object
+    for ranges in ([[1.0, 1.0]], [[1.0, 1.0], [1.0, 0.0]], [[1.0, 1.0], [0.0]], [1.0, 1.0], [["a", "b"], ["c", "d"]],
+                   [[1.0, 1.0], [0.0, float("nan")]], "ab"):
         with pytest.raises(InputError, match="ranges as"):
             intervals.Intervals("like50+binned-colon-novel", 0.9, groups, 0.5, like={**like, "ranges": ranges})
+    with pytest.raises(InputError, match="ranges as"):
+        intervals.Intervals("like50+binned-colon-novel", 0.9, groups, 0.5, like=[like])
 
 
 def test_a_calibration_file_colonbench_cannot_read_is_refused_in_one_line(tmp_path):
-    """A model's calibration file cut short, with a field it does not know, or with a classifier whose ranges clash
-    is refused with an InputError naming the file, not a traceback from json or the dataclass; a good one loads."""
+    """A model's calibration file cut short, with a field it does not know, with a classifier whose ranges clash, not
+    a JSON object, or with a ``source`` that is not one, is refused with an InputError naming the file and the way
+    out, not a traceback from json or the dataclass; a good one loads."""
     model = tmp_path / "mine.safetensors"
     cal = intervals.Intervals("like50+binned-colon-novel", 0.9, {"all": {"low": -0.2, "high": 0.2, "n": 100}}, 0.5,
                               like={"features": ["one"], "ranges": [[1.0, 1.0]], "weights": [0.0], "threshold": 0.5})
     text = json.dumps(cal.to_json())
-    path = intervals.path_for(model)
+    path = calfile.path_for(model)
     for bad, why in ((text[: len(text) // 2], "Expecting|Unterminated"),
                      (json.dumps({**cal.to_json(), "colour": 1}), "colour"),
-                     (text.replace('"ranges": [[1.0, 1.0]]', '"ranges": []'), "clash")):
+                     (text.replace('"ranges": [[1.0, 1.0]]', '"ranges": []'), "clash"),
+                     (json.dumps([cal.to_json()]), "not a JSON object"),
+                     (json.dumps({**cal.to_json(), "source": "mine"}), "'source'")):
         path.write_text(bad)
-        with pytest.raises(InputError, match=f"mine.intervals.json beside the model is not a calibration .*({why})"):
-            intervals.load(model, None)
+        with pytest.raises(InputError, match=f"mine.intervals.json is not a calibration colonbench can read .*({why})"
+                                             ".*calibrate_intervals.py --model"):
+            calfile.load(model, None)
     path.write_text(text)
-    assert intervals.load(model, None).like == cal.like
+    assert calfile.load(model, None).like == cal.like
 
 
 def test_a_group_is_fitted_as_its_scheme_fits_those_estimates_alone_with_the_whole_fits_weights():

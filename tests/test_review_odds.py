@@ -9,7 +9,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from colonbench.completion import intervals, known_extent, review
+from colonbench.completion import calfile, intervals, known_extent, review
 from colonbench.errors import InputError
 from colonbench.estimate import Estimate
 
@@ -127,7 +127,7 @@ def test_the_model_card_shows_a_binned_scheme_per_band_and_the_review_odds(tmp_p
     cal.review_odds = {"features": ["one", "length"], "ranges": [[1, 1], [0.5, 1.2]], "weights": [1.0, -2.0]}
     cal.source = {"id": "binned-test", "steps": "steps=10", "estimates": n}
     model = tmp_path / "m.safetensors"
-    intervals.path_for(model).write_text(json.dumps(cal.to_json()))
+    calfile.path_for(model).write_text(json.dumps(cal.to_json()))
     text = "\n".join(model_card.intervals_rows(model))
     group = cal.groups["all"]
     assert len(group["band_low"]) == 4 and f"{group['band_low'][3]:+.2f} s to {group['band_high'][3]:+.2f} s" in text
