@@ -1,4 +1,5 @@
-"""Which calibration ships: decision record 0172's rule over the held-out cells of every (scheme, known extent) pair.
+"""Which calibration ships: decision record 0172's rule over the held-out cells of every (scheme, known extent) pair,
+with 0174's scheme in use kept where no pair holds.
 
 ``scripts/calibrate_intervals.py`` measures each candidate leave-one-colon-out and summarises it per cell (a
 calibration set or a real colon on its own, at a noise level): ``{"cells": {name: {"n", "inside", "width"}},
@@ -61,12 +62,13 @@ def holds(summary: dict) -> bool:
     return all(outside(c) == 0.0 for c in summary["cells"].values())
 
 
-def choose_pair(schemes: dict, known: dict) -> tuple[str, str, list]:
+def choose_pair(schemes: dict, known: dict, keep: str | None = None) -> tuple[str, str, list]:
     """Decision record 0172's rule: every (scheme, known extent) pair is a candidate, judged on its sixteen held-out
     cells. Of the pairs whose cells all hold (:func:`holds`), the scheme narrowest over the real colons, with its
     known extent narrowest over them among its pairs that hold; if none holds, the pair with the smallest
-    :func:`shortfall`, then the narrowest scheme, then the narrowest known extent. Equals keep the first in
-    ``schemes``' and ``known``'s order.
+    :func:`shortfall`, then the narrowest scheme, then the narrowest known extent, among the pairs of the scheme
+    ``keep`` where it is given (decision record 0174: the scheme in use stays unless a pair holds), else among all.
+    Equals keep the first in ``schemes``' and ``known``'s order.
 
     Parameters
     ----------
@@ -75,6 +77,8 @@ def choose_pair(schemes: dict, known: dict) -> tuple[str, str, list]:
         ``shortfall``).
     known : dict
         Scheme -> known-extent candidate (``K0``-``K3``) -> its summary, of the scheme's known-length intervals.
+    keep : str, optional
+        The scheme in use, kept where no pair holds; one of ``schemes``.
 
     Returns
     -------
@@ -92,5 +96,8 @@ def choose_pair(schemes: dict, known: dict) -> tuple[str, str, list]:
         scheme = min(holding, key=lambda p: p["width"])["scheme"]
         pick = min((p for p in holding if p["scheme"] == scheme), key=lambda p: p["known_width"])
     else:
-        pick = min(pairs, key=lambda p: (p["shortfall"], p["width"], p["known_width"]))
+        if keep is not None and keep not in schemes:
+            raise ValueError(f"the scheme to keep, {keep!r}, is not a candidate")
+        pick = min((p for p in pairs if keep in (None, p["scheme"])),
+                   key=lambda p: (p["shortfall"], p["width"], p["known_width"]))
     return pick["scheme"], pick["known"], pairs

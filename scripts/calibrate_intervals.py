@@ -55,6 +55,8 @@ SCHEMES = ("scaled", "scaled-colon", "scaled-colon-novel", "scaled-colon-novel-s
            "quant95-colon-novel-misfit-shift", "quant90-colon-novel-misfit-shift",
            "like50+binned-colon-novel-depth-shift", "like80+binned-colon-novel-depth-shift",
            "like50+scaled2-colon-novel-misfit-shift", "like80+scaled2-colon-novel-misfit-shift")
+#: Decision record 0174: the scheme in use, kept unless some (scheme, known extent) pair holds all sixteen cells.
+KEEP = "like50+binned-colon-novel-depth-shift"
 #: Decision record 0167: by how many points of the lower real colon's precision the review by odds must beat the
 #: interval's score to replace it.
 ODDS_GAIN = 3.0
@@ -368,11 +370,14 @@ def calibrate(df: pd.DataFrame, level: float, source: dict) -> intervals.Interva
                                 for k, e in known_extent.KNOWN_EXTRA.items()}
             known_summaries[base] = summarise(known_held[base], level, show=False)
         known_summaries[scheme] = known_summaries[base]
-    best, known_choice, pairs = choose_pair(summary, known_summaries)
-    print("\nthe pairs nearest to holding every cell (decision record 0172: shortfall, then real widths, points):\n"
+    best, known_choice, pairs = choose_pair(summary, known_summaries, KEEP)
+    print("\nthe pairs nearest to holding every cell (decision records 0172 and 0174: shortfall, then real widths, "
+          "points):\n"
           + pd.DataFrame(pairs).sort_values(["shortfall", "width", "known_width"], kind="stable").head(12).to_string())
     known_held, known_summary = known_held[likeness.base(best)], known_summaries[best]
-    print(f"\nchosen: {best} with the known extent {known_choice}\nknown length, held out:")
+    print(f"\nchosen: {best} with the known extent {known_choice}"
+          + ("" if any(p["holds"] for p in pairs) else " (no pair holds: the scheme in use stays, 0174)")
+          + "\nknown length, held out:")
     summarise({known_choice: known_held[known_choice]}, level)
     by, width, review_report, reviews = review_rule(held[best], best)
     odds = odds_rule(held[best], intervals.scale_features(best), by, review_report)

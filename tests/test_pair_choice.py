@@ -80,3 +80,37 @@ def test_where_no_pair_holds_the_least_outside_wins(calibrate_intervals):
     same = ci.summarise({"a": held({"V_paper": 98.0}, 0.40), "b": held({"V_paper": 98.0}, 0.30)}, 0.9, show=False)
     plain = ci.summarise({"K0": held({}, 0.2)}, 0.9, show=False)
     assert choice.choose_pair(same, {"a": plain, "b": plain})[0] == "b"
+
+
+def test_where_no_pair_holds_the_scheme_in_use_stays_with_its_least_outside_known_extent(calibrate_intervals):
+    """Decision record 0174: where no pair holds, the scheme in use stays though another is less outside, with its
+    own known extent least outside; where a pair holds, 0172's rule chooses as before; a scheme to keep that is no
+    candidate is refused."""
+    ci = calibrate_intervals
+    schemes = ci.summarise({"in-use": held({"V_real gca00020": 80.0}, 0.30),
+                            "other": held({"V_real gca00020": 83.0}, 0.40)}, 0.9, show=False)
+    known = ci.summarise({"K0": held({"V_real gca00070": 78.0}, 0.2), "K2": held({"V_real gca00070": 80.0}, 0.2)},
+                         0.9, show=False)
+    both = {"in-use": known, "other": known}
+    assert choice.choose_pair(schemes, both)[:2] == ("other", "K2")
+    assert choice.choose_pair(schemes, both, keep="in-use")[:2] == ("in-use", "K2")
+    holding = ci.summarise({"K0": held({}, 0.2)}, 0.9, show=False)
+    # "other" with a known extent that holds still has a scheme cell outside: no pair holds, the scheme in use stays
+    assert choice.choose_pair(schemes, {"in-use": known, "other": {**known, **holding}}, keep="in-use")[0] == "in-use"
+    schemes["other"] = ci.summarise({"x": held({}, 0.40)}, 0.9, show=False)["x"]
+    assert choice.choose_pair(schemes, {"in-use": known, "other": {**known, **holding}}, keep="in-use")[:2] \
+        == ("other", "K0")
+    with pytest.raises(ValueError, match="not a candidate"):
+        choice.choose_pair(ci.summarise({"a": held({"V_paper": 98.0})}, 0.9, show=False), {"a": known}, keep="b")
+
+
+def test_the_scheme_kept_is_a_candidate_and_the_one_shipped(calibrate_intervals):
+    """Decision record 0174: the scheme the calibration script keeps where no pair holds is one of its candidates and
+    the shipped calibration's; a record that changes the one shipped changes ``KEEP`` with it."""
+    import json
+
+    from colonbench.completion import calfile
+    from colonbench.completion.modelfile import model_path
+
+    assert calibrate_intervals.KEEP in calibrate_intervals.SCHEMES
+    assert json.loads(calfile.path_for(model_path(None)).read_text())["scheme"] == calibrate_intervals.KEEP
