@@ -87,6 +87,8 @@ def choose_pair(schemes: dict, known: dict, keep: str | None = None) -> tuple[st
         Every pair's ``scheme``, ``known``, ``holds``, ``shortfall`` (points, both parts) and the two real widths
         (``width``, ``known_width``, points), in the order tried.
     """
+    if keep is not None and keep not in schemes:
+        raise ValueError(f"the scheme to keep, {keep!r}, is not a candidate")
     pairs = [{"scheme": s, "known": k, "holds": holds(schemes[s]) and holds(known[s][k]),
               "shortfall": round(schemes[s]["shortfall"] + known[s][k]["shortfall"], 2),
               "width": schemes[s]["real_width"], "known_width": known[s][k]["real_width"]}
@@ -96,8 +98,6 @@ def choose_pair(schemes: dict, known: dict, keep: str | None = None) -> tuple[st
         scheme = min(holding, key=lambda p: p["width"])["scheme"]
         pick = min((p for p in holding if p["scheme"] == scheme), key=lambda p: p["known_width"])
     else:
-        if keep is not None and keep not in schemes:
-            raise ValueError(f"the scheme to keep, {keep!r}, is not a candidate")
         pick = min((p for p in pairs if keep in (None, p["scheme"])),
                    key=lambda p: (p["shortfall"], p["width"], p["known_width"]))
     return pick["scheme"], pick["known"], pairs

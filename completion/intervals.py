@@ -365,13 +365,17 @@ def linear_score(fitted: dict, f: np.ndarray, side: str = "") -> float:
 
 
 def _like_fits(like: dict) -> bool:
-    """Whether a likeness classifier's fields fit together: ``p`` features and weights, (p, 2) finite ``ranges`` each
-    low <= high, a ``threshold`` in (0, 1)."""
+    """Whether a likeness classifier's fields fit together: ``p`` feature names :func:`features` knows, ``p`` finite
+    weights, (p, 2) finite ``ranges`` each low <= high, and a number ``threshold`` in (0, 1)."""
     try:
-        p, ranges = len(like.get("features", ())), np.asarray(like.get("ranges"), float)
-        return 0 < float(like.get("threshold", 0)) < 1 and len(like.get("weights", ())) == p and \
-            ranges.shape == (p, 2) and bool(np.isfinite(ranges).all() and (ranges[:, 0] <= ranges[:, 1]).all())
-    except (TypeError, ValueError):
+        names, threshold = like.get("features", ()), like.get("threshold")
+        ranges, weights = np.asarray(like.get("ranges"), float), np.asarray(like.get("weights"), float)
+        features(0.5, {}, names)                                    # a name it does not know: KeyError
+        return isinstance(threshold, (int, float)) and not isinstance(threshold, bool) and 0 < threshold < 1 and \
+            all(isinstance(n, str) for n in names) and weights.shape == (len(names),) and \
+            ranges.shape == (len(names), 2) and bool(np.isfinite(ranges).all() and np.isfinite(weights).all()
+                                                     and (ranges[:, 0] <= ranges[:, 1]).all())
+    except (TypeError, ValueError, KeyError):
         return False
 
 

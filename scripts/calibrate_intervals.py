@@ -8,19 +8,20 @@ training colons are left out), calibration-paper.yaml's and calibration-paper-mo
 generator (``V_paper``) and validation-real.yaml, the real validation colons gca00020 and gca00070 (``V_real``), with
 calibration-real.yaml's real training colons, which are reported, never calibrated on (the network saw them). Estimates
 every segment with the completion method (its intervals off, every signal on) at 0 and 0.5 mm noise, as the suites do
-(cached per model and steps in ``<data>/<manifest>``), then chooses by decision record 0172's rule. Every scheme is
-measured leave-one-colon-out (a colon's estimates get the intervals of a calibration fitted on all the other colons),
-and so is each known-length candidate on it (``K0``: the scheme's features, ``K1``: with the share of the length the
-span covers; ``K2``, ``K3``: the same with a group of their own for the estimates the length shortened). Each (scheme,
-known extent) pair has sixteen cells (``V_wide``, ``V_paper`` and each real colon on its own, at each noise level, for
-both intervals); a cell holds within 85-95 % inside, each edge moved out by its binomial standard error. Of the pairs
-whose cells all hold, the scheme narrowest over the real colons with its narrowest known extent; else the pair the
-least outside. The review rules, each a score of the interval and its threshold, come from the same held-out
-intervals, for the segments and for the known extent (decision record 0163); the segments' review is by the fitted odds
-of a far-off estimate instead where, held out, those are right more often by more than 3 points (decision record
-0167). The chosen scheme is fitted on all three sets and written beside the model (``<model>.intervals.json``, every
-number to 9 significant digits), with the known-length interval fitted on the same segments with their true lengths.
-Prints every scheme's held-out table.
+(cached per model and steps in ``<data>/<manifest>``), then chooses by decision records 0172's and 0174's rule. Every
+scheme is measured leave-one-colon-out (a colon's estimates get the intervals of a calibration fitted on all the other
+colons), and so is each known-length candidate on it (``K0``: the scheme's features, ``K1``: with the share of the
+length the span covers; ``K2``, ``K3``: the same with a group of their own for the estimates the length shortened).
+Each (scheme, known extent) pair has sixteen cells (``V_wide``, ``V_paper`` and each real colon on its own, at each
+noise level, for both intervals); a cell holds within 85-95 % inside, each edge moved out by its binomial standard
+error. Of the pairs whose cells all hold, the scheme narrowest over the real colons with its narrowest known extent;
+else, for the shipped model, the scheme in use (``KEEP``, decision record 0174) with its known extent the least
+outside, and for a model of your own (``--model``) the pair the least outside. The review rules, each a score of the
+interval and its threshold, come from the same held-out intervals, for the segments and for the known extent (decision
+record 0163); the segments' review is by the fitted odds of a far-off estimate instead where, held out, those are right
+more often by more than 3 points (decision record 0167). The chosen scheme is fitted on all three sets and written
+beside the model (``<model>.intervals.json``, every number to 9 significant digits), with the known-length interval
+fitted on the same segments with their true lengths. Prints every scheme's held-out table.
 """
 
 from __future__ import annotations
@@ -349,9 +350,16 @@ def with_units(df: pd.DataFrame) -> pd.DataFrame:
                      cell=np.where(real, "V_real " + names, df["set"]))
 
 
-def calibrate(df: pd.DataFrame, level: float, source: dict) -> intervals.Intervals:
+def keep_for(model: str | None) -> str | None:
+    """The scheme a calibration keeps where no pair holds (decision record 0174): the shipped model's ``KEEP``; none
+    for a model of your own (``--model``), which 0172's rule alone chooses for."""
+    return KEEP if model is None else None
+
+
+def calibrate(df: pd.DataFrame, level: float, source: dict, keep: str | None = None) -> intervals.Intervals:
     """Choose, fit and describe the calibration from the estimates' table (columns of :func:`estimates` and ``set``,
-    :data:`MANIFESTS`' values); prints every figure it chooses by."""
+    :data:`MANIFESTS`' values); prints every figure it chooses by. ``keep``: the scheme kept where no pair holds
+    (:func:`keep_for`)."""
     df = with_units(df)
     cal_df = df[df["set"].isin(CALIBRATED)].reset_index(drop=True)
     print("estimates per set:", df["set"].value_counts().to_dict())
@@ -370,13 +378,14 @@ def calibrate(df: pd.DataFrame, level: float, source: dict) -> intervals.Interva
                                 for k, e in known_extent.KNOWN_EXTRA.items()}
             known_summaries[base] = summarise(known_held[base], level, show=False)
         known_summaries[scheme] = known_summaries[base]
-    best, known_choice, pairs = choose_pair(summary, known_summaries, KEEP)
+    best, known_choice, pairs = choose_pair(summary, known_summaries, keep)
     print("\nthe pairs nearest to holding every cell (decision records 0172 and 0174: shortfall, then real widths, "
           "points):\n"
           + pd.DataFrame(pairs).sort_values(["shortfall", "width", "known_width"], kind="stable").head(12).to_string())
     known_held, known_summary = known_held[likeness.base(best)], known_summaries[best]
     print(f"\nchosen: {best} with the known extent {known_choice}"
-          + ("" if any(p["holds"] for p in pairs) else " (no pair holds: the scheme in use stays, 0174)")
+          + ("" if any(p["holds"] for p in pairs) or keep is None
+             else " (no pair holds: the scheme in use stays, 0174)")
           + "\nknown length, held out:")
     summarise({known_choice: known_held[known_choice]}, level)
     by, width, review_report, reviews = review_rule(held[best], best)
@@ -457,7 +466,7 @@ def main() -> None:
     source = {"model": path.name, "model_sha256": sha256_file(path), "steps": steps_version(),
               "manifests": {f"{m}.yaml": sha256_file(ROOT / f"{m}.yaml") for m in MANIFESTS},
               "noise_mm": list(NOISE_MM), "estimates": int(df["set"].isin(CALIBRATED).sum())}
-    cal = calibrate(df, args.level, source)
+    cal = calibrate(df, args.level, source, keep_for(args.model))
     out = calfile.path_for(path)
     out.write_text(json.dumps(cal.to_json(), indent=1) + "\n")
     print(f"\nwrote {out} (id {cal.source['id']})")

@@ -75,22 +75,30 @@ def test_the_classifier_routes_each_estimate_and_a_missing_group_falls_back_to_a
             intervals.Intervals("like50+binned-colon-novel", 0.9, groups, 0.5, like={**like, "ranges": ranges})
     with pytest.raises(InputError, match="ranges as"):
         intervals.Intervals("like50+binned-colon-novel", 0.9, groups, 0.5, like=[like])
+    # a threshold in a string, weights not numbers or not finite, a feature the estimate's features do not know
+    for bad in ({"threshold": "0.5"}, {"threshold": True}, {"weights": "ab"}, {"weights": [1.0, float("nan")]},
+                {"features": ["one", "colour"]}, {"features": "ab"}):
+        with pytest.raises(InputError, match="ranges as"):
+            intervals.Intervals("like50+binned-colon-novel", 0.9, groups, 0.5, like={**like, **bad})
 
 
 def test_a_calibration_file_colonbench_cannot_read_is_refused_in_one_line(tmp_path):
-    """A model's calibration file cut short, with a field it does not know, with a classifier whose ranges clash, not
-    a JSON object, or with a ``source`` that is not one, is refused with an InputError naming the file and the way
-    out, not a traceback from json or the dataclass; a good one loads."""
+    """A model's calibration file cut short, with a field it does not know or lacks, with a field of the wrong type,
+    with a classifier whose ranges clash, or not a JSON object, is refused with an InputError naming the file, what is
+    wrong and the way out, not a traceback from json or the dataclass; a good one loads."""
     model = tmp_path / "mine.safetensors"
     cal = intervals.Intervals("like50+binned-colon-novel", 0.9, {"all": {"low": -0.2, "high": 0.2, "n": 100}}, 0.5,
                               like={"features": ["one"], "ranges": [[1.0, 1.0]], "weights": [0.0], "threshold": 0.5})
     text = json.dumps(cal.to_json())
     path = calfile.path_for(model)
     for bad, why in ((text[: len(text) // 2], "Expecting|Unterminated"),
-                     (json.dumps({**cal.to_json(), "colour": 1}), "colour"),
+                     (json.dumps({**cal.to_json(), "colour": 1}), "unknown fields: colour"),
                      (text.replace('"ranges": [[1.0, 1.0]]', '"ranges": []'), "clash"),
-                     (json.dumps([cal.to_json()]), "not a JSON object"),
-                     (json.dumps({**cal.to_json(), "source": "mine"}), "'source'")):
+                     (json.dumps([cal.to_json()]), "a JSON list, not an object"),
+                     (json.dumps({**cal.to_json(), "source": "mine"}), "'source' is not an object"),
+                     (json.dumps({k: v for k, v in cal.to_json().items() if k != "level"}), "missing fields: level"),
+                     (json.dumps({**cal.to_json(), "scheme": None}), "'scheme' is not a string"),
+                     (json.dumps({**cal.to_json(), "level": True}), "'level' is not a number")):
         path.write_text(bad)
         with pytest.raises(InputError, match=f"mine.intervals.json is not a calibration colonbench can read .*({why})"
                                              ".*calibrate_intervals.py --model"):

@@ -114,3 +114,18 @@ def test_the_scheme_kept_is_a_candidate_and_the_one_shipped(calibrate_intervals)
 
     assert calibrate_intervals.KEEP in calibrate_intervals.SCHEMES
     assert json.loads(calfile.path_for(model_path(None)).read_text())["scheme"] == calibrate_intervals.KEEP
+    # the shipped model keeps it; a model of your own is chosen for by 0172's rule alone
+    assert calibrate_intervals.keep_for(None) == calibrate_intervals.KEEP
+    assert calibrate_intervals.keep_for("mine.safetensors") is None
+
+
+def test_where_the_scheme_in_use_and_a_narrower_one_both_hold_the_narrower_wins(calibrate_intervals):
+    """Decision record 0174 keeps the scheme in use only where no pair holds: where it holds and a narrower scheme
+    holds too, 0172's step 1 chooses the narrower; a scheme to keep that is no candidate is refused even then."""
+    ci = calibrate_intervals
+    schemes = ci.summarise({"in-use": held({}, 0.40), "narrow": held({}, 0.30)}, 0.9, show=False)
+    known = ci.summarise({"K0": held({}, 0.2)}, 0.9, show=False)
+    both = {"in-use": known, "narrow": known}
+    assert choice.choose_pair(schemes, both, keep="in-use")[:2] == ("narrow", "K0")
+    with pytest.raises(ValueError, match="not a candidate"):
+        choice.choose_pair(schemes, both, keep="other")
