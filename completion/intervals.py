@@ -370,11 +370,10 @@ def _like_fits(like: dict) -> bool:
     try:
         names, threshold = like.get("features", ()), like.get("threshold")
         ranges, weights = np.asarray(like.get("ranges"), float), np.asarray(like.get("weights"), float)
-        features(0.5, {}, names)                                    # a name it does not know: KeyError
+        features(0.5, {}, names)                        # a name it does not know (a non-string too): KeyError
         return isinstance(threshold, (int, float)) and not isinstance(threshold, bool) and 0 < threshold < 1 and \
-            all(isinstance(n, str) for n in names) and weights.shape == (len(names),) and \
-            ranges.shape == (len(names), 2) and bool(np.isfinite(ranges).all() and np.isfinite(weights).all()
-                                                     and (ranges[:, 0] <= ranges[:, 1]).all())
+            weights.shape == (len(names),) and ranges.shape == (len(names), 2) and \
+            bool(np.isfinite(ranges).all() and np.isfinite(weights).all() and (ranges[:, 0] <= ranges[:, 1]).all())
     except (TypeError, ValueError, KeyError):
         return False
 

@@ -148,8 +148,8 @@ def main() -> None:
     ap.add_argument("--write", action="store_true", help="write the chosen map interval into the calibration file")
     ap.add_argument("--workers", type=int, default=2, help="processes generating the data")
     args = ap.parse_args()
-    path = calfile.path_for(model_path(args.model))
-    cal = calfile.load(model_path(args.model), steps=None)
+    model = model_path(args.model)
+    path, cal = calfile.path_for(model), calfile.load(model, steps=None)
     if cal is None or not cal.known:
         raise SystemExit("the model has no calibration file with a known-extent interval: run "
                          "scripts/calibrate_intervals.py first")

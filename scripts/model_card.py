@@ -83,7 +83,7 @@ def intervals_rows(model: Path) -> list[str]:
     """The card's section on the model's coverage intervals, from its calibration file (none: no section)."""
     from colonbench.completion import calfile
 
-    cal = calfile.load(model, steps=None) if calfile.path_for(model).is_file() else None
+    cal = calfile.load(model, steps=None)               # None where the model has no calibration file
     if cal is None:
         return []
     src = cal.source
