@@ -36,11 +36,12 @@ original = planes._rim_plane
 def recorded(point, normal, x, band, cap_deg, min_share):
     """The rim search, recording the sectors the accepted rim fills (0 where none)."""
     out = original(point, normal, x, band, cap_deg, min_share)
-    if out is None:
+    plane = out[0] if isinstance(out, tuple) and isinstance(out[1], int) else out   # after 0175: (plane, sectors)
+    if plane is None:
         record.append(0)
         return out
-    outward = -out[1]
-    near = planes._touching(x, outward, band) if out[0] is not point else \
+    outward = -plane[1]
+    near = planes._touching(x, outward, band) if plane[0] is not point else \
         x[np.abs((x - point) @ -normal - ((x - point) @ -normal).max()) < band]
     record.append(int(planes._sectors(near - point, outward[None], np.ones((1, len(near)), bool))[0]))
     return out
@@ -61,3 +62,6 @@ df["far"] = (df.estimate - df.true).abs() > 0.15
 df["band"] = pd.cut(df.fill, [-0.01, 0.55, 0.75, 0.9, 1.0])
 print(df.groupby(["cell", "band"], observed=True).agg(n=("far", "size"), far=("far", "mean"),
                                                       inside=("inside", "mean")).round(3).to_string())
+far = df[df.far & (df.set == "V_real")]
+print(f"the real colons' estimates off by more than 15 points: {len(far)}; by hole model, with their median fill:")
+print(far.groupby("hole_model").agg(n=("fill", "size"), fill=("fill", "median")).round(3).to_string())
