@@ -56,6 +56,7 @@ _NOVEL = _SIGNALS + ("spread", "radius_ratio", "line_extent")     # decision rec
 _GAPS = _NOVEL + ("log_gap",)                                       # decision record 0161
 _DEPTH = _NOVEL + ("depth",)                                        # decision record 0161, round 5
 _MISFIT = _NOVEL + ("misfit",)                                      # decision record 0165
+_FILL = _DEPTH + ("unfilled",)                                      # decision record 0175
 SCALE_FEATURES = {
     "scaled": _SIGNALS, "scaled2": _SIGNALS, "scaled2-gaps": _SIGNALS + ("gap_share",), "scaled-colon": _SIGNALS,
     "scaled-colon-novel": _NOVEL, "scaled-colon-novel-shift": _NOVEL, "scaled2-colon-novel": _NOVEL,
@@ -64,6 +65,7 @@ SCALE_FEATURES = {
     "scaled2-colon-novel-depth-shift": _DEPTH, "binned-colon-novel-depth-shift": _DEPTH,
     "scaled2-colon-novel-misfit-shift": _MISFIT, "binned-colon-novel-misfit-shift": _MISFIT,
     "quant95-colon-novel-misfit-shift": _MISFIT, "quant90-colon-novel-misfit-shift": _MISFIT,
+    "binned-colon-novel-depth-fill-shift": _FILL,
 }
 #: A ``binned`` scheme's bands of the fitted scale: cut at these colon-weighted quantiles of it (decision 0161).
 BAND_QUANTILES = (0.25, 0.5, 0.75)
@@ -82,9 +84,11 @@ def features(coverage: float, signals: dict, names) -> np.ndarray:
     (:mod:`colonbench.completion.novelty`); ``log_gap``: ``log10(gap_share + 0.001)``, -3 where no wall-gap patch
     was found; ``depth``: the holes' depth (``hole_depth_mm``, :func:`colonbench.completion.novelty.hole_depth`) /
     10 mm; ``misfit``: how far the cloud lies from the completed wall's nearest vertices (``wall_misfit_mm``, mm,
-    :func:`colonbench.completion.novelty.wall_misfit`); ``share_off``: ``|ln(length_share)|``, how far the span
-    between the planes is from a length given (``length_share``), 0 where none is (a map's segment, whose planes
-    are known; like every feature, then clipped into the range calibrated on)."""
+    :func:`colonbench.completion.novelty.wall_misfit`); ``unfilled``: ``1 - rim_fill``, how much of a ring the less
+    filled cut rim lacks (1 where an end has no rim, 0 where the estimate has no ``rim_fill``: planes the caller gave;
+    decision record 0175); ``share_off``: ``|ln(length_share)|``, how far the span between the planes is from a
+    length given (``length_share``), 0 where none is (a map's segment, whose planes are known; like every feature,
+    then clipped into the range calibrated on)."""
     g = lambda k: float(signals.get(k, 0.0) or 0.0)          # noqa: E731
     length = g("length_mm")
     rims = int(g("rims"))
@@ -94,7 +98,7 @@ def features(coverage: float, signals: dict, names) -> np.ndarray:
              "radius_ratio": g("radius_mm") / max(length, 1.0),
              "line_extent": length / g("extent_mm") if g("extent_mm") > 0 else 0.0,
              "log_gap": math.log10(max(g("gap_share"), 0.0) + 0.001), "depth": g("hole_depth_mm") / 10.0,
-             "misfit": g("wall_misfit_mm"),
+             "misfit": g("wall_misfit_mm"), "unfilled": 1.0 - float(signals.get("rim_fill", 1.0)),
              "share_off": abs(math.log(g("length_share"))) if g("length_share") > 0 else 0.0}
     out = np.array([value[n] for n in names], float)
     return np.where(np.isfinite(out), out, 0.0)

@@ -26,19 +26,19 @@ from pathlib import Path
 import numpy as np
 
 from colonbench.completion import known_extent, novelty, screening
-from colonbench.completion.gaps import GAP_VALLEY, reach_planes
+from colonbench.completion.gaps import GAP_VALLEY
 from colonbench.completion.heatmap_centerline import END_LEVEL, extract_centerline
 from colonbench.completion.calfile import load as load_intervals
 from colonbench.completion.modelfile import DEFAULT_MODEL, model_path, shipped_model, shipped_models  # noqa: F401
 from colonbench.completion.planes import line_between
-from colonbench.completion.steps import STEPS_VERSION, complete
+from colonbench.completion.steps import STEPS_VERSION, complete, signals_of
 from colonbench.completion.symmetry import averaged, check_tta
 from colonbench.completion.surface import SHELL_LEVEL, cloud_density
 from colonbench.errors import InputError
 from colonbench.estimate import Estimate
 from colonbench.grid import Grid, check_points, distinct_points, fit_grid, principal_axes
 from colonbench.heatmaps import input_from_points
-from colonbench.polyline import arc_length, resample
+from colonbench.polyline import resample
 
 #: Fewest points accepted: below this there is no segment to complete.
 MIN_POINTS = 200
@@ -490,11 +490,7 @@ def from_heatmap(heatmap: np.ndarray, grid: Grid, points, method: str = "complet
     verts = grid.to_mm(comp.vertices) if len(comp.vertices) else np.zeros((0, 3))
     inside = line_between(cl_vox, comp.planes)
     cl = resample(grid.to_mm(inside), CENTERLINE_SPACING_MM) if len(inside) else np.zeros((0, 3))
-    signals = {"rims": int(comp.rims), "rims_doubtful": int(getattr(comp.planes, "doubtful", 0)),
-               "gap_share": round(comp.gap_share, 4),
-               "length_mm": round(float(arc_length(cl)[-1]), 2) if len(cl) else 0.0,
-               "span_mm": round(float(arc_length(reach_planes(inside, comp.planes))[-1]) * grid.voxel_size, 2),
-               **({} if cut_rims else {"extent": "known"})}     # a caller clipping at planes it knows its ends
+    signals = signals_of(comp, cl, inside, grid.voxel_size, cut_rims)
     return Estimate(coverage=comp.coverage, holes=verts[comp.hole], centerline=cl, method=method,
                     mesh_vertices=verts, mesh_faces=comp.faces, hole_vertices=comp.hole,
                     seconds={"centerline": t1 - t0, "mesh_holes": t2 - t1}, signals=signals)

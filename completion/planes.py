@@ -75,10 +75,13 @@ class Planes(list):
     """A segment's end planes, ``(point, inward unit normal)`` each, ``rims``: how many of them were found at
     a cut rim of the cloud (:func:`rim_planes`; 0 for planes found otherwise), and ``doubtful``: how many of those
     cross the line more than :data:`RIM_DOUBT_MM` inside the cloud (:func:`cuts_into_cloud`). An end with no rim is
-    one the cloud does not reach, or reaches raggedly: where the segment may go on unseen."""
+    one the cloud does not reach, or reaches raggedly: where the segment may go on unseen. ``fill``: each end's
+    share of the :data:`RIM_SECTORS` sectors its rim's points fill, 0 where it has no rim (decision record 0175: a
+    cloud that stops at the camera's reach can pass for a cut rim, but rarely all round)."""
 
     rims: int = 0
     doubtful: int = 0
+    fill: tuple = ()
 
 
 def end_planes(centerline_vox: np.ndarray, reach: float = END_REACH) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -181,28 +184,31 @@ def rim_planes(centerline_vox: np.ndarray, partial_vox: np.ndarray, band: float 
         return planes
     dense = resample(np.asarray(centerline_vox, float), 0.25)
     _, nearest = cKDTree(dense).query(pts)
-    out = Planes()
+    out, fill = Planes(), []
     for k, (point, normal) in enumerate(planes):
         near = nearest <= RIM_END_SHARE * len(dense) if k == 0 else nearest >= (1 - RIM_END_SHARE) * len(dense)
         x = pts[near]
-        rim = _rim_plane(point, normal, x, band, cap_deg, min_share)
+        rim, sectors = _rim_plane(point, normal, x, band, cap_deg, min_share)
         out.append(pushed_out(point, normal, x) if rim is None else rim)
         out.rims += rim is not None
+        fill.append(sectors / RIM_SECTORS)
         # a rim at the line's own end keeps the line's plane, ``point``: nothing to doubt
         out.doubtful += rim is not None and rim[0] is not point and \
             cuts_into_cloud(rim, k, dense, nearest) * voxel_mm > RIM_DOUBT_MM
+    out.fill = tuple(fill)
     return out
 
 
 def _rim_plane(point: np.ndarray, normal: np.ndarray, x: np.ndarray, band: float, cap_deg: float,
-               min_share: float) -> tuple[np.ndarray, np.ndarray] | None:
-    """One end's plane from its cut rim (:func:`rim_planes`), or None where no rim is seen there.
+               min_share: float) -> tuple[tuple[np.ndarray, np.ndarray] | None, int]:
+    """One end's plane from its cut rim (:func:`rim_planes`), or None where no rim is seen there, and how many of
+    :data:`RIM_SECTORS` sectors the rim's points fill (0 where there is none).
 
     ``point``, ``normal``: the line's end plane (:func:`end_planes`); ``x`` (n, 3): the cloud's points at
     that end, voxels.
     """
     if len(x) < RIM_MIN_POINTS:
-        return None
+        return None, 0
     # coarse: the directions are ~6 degrees apart, so the touching band is twice as wide
     dirs = cap_directions(-normal, cap_deg, RIM_DIRECTIONS)
     proj = dirs @ x.T                                           # (directions, points)
@@ -211,7 +217,7 @@ def _rim_plane(point: np.ndarray, normal: np.ndarray, x: np.ndarray, band: float
     touch[count < RIM_MIN_TOUCHING] = False
     sectors = _sectors(x - point, dirs, touch)
     if not sectors.any():
-        return None
+        return None, 0
     best = int(np.lexsort((np.arange(len(dirs)), count, sectors))[-1])
     # fine: the plane fitted to the touching points, its own supporting plane, a few times over
     outward, rim, refitted = dirs[best], x[touch[best]], False
@@ -223,13 +229,13 @@ def _rim_plane(point: np.ndarray, normal: np.ndarray, x: np.ndarray, band: float
         outward, rim, refitted = fitted, _touching(x, fitted, band), True
     if not refitted:                     # the coarse rim was taken within twice the band
         rim = _touching(x, outward, band)
-    if len(rim) < RIM_MIN_TOUCHING or \
-            _sectors(rim - point, outward[None], np.ones((1, len(rim)), bool))[0] < min_share * RIM_SECTORS:
-        return None
+    filled = int(_sectors(rim - point, outward[None], np.ones((1, len(rim)), bool))[0]) if len(rim) else 0
+    if len(rim) < RIM_MIN_TOUCHING or filled < min_share * RIM_SECTORS:
+        return None, 0
     centre = rim.mean(axis=0)
     # where the line reaches the cut, its own plane is as good (and exact on the GT heatmap); where it
     # runs on past the cut (its ends follow the lumen, which the network may continue), the cut holds
-    return (centre, -outward) if abs((centre - point) @ outward) > RIM_BEYOND else (point, normal)
+    return ((centre, -outward) if abs((centre - point) @ outward) > RIM_BEYOND else (point, normal)), filled
 
 
 def cuts_into_cloud(plane: tuple, end: int, dense: np.ndarray, nearest: np.ndarray) -> float:

@@ -9,11 +9,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from colonbench.completion.gaps import GAP_VALLEY, wall_gaps
+from colonbench.completion.gaps import GAP_VALLEY, reach_planes, wall_gaps
 from colonbench.completion.planes import clip_to_segment, segment_planes
 from colonbench.completion.surface import (HOLE_DISTANCE, SHELL_LEVEL, clip_to_shell, extract_mesh, hole_vertices,
                                            mesh_coverage, resigned_field)
 from colonbench.meshes import triangle_areas
+from colonbench.polyline import arc_length
 
 
 #: Revision of the steps after the network, part of the methods' versions: 1 the paper's, 2 the sparse
@@ -89,3 +90,35 @@ def complete(heatmap: np.ndarray, centerline_vox: np.ndarray, partial_vox: np.nd
             gap_share = float(area[-len(gap_f):].sum() / area.sum()) if area.sum() > 0 else 0.0
     rims = getattr(planes, "rims", 0) if cut_rims else len(planes)   # planes the caller knows are the segment's ends
     return Completion(verts, faces, hole, mesh_coverage(verts, faces, hole), planes, rims, gap_share)
+
+
+def signals_of(comp: Completion, line_mm: np.ndarray, inside_vox: np.ndarray, voxel_mm: float, cut_rims: bool) -> dict:
+    """What a completed segment says of how sure its estimate is (:attr:`colonbench.estimate.Estimate.signals`).
+
+    Parameters
+    ----------
+    comp : Completion
+    line_mm : (m, 3) float
+        The method's centerline between the planes, mm.
+    inside_vox : (k, 3) float
+        The same line in voxels, before it is resampled.
+    voxel_mm : float
+        A voxel's edge, mm.
+    cut_rims : bool
+        Whether the planes were searched for at the cloud's cut rims (else the caller knows them).
+
+    Returns
+    -------
+    dict
+        ``rims``, ``rims_doubtful`` (:class:`~colonbench.completion.planes.Planes`), ``gap_share``, ``length_mm``
+        (``line_mm``'s length), ``span_mm`` (the line run on to the planes, :func:`~colonbench.completion.gaps.
+        reach_planes`, mm) and, where the planes were searched for, ``rim_fill``: the smaller of the two ends'
+        shares of a ring their cut rims fill, 0 where an end has none (decision record 0175); where the caller knows
+        them, ``extent``: ``known``.
+    """
+    fill = getattr(comp.planes, "fill", ())
+    out = {"rims": int(comp.rims), "rims_doubtful": int(getattr(comp.planes, "doubtful", 0)),
+           "gap_share": round(comp.gap_share, 4),
+           "length_mm": round(float(arc_length(line_mm)[-1]), 2) if len(line_mm) else 0.0,
+           "span_mm": round(float(arc_length(reach_planes(inside_vox, comp.planes))[-1]) * voxel_mm, 2)}
+    return {**out, **({"rim_fill": round(min(fill), 4) if fill else 0.0} if cut_rims else {"extent": "known"})}

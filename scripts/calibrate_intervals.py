@@ -48,14 +48,16 @@ ROOT = Path(__file__).resolve().parents[1] / "data_manifests"
 MANIFESTS = {"calibration": "V_wide", "calibration-paper": "V_paper", "calibration-paper-more": "V_paper",
              "validation-real": "V_real", "calibration-real": "train_real"}
 CALIBRATED = ("V_wide", "V_paper", "V_real")
-#: Decision records 0325's, 0161's, 0165's, 0166's, 0170's and 0172's candidates.
+#: Decision records 0325's, 0161's, 0165's, 0166's, 0170's, 0172's and 0175's candidates.
 SCHEMES = ("scaled", "scaled-colon", "scaled-colon-novel", "scaled-colon-novel-shift", "scaled2-colon-novel",
            "scaled2-colon-novel-shift", "binned-colon-novel", "binned-colon-novel-shift",
            "scaled2-colon-novel-gaps-shift", "binned-colon-novel-gaps-shift", "scaled2-colon-novel-depth-shift",
            "binned-colon-novel-depth-shift", "scaled2-colon-novel-misfit-shift", "binned-colon-novel-misfit-shift",
            "quant95-colon-novel-misfit-shift", "quant90-colon-novel-misfit-shift",
            "like50+binned-colon-novel-depth-shift", "like80+binned-colon-novel-depth-shift",
-           "like50+scaled2-colon-novel-misfit-shift", "like80+scaled2-colon-novel-misfit-shift")
+           "like50+scaled2-colon-novel-misfit-shift", "like80+scaled2-colon-novel-misfit-shift",
+           "binned-colon-novel-depth-fill-shift", "like50+binned-colon-novel-depth-fill-shift",
+           "like80+binned-colon-novel-depth-fill-shift")
 #: Decision record 0174: the scheme in use, kept unless some (scheme, known extent) pair holds all sixteen cells.
 KEEP = "like50+binned-colon-novel-depth-shift"
 #: Decision record 0167: by how many points of the lower real colon's precision the review by odds must beat the
@@ -66,7 +68,7 @@ NOISE_MM = (0.0, 0.5)
 SIGNIFICANT = 9
 #: The signals an estimate's interval may be scaled by, as columns of the estimates' table.
 SIGNALS = ("rims", "rims_doubtful", "gap_share", "length_mm", "span_mm", "spread", "radius_mm", "extent_mm",
-           "hole_depth_mm", "wall_misfit_mm")
+           "hole_depth_mm", "wall_misfit_mm", "rim_fill")
 #: The review rule (decision record 0325): flag at least this share of the estimates off by more than BIG in each
 #: real colon held out and in V_wide.
 REVIEW_RECALL, BIG = 0.75, 0.15
@@ -444,7 +446,7 @@ def table(data: list[tuple[str, Path]], method: CompletionMethod, path: Path) ->
     """Every calibration dataset's estimates, each row with its ``set``."""
     parts = []
     for name, folder in data:
-        cache = folder / f"completion-estimates-{sha256_file(path)[:12]}-{steps_version()}-signals4.csv"
+        cache = folder / f"completion-estimates-{sha256_file(path)[:12]}-{steps_version()}-signals5.csv"
         part = estimates(folder, method, cache).assign(manifest=name, set=MANIFESTS[name])
         if name == "calibration":         # its segments of the real training colons: seen by the network
             part.loc[part["colon_id"] >= REAL_IDS, "set"] = "train_real"

@@ -85,7 +85,7 @@ def one(method: CompletionMethod, points: np.ndarray) -> dict | None:
     for k, (point, normal) in enumerate(ends):
         near = nearest <= P.RIM_END_SHARE * len(dense) if k == 0 else nearest >= (1 - P.RIM_END_SHARE) * len(dense)
         x = vox[near]
-        rim = P._rim_plane(point, normal, x, P.RIM_BAND, P.RIM_CAP_DEG, P.RIM_MIN_SHARE)
+        rim, _ = P._rim_plane(point, normal, x, P.RIM_BAND, P.RIM_CAP_DEG, P.RIM_MIN_SHARE)
         fallback.append(P.pushed_out(point, normal, x))
         found.append(fallback[-1] if rim is None else rim)
         checked = rim is not None and rim[0] is not point          # a rim at the line's end keeps its plane

@@ -10,6 +10,7 @@ from scipy.spatial import cKDTree
 pytest.importorskip("torch")
 pytest.importorskip("monai")
 
+from colonbench.completion import intervals
 from colonbench.completion.gaps import wall_gaps
 from colonbench.completion.heatmap_centerline import extract_centerline  # noqa: E402
 from colonbench.completion.known_extent import known_length
@@ -328,6 +329,30 @@ def test_an_end_without_a_rim_keeps_the_line_plane_pushed_out_to_the_cloud():
     point, normal = ends[1]
     assert pushed_out(point, normal, pts[pts[:, 2] < 42.0])[0] is point
     assert pushed_out(point, normal, pts[pts[:, 2] < 42.05])[0] is point
+
+
+@pytest.mark.parametrize("wedge_deg, far_fill", [(0.0, (24, 24)), (135.0, (15, 16)), (210.0, (0, 0))])
+def test_each_end_records_how_much_of_a_ring_its_cut_rim_fills(wedge_deg, far_fill):
+    # the cut tube, its far end (z > 40) seen all round but for a wedge of `wedge_deg` degrees: the far rim fills
+    # the 24 sectors less the wedge's 9 (two of them cut by the wedge's edges may keep points: 15 or 16); a wedge
+    # of 210 degrees leaves 10 or 11, under the half a rim needs: no rim there, a fill of 0 (decision record 0175)
+    from colonbench.completion.planes import RIM_SECTORS, rim_planes
+
+    pts, _ = _cut_tube_cloud()
+    angle = np.degrees(np.arctan2(pts[:, 1] - 32.0, pts[:, 0] - 32.0)) % 360.0
+    pts = pts[(pts[:, 2] <= 40.0) | (angle >= wedge_deg)]
+    line = np.stack([np.full(25, 32.0), np.full(25, 32.0), np.linspace(18.0, 42.0, 25)], 1)
+    planes = rim_planes(line, pts)
+    assert planes.rims == (1 if wedge_deg > 180 else 2) and planes.fill[0] == 1.0
+    assert far_fill[0] <= planes.fill[1] * RIM_SECTORS <= far_fill[1]
+    *_, hm = tube_heatmaps(straight(63.0), UNIT)
+    est = from_heatmap(hm.target, UNIT, UNIT.to_mm(pts), centerline_vox=line)
+    assert est.signals["rim_fill"] == round(min(planes.fill), 4)
+    assert intervals.features(est.coverage, est.signals, ("unfilled",))[0] == pytest.approx(1 - est.signals["rim_fill"])
+    # planes the caller knows (a map's segment): no fill, its ends count as seen
+    known = from_heatmap(hm.target, UNIT, UNIT.to_mm(pts), centerline_vox=line, cut_rims=False)
+    assert "rim_fill" not in known.signals and known.signals["extent"] == "known"
+    assert intervals.features(known.coverage, known.signals, ("unfilled",))[0] == 0.0
 
 
 def test_the_wall_gaps_run_on_past_the_line_to_a_pushed_out_plane():
