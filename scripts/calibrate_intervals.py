@@ -48,16 +48,15 @@ ROOT = Path(__file__).resolve().parents[1] / "data_manifests"
 MANIFESTS = {"calibration": "V_wide", "calibration-paper": "V_paper", "calibration-paper-more": "V_paper",
              "validation-real": "V_real", "calibration-real": "train_real"}
 CALIBRATED = ("V_wide", "V_paper", "V_real")
-#: Decision records 0325's, 0161's, 0165's, 0166's, 0170's, 0172's and 0175's candidates.
+#: Decision records 0325's, 0161's, 0165's, 0166's, 0170's and 0172's candidates. 0175's three with the rims' fill
+#: (``...-depth-fill-shift``) held no more cells and left: the file records every candidate's cells.
 SCHEMES = ("scaled", "scaled-colon", "scaled-colon-novel", "scaled-colon-novel-shift", "scaled2-colon-novel",
            "scaled2-colon-novel-shift", "binned-colon-novel", "binned-colon-novel-shift",
            "scaled2-colon-novel-gaps-shift", "binned-colon-novel-gaps-shift", "scaled2-colon-novel-depth-shift",
            "binned-colon-novel-depth-shift", "scaled2-colon-novel-misfit-shift", "binned-colon-novel-misfit-shift",
            "quant95-colon-novel-misfit-shift", "quant90-colon-novel-misfit-shift",
            "like50+binned-colon-novel-depth-shift", "like80+binned-colon-novel-depth-shift",
-           "like50+scaled2-colon-novel-misfit-shift", "like80+scaled2-colon-novel-misfit-shift",
-           "binned-colon-novel-depth-fill-shift", "like50+binned-colon-novel-depth-fill-shift",
-           "like80+binned-colon-novel-depth-fill-shift")
+           "like50+scaled2-colon-novel-misfit-shift", "like80+scaled2-colon-novel-misfit-shift")
 #: Decision record 0174: the scheme in use, kept unless some (scheme, known extent) pair holds all sixteen cells.
 KEEP = "like50+binned-colon-novel-depth-shift"
 #: Decision record 0167: by how many points of the lower real colon's precision the review by odds must beat the
