@@ -62,9 +62,6 @@ KEEP = "like50+binned-colon-novel-depth-shift"
 #: Decision record 0167: by how many points of the lower real colon's precision the review by odds must beat the
 #: interval's score to replace it.
 ODDS_GAIN = 3.0
-#: Decision record 0177: what the review's odds read besides the interval scheme's features (the wall-gap share and
-#: the rims' fill, which rank a real colon's far-off estimates where its interval does not).
-ODDS_EXTRA = ("log_gap", "unfilled")
 NOISE_MM = (0.0, 0.5)
 #: Significant digits of every number the calibration file stores (:func:`rounded`).
 SIGNIFICANT = 9
@@ -393,8 +390,7 @@ def calibrate(df: pd.DataFrame, level: float, source: dict, keep: str | None = N
           + "\nknown length, held out:")
     summarise({known_choice: known_held[known_choice]}, level)
     by, width, review_report, reviews = review_rule(held[best], best)
-    odds_names = intervals.scale_features(best) + ODDS_EXTRA
-    odds = odds_rule(held[best], odds_names, by, review_report)
+    odds = odds_rule(held[best], intervals.scale_features(best), by, review_report)
     by_known, known_width, known_review, known_reviews = review_rule(known_held[known_choice],
                                                                      f"known length {known_choice}")
     w, c = unit_weights(cal_df), cal_df["colon"].to_numpy()
@@ -405,7 +401,7 @@ def calibrate(df: pd.DataFrame, level: float, source: dict, keep: str | None = N
     cal.review_known, cal.review_by, cal.review_by_known = known_width, by, by_known
     if odds is not None:
         cal.review_by, (cal.review_width, review_report) = "odds", odds
-        cal.review_odds = fit_odds(cal_df, odds_names)
+        cal.review_odds = fit_odds(cal_df, intervals.scale_features(best))
     reported = df[df["set"] == "train_real"]
     if len(reported):                    # never calibrated on: the calibration's intervals, held out by construction
         lo_hi = np.array([cal.interval(c, s) for c, s in zip(reported["estimate"], signals(reported))])
