@@ -98,7 +98,8 @@ def features(coverage: float, signals: dict, names) -> np.ndarray:
              "radius_ratio": g("radius_mm") / max(length, 1.0),
              "line_extent": length / g("extent_mm") if g("extent_mm") > 0 else 0.0,
              "log_gap": math.log10(max(g("gap_share"), 0.0) + 0.001), "depth": g("hole_depth_mm") / 10.0,
-             "misfit": g("wall_misfit_mm"), "unfilled": 1.0 - float(signals.get("rim_fill", 1.0)),
+             "misfit": g("wall_misfit_mm"),
+             "unfilled": 1.0 - float(signals["rim_fill"]) if signals.get("rim_fill") is not None else 0.0,
              "share_off": abs(math.log(g("length_share"))) if g("length_share") > 0 else 0.0}
     out = np.array([value[n] for n in names], float)
     return np.where(np.isfinite(out), out, 0.0)

@@ -76,8 +76,9 @@ class Planes(list):
     a cut rim of the cloud (:func:`rim_planes`; 0 for planes found otherwise), and ``doubtful``: how many of those
     cross the line more than :data:`RIM_DOUBT_MM` inside the cloud (:func:`cuts_into_cloud`). An end with no rim is
     one the cloud does not reach, or reaches raggedly: where the segment may go on unseen. ``fill``: each end's
-    share of the :data:`RIM_SECTORS` sectors its rim's points fill, 0 where it has no rim (decision record 0175: a
-    cloud that stops at the camera's reach can pass for a cut rim, but rarely all round)."""
+    share of the :data:`RIM_SECTORS` sectors its rim's points fill, 0 where it has no rim, () where no rim was
+    searched for (too few points; decision record 0175: a cloud that stops at the camera's reach can pass for a cut
+    rim, but rarely all round)."""
 
     rims: int = 0
     doubtful: int = 0

@@ -98,6 +98,7 @@ def signals_of(comp: Completion, line_mm: np.ndarray, inside_vox: np.ndarray, vo
     Parameters
     ----------
     comp : Completion
+        The completed segment, its planes and rims.
     line_mm : (m, 3) float
         The method's centerline between the planes, mm.
     inside_vox : (k, 3) float
@@ -111,10 +112,10 @@ def signals_of(comp: Completion, line_mm: np.ndarray, inside_vox: np.ndarray, vo
     -------
     dict
         ``rims``, ``rims_doubtful`` (:class:`~colonbench.completion.planes.Planes`), ``gap_share``, ``length_mm``
-        (``line_mm``'s length), ``span_mm`` (the line run on to the planes, :func:`~colonbench.completion.gaps.
-        reach_planes`, mm) and, where the planes were searched for, ``rim_fill``: the smaller of the two ends'
-        shares of a ring their cut rims fill, 0 where an end has none (decision record 0175); where the caller knows
-        them, ``extent``: ``known``.
+        (``line_mm``'s length), ``span_mm`` (the line run on to the planes,
+        :func:`~colonbench.completion.gaps.reach_planes`, mm) and, where the planes were searched for, ``rim_fill``:
+        the smaller of the two ends' shares of a ring their cut rims fill, 0 where an end has none or no rim was
+        searched for (decision record 0175); where the caller knows them, ``extent``: ``known``.
     """
     fill = getattr(comp.planes, "fill", ())
     out = {"rims": int(comp.rims), "rims_doubtful": int(getattr(comp.planes, "doubtful", 0)),

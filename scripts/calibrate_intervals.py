@@ -92,9 +92,13 @@ def calibration_data(root: Path, workers: int = 2) -> list[tuple[str, Path]]:
 
 
 def estimates(data: Path, method: CompletionMethod, cache: Path) -> pd.DataFrame:
-    """Completion's estimate of every validation segment at every noise level, with its signals (cached)."""
+    """Completion's estimate of every validation segment at every noise level, with its signals (cached; a cache
+    without a column of :data:`SIGNALS` is made again)."""
     if cache.is_file():
-        return pd.read_csv(cache)
+        cached = pd.read_csv(cache)
+        if set(SIGNALS) <= set(cached.columns):
+            return cached
+        print(f"{cache} lacks signals {sorted(set(SIGNALS) - set(cached.columns))}: made again", flush=True)
     _, picks = select(data, "validation")
     rows = []
     for name, indices in picks:
@@ -445,7 +449,7 @@ def table(data: list[tuple[str, Path]], method: CompletionMethod, path: Path) ->
     """Every calibration dataset's estimates, each row with its ``set``."""
     parts = []
     for name, folder in data:
-        cache = folder / f"completion-estimates-{sha256_file(path)[:12]}-{steps_version()}-signals5.csv"
+        cache = folder / f"completion-estimates-{sha256_file(path)[:12]}-{steps_version()}-signals6.csv"
         part = estimates(folder, method, cache).assign(manifest=name, set=MANIFESTS[name])
         if name == "calibration":         # its segments of the real training colons: seen by the network
             part.loc[part["colon_id"] >= REAL_IDS, "set"] = "train_real"

@@ -353,6 +353,13 @@ def test_each_end_records_how_much_of_a_ring_its_cut_rim_fills(wedge_deg, far_fi
     known = from_heatmap(hm.target, UNIT, UNIT.to_mm(pts), centerline_vox=line, cut_rims=False)
     assert "rim_fill" not in known.signals and known.signals["extent"] == "known"
     assert intervals.features(known.coverage, known.signals, ("unfilled",))[0] == 0.0
+    # a line that reaches both cuts keeps its own planes, and the rims there count all the same; a cloud too small to
+    # search has no rims and no fill
+    full = np.stack([np.full(41, 32.0), np.full(41, 32.0), np.linspace(10.5, 49.5, 41)], 1)
+    kept = rim_planes(full, pts)
+    assert np.allclose(kept[0][0], full[0]) and kept.fill[0] == 1.0
+    assert far_fill[0] <= kept.fill[1] * RIM_SECTORS <= far_fill[1]
+    assert rim_planes(line, pts[:40]).fill == ()
 
 
 def test_the_wall_gaps_run_on_past_the_line_to_a_pushed_out_plane():
