@@ -184,7 +184,7 @@ def main() -> None:
     held = helds[best]                                 # the review threshold on the chosen intervals (0223)
     threshold = review_threshold(held)
     adopted = threshold is not None and threshold > cal.review_known
-    print(f"\nthe map's own review threshold (decision record 0223): "
+    print("\nthe map's own review threshold (decision record 0223): "
           + (f"{100 * threshold:.1f} points, against the known extent's {100 * cal.review_known:.1f}: "
              f"{'adopted' if adopted else 'not adopted (no larger)'}\n{review_report(held, threshold).to_string()}"
              if threshold is not None else "none catches 75 % in each real colon"))
