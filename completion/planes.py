@@ -230,8 +230,10 @@ def _rim_plane(point: np.ndarray, normal: np.ndarray, x: np.ndarray, band: float
         outward, rim, refitted = fitted, _touching(x, fitted, band), True
     if not refitted:                     # the coarse rim was taken within twice the band
         rim = _touching(x, outward, band)
-    filled = int(_sectors(rim - point, outward[None], np.ones((1, len(rim)), bool))[0]) if len(rim) else 0
-    if len(rim) < RIM_MIN_TOUCHING or filled < min_share * RIM_SECTORS:
+    if len(rim) < RIM_MIN_TOUCHING:
+        return None, 0
+    filled = int(_sectors(rim - point, outward[None], np.ones((1, len(rim)), bool))[0])
+    if filled < min_share * RIM_SECTORS:
         return None, 0
     centre = rim.mean(axis=0)
     # where the line reaches the cut, its own plane is as good (and exact on the GT heatmap); where it
