@@ -16,12 +16,26 @@ SUFFIX = ".intervals.json"
 #: The calibration's fields by the JSON type they must have (the rest of :class:`Intervals`' fields are objects).
 _STRINGS = ("scheme", "review_by", "review_by_known")
 _NUMBERS = ("level", "review_width", "review_known")
+#: Significant digits of every number the calibration file stores (:func:`rounded`).
+SIGNIFICANT = 9
 
 
 def path_for(model: Path) -> Path:
     """The calibration file of a model file: ``<model stem>.intervals.json`` beside it."""
     model = Path(model)
     return model.with_name(model.name.removesuffix(".safetensors") + SUFFIX)
+
+
+def rounded(value, digits: int = SIGNIFICANT):
+    """``value`` (a calibration's JSON: dicts, lists, numbers, strings) with every float rounded to ``digits``
+    significant digits, so that the file and its id almost never change with the last bits another machine's kernels
+    give the fits (decision record 0168: 1e-15 to 1e-12 of each weight under another BLAS; a number within that of a
+    rounding boundary would still flip)."""
+    if isinstance(value, dict):
+        return {k: rounded(v, digits) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [rounded(v, digits) for v in value]
+    return float(f"{value:.{digits}g}") if isinstance(value, float) else value
 
 
 def fields_problem(raw) -> str:

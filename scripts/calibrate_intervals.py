@@ -1,27 +1,30 @@
 """Calibrate the completion method's coverage intervals on colons neither the network nor the calibration saw.
 
-    python scripts/calibrate_intervals.py [--data data] [--model small] [--level 0.9] [--workers 2]
+    python scripts/calibrate_intervals.py [--remake] [--data data] [--model small] [--level 0.9] [--workers 2]
 
-Generates the calibration's datasets where missing (``<data>/<manifest>``, the manifests' validation splits):
-data_manifests/calibration.yaml's widened colons (``V_wide``: no manifest trains on them; its segments of the real
-training colons are left out), calibration-paper.yaml's and calibration-paper-more.yaml's colons of the paper's
-generator (``V_paper``) and validation-real.yaml, the real validation colons gca00020 and gca00070 (``V_real``), with
-calibration-real.yaml's real training colons, which are reported, never calibrated on (the network saw them). Estimates
-every segment with the completion method (its intervals off, every signal on) at 0 and 0.5 mm noise, as the suites do
-(cached per model and steps in ``<data>/<manifest>``), then chooses by decision records 0172's and 0174's rule. Every
-scheme is measured leave-one-colon-out (a colon's estimates get the intervals of a calibration fitted on all the other
-colons), and so is each known-length candidate on it (``K0``: the scheme's features, ``K1``: with the share of the
-length the span covers; ``K2``, ``K3``: the same with a group of their own for the estimates the length shortened).
-Each (scheme, known extent) pair has sixteen cells (``V_wide``, ``V_paper`` and each real colon on its own, at each
-noise level, for both intervals); a cell holds within 85-95 % inside, each edge moved out by its binomial standard
-error. Of the pairs whose cells all hold, the scheme narrowest over the real colons with its narrowest known extent;
-else, for the shipped model, the scheme in use (``KEEP``, decision record 0174) with its known extent the least
-outside, and for a model of your own (``--model``) the pair the least outside. The review rules, each a score of the
-interval and its threshold, come from the same held-out intervals, for the segments and for the known extent (decision
-record 0163); the segments' review is by the fitted odds of a far-off estimate instead where, held out, those are right
-more often by more than 3 points (decision record 0167). The chosen scheme is fitted on all three sets and written
-beside the model (``<model>.intervals.json``, every number to 9 significant digits), with the known-length interval
-fitted on the same segments with their true lengths. Prints every scheme's held-out table.
+Calibrates on the model's table of calibration estimates (:mod:`colonbench.completion.caltable`, committed beside the
+shipped model; decision record 0178), so that the calibration file is the same on every machine. Where the model has
+none, or with ``--remake``, the table is made first: the calibration's datasets are generated where missing
+(``<data>/<manifest>``, the manifests' validation splits): data_manifests/calibration.yaml's widened colons (``V_wide``:
+no manifest trains on them; its segments of the real training colons are left out), calibration-paper.yaml's and
+calibration-paper-more.yaml's colons of the paper's generator (``V_paper``) and validation-real.yaml, the real
+validation colons gca00020 and gca00070 (``V_real``), with calibration-real.yaml's real training colons, which are
+reported, never calibrated on (the network saw them); every segment is estimated by the completion method (its intervals
+off, every signal on) at 0 and 0.5 mm noise, as the suites do, and ``--remake`` prints how the new table differs from
+the old. The choice is decision records 0172's and 0174's rule. Every scheme is measured leave-one-colon-out (a colon's
+estimates get the intervals of a calibration fitted on all the other colons), and so is each known-length candidate on
+it (``K0``: the scheme's features, ``K1``: with the share of the length the span covers; ``K2``, ``K3``: the same with a
+group of their own for the estimates the length shortened). Each (scheme, known extent) pair has sixteen cells
+(``V_wide``, ``V_paper`` and each real colon on its own, at each noise level, for both intervals); a cell holds within
+85-95 % inside, each edge moved out by its binomial standard error. Of the pairs whose cells all hold, the scheme
+narrowest over the real colons with its narrowest known extent; else, for the shipped model, the scheme in use
+(``KEEP``, decision record 0174) with its known extent the least outside, and for a model of your own (``--model``) the
+pair the least outside. The review rules, each a score of the interval and its threshold, come from the same held-out
+intervals, for the segments and for the known extent (decision record 0163); the segments' review is by the fitted odds
+of a far-off estimate instead where, held out, those are right more often by more than 3 points (decision record 0167).
+The chosen scheme is fitted on all three sets and written beside the model (``<model>.intervals.json``, every number to
+9 significant digits), with the known-length interval fitted on the same segments with their true lengths. Prints every
+scheme's held-out table.
 """
 
 from __future__ import annotations
@@ -35,7 +38,7 @@ import numpy as np
 import pandas as pd
 
 from colonbench.benchmark.evaluate import noisy, select
-from colonbench.completion import calfile, intervals, known_extent, likeness, review
+from colonbench.completion import calfile, caltable, intervals, known_extent, likeness, review
 from colonbench.completion.choice import choose_pair, shortfall
 from colonbench.completion.method import CompletionMethod, model_path, steps_version
 from colonbench.errors import ColonbenchError
@@ -63,8 +66,6 @@ KEEP = "like50+binned-colon-novel-depth-shift"
 #: interval's score to replace it.
 ODDS_GAIN = 3.0
 NOISE_MM = (0.0, 0.5)
-#: Significant digits of every number the calibration file stores (:func:`rounded`).
-SIGNIFICANT = 9
 #: The signals an estimate's interval may be scaled by, as columns of the estimates' table.
 SIGNALS = ("rims", "rims_doubtful", "gap_share", "length_mm", "span_mm", "spread", "radius_mm", "extent_mm",
            "hole_depth_mm", "wall_misfit_mm", "rim_fill")
@@ -427,34 +428,34 @@ def calibrate(df: pd.DataFrame, level: float, source: dict, keep: str | None = N
                                           for k, v in known_reviews.items()},
                   "known_held_out": {f"{s} {n:g} mm": {"inside": float(r["inside"]), "width": float(r["width"])}
                                      for (s, n), r in cells(known_held[known_choice]).iterrows()}}
-    cal = intervals.Intervals(**rounded(cal.to_json()))
+    cal = intervals.Intervals(**calfile.rounded(cal.to_json()))
     digest = hashlib.sha256(json.dumps(cal.to_json(), sort_keys=True).encode()).hexdigest()[:8]
     cal.source["id"] = f"{best}-{digest}"
     return cal
 
 
-def rounded(value, digits: int = SIGNIFICANT):
-    """``value`` (a calibration's JSON: dicts, lists, numbers, strings) with every float rounded to ``digits``
-    significant digits, so that the file and its id almost never change with the last bits another machine's kernels
-    give the fits (decision record 0168: 1e-15 to 1e-12 of each weight under another BLAS; a number within that of a
-    rounding boundary would still flip)."""
-    if isinstance(value, dict):
-        return {k: rounded(v, digits) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [rounded(v, digits) for v in value]
-    return float(f"{value:.{digits}g}") if isinstance(value, float) else value
-
-
-def table(data: list[tuple[str, Path]], method: CompletionMethod, path: Path) -> pd.DataFrame:
-    """Every calibration dataset's estimates, each row with its ``set``."""
+def table(data: list[tuple[str, Path]], method: CompletionMethod, path: Path, again: bool = False) -> pd.DataFrame:
+    """Every calibration dataset's estimates, each row with its ``manifest`` first (cached per dataset; ``again``:
+    estimated again, the caches made anew)."""
     parts = []
     for name, folder in data:
         cache = folder / f"completion-estimates-{sha256_file(path)[:12]}-{steps_version()}-signals6.csv"
-        part = estimates(folder, method, cache).assign(manifest=name, set=MANIFESTS[name])
-        if name == "calibration":         # its segments of the real training colons: seen by the network
-            part.loc[part["colon_id"] >= REAL_IDS, "set"] = "train_real"
-        parts.append(part)
+        if again:
+            cache.unlink(missing_ok=True)
+        part = estimates(folder, method, cache)
+        parts.append(part.assign(manifest=name)[["manifest", *part.columns]])
     return pd.concat(parts, ignore_index=True)
+
+
+def with_sets(df: pd.DataFrame) -> pd.DataFrame:
+    """``df`` with each row's ``set`` (:data:`MANIFESTS`): the widened manifest's segments of the real training colons
+    are ``train_real``."""
+    if not df["manifest"].isin(list(MANIFESTS)).all():
+        raise ColonbenchError(f"the table's rows must come from {', '.join(MANIFESTS)}, not "
+                              f"{', '.join(sorted(set(df['manifest']) - set(MANIFESTS)))}")
+    out = df.assign(set=df["manifest"].map(MANIFESTS))
+    out.loc[(out["manifest"] == "calibration") & (out["colon_id"] >= REAL_IDS), "set"] = "train_real"
+    return out
 
 
 def main() -> None:
@@ -463,14 +464,26 @@ def main() -> None:
     ap.add_argument("--model", default=None, help="model (default: the shipped one)")
     ap.add_argument("--level", type=float, default=intervals.LEVEL)
     ap.add_argument("--workers", type=int, default=2, help="processes generating the data")
+    ap.add_argument("--remake", action="store_true", help="generate the data and estimate every segment again, "
+                    "though the model has its table of calibration estimates")
     args = ap.parse_args()
     method = CompletionMethod(args.model)
     method.intervals, method.spread, method.hole_depth, method.misfit = None, True, True, True   # every signal
     path = model_path(args.model)
-    df = table(calibration_data(Path(args.data), args.workers), method, path)
+    saved = caltable.path_for(path, steps_version())
+    if args.remake or not saved.is_file():        # decision record 0178: calibrated on the table as read back
+        made = table(calibration_data(Path(args.data), args.workers), method, path, again=args.remake)
+        if saved.is_file():
+            print(f"estimated again, against {saved.name}: {caltable.compare(caltable.read(saved), made)}")
+        caltable.write(made, saved)
+        print(f"wrote {saved}")
+    else:
+        print(f"calibrating on {saved} (--remake: the segments estimated again)")
+    df = with_sets(caltable.read(saved, SIGNALS))
     source = {"model": path.name, "model_sha256": sha256_file(path), "steps": steps_version(),
               "manifests": {f"{m}.yaml": sha256_file(ROOT / f"{m}.yaml") for m in MANIFESTS},
-              "noise_mm": list(NOISE_MM), "estimates": int(df["set"].isin(CALIBRATED).sum())}
+              "noise_mm": list(NOISE_MM), "estimates": int(df["set"].isin(CALIBRATED).sum()),
+              "estimates_table": saved.name, "estimates_sha256": sha256_file(saved)}
     cal = calibrate(df, args.level, source, keep_for(args.model))
     out = calfile.path_for(path)
     out.write_text(json.dumps(cal.to_json(), indent=1) + "\n")

@@ -481,10 +481,10 @@ def test_a_band_too_small_in_effect_gets_the_pooled_quantiles():
     assert out["band_edges"] == [0.5, 1.5, 2.5]     # between the order statistics: no estimate lies on an edge
 
 
-def test_the_calibration_file_stores_numbers_the_last_bits_of_a_kernel_do_not_move(calibrate_intervals):
+def test_the_calibration_file_stores_numbers_the_last_bits_of_a_kernel_do_not_move():
     """Decision record 0168: another BLAS moves the fits' weights by 1e-15 to 1e-12 of themselves; the file keeps
     9 significant digits, so it and its id come out the same there."""
-    r = calibrate_intervals.rounded
+    r = calfile.rounded
     assert r({"w": [0.1234567891234, -2.0000000000004], "n": 3, "s": "x", "t": (1.0, 5e-20)}) == \
         {"w": [0.123456789, -2.0], "n": 3, "s": "x", "t": [1.0, 5e-20]}
     assert r(0.4516600607761735) == r(0.4516600607761776)            # two kernels' weight, as measured
