@@ -121,3 +121,26 @@ def test_the_script_calibrates_on_the_models_table_and_touches_no_data(tmp_path,
 def test_a_table_of_rows_from_no_calibration_dataset_is_refused():
     with pytest.raises(Exception, match="must come from"):
         script().with_sets(a_table().assign(manifest="paper"))
+
+
+def test_remake_estimates_again_says_what_moved_and_rewrites_the_table(tmp_path, monkeypatch, capsys):
+    """--remake makes the table again though one is there, prints how it differs from the old one row by row, and
+    calibrates on the new one as read back."""
+    module = script()
+    model = tmp_path / "mine.safetensors"
+    shutil.copy(model_path(None), model)
+    old = a_table().assign(**{s: 0.0 for s in module.SIGNALS if s not in a_table()})
+    saved = caltable.path_for(model, steps_version())
+    caltable.write(old, saved)
+    new = old.copy()
+    new.loc[2, "estimate"] += 0.05
+    seen = {}
+    monkeypatch.setattr(module, "calibration_data", lambda root, workers: [("calibration", tmp_path)])
+    monkeypatch.setattr(module, "table", lambda data, method, path, again: seen.setdefault("again", again) and new)
+    monkeypatch.setattr(module, "calibrate", lambda df, level, source, keep: seen.update(df=df) or intervals.Intervals(
+        "marginal", level, {"all": {"low": -0.1, "high": 0.1, "n": 6}}, 0.3, {**source, "id": "marginal-test"}))
+    monkeypatch.setattr(sys, "argv", ["calibrate_intervals.py", "--model", str(model), "--remake"])
+    module.main()
+    out = capsys.readouterr().out
+    assert seen["again"] is True and "'moved': {'1e-06': 1, '0.01': 1}" in out and f"wrote {saved}" in out
+    assert caltable.read(saved).loc[2, "estimate"] == new.loc[2, "estimate"] == seen["df"].loc[2, "estimate"]
