@@ -13,6 +13,10 @@ import math
 
 import numpy as np
 
+#: Values closer than this share of their size count as tied where a cut is put between values
+#: (:func:`weighted_quantile`): another machine's kernels move a value by about 1e-16 of it.
+TIED = 1e-9
+
 
 def conformal_quantiles(residuals, level: float) -> tuple[float, float]:
     """The split-conformal low and high quantiles of ``true - estimated`` residuals (fractions)."""
@@ -70,14 +74,19 @@ def effective_size(weights) -> float:
 
 def weighted_quantile(values, weights, q: float = 0.5, between: bool = False) -> float:
     """The weighted ``q``-quantile of ``values`` (the first value at which the weights below reach ``q``);
-    ``between``: the midpoint of it and the next larger order statistic, a cut no value lies on unless tied."""
+    ``between``: the midpoint of it and the next value larger than it by more than :data:`TIED` of its size, a cut
+    no value lies on or within float noise of, ties included (the quantile itself plus that margin where no value
+    is larger)."""
     v, w = np.asarray(values, float), np.asarray(weights, float)
     order = np.argsort(v, kind="stable")
     cum = np.cumsum(w[order]) / w.sum()
     k = min(int(np.searchsorted(cum, q - 1e-12)), len(v) - 1)
-    if between and k + 1 < len(v):
-        return float((v[order][k] + v[order][k + 1]) / 2.0)
-    return float(v[order][k])
+    value = float(v[order][k])
+    if not between:
+        return value
+    margin = TIED * max(1.0, abs(value))
+    larger = v[order][k + 1:][v[order][k + 1:] > value + margin]
+    return float((value + larger[0]) / 2.0) if len(larger) else value + margin
 
 
 def shifted_quantiles(z: np.ndarray, level: float, weights, colons) -> tuple[float, float, dict]:
