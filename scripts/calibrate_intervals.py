@@ -2,9 +2,9 @@
 
     python scripts/calibrate_intervals.py [--remake] [--data data] [--model small] [--level 0.9] [--workers 2]
 
-Calibrates on the model's table of calibration estimates (:mod:`colonbench.completion.caltable`, committed beside the
-shipped model; decision record 0178), so that the calibration file is the same on every machine. Where the model has
-none, or with ``--remake``, the table is made first: the calibration's datasets are generated where missing
+Calibrates on the model's table of calibration estimates beside it (:mod:`colonbench.completion.caltable`, decision
+record 0178): the same table gives the same calibration file on any machine. Where the model has none, or with
+``--remake``, the table is made first: the calibration's datasets are generated where missing
 (``<data>/<manifest>``, the manifests' validation splits): data_manifests/calibration.yaml's widened colons (``V_wide``:
 no manifest trains on them; its segments of the real training colons are left out), calibration-paper.yaml's and
 calibration-paper-more.yaml's colons of the paper's generator (``V_paper``) and validation-real.yaml, the real
@@ -92,14 +92,8 @@ def calibration_data(root: Path, workers: int = 2) -> list[tuple[str, Path]]:
     return out
 
 
-def estimates(data: Path, method: CompletionMethod, cache: Path) -> pd.DataFrame:
-    """Completion's estimate of every validation segment at every noise level, with its signals (cached; a cache
-    without a column of :data:`SIGNALS` is made again)."""
-    if cache.is_file():
-        cached = pd.read_csv(cache)
-        if set(SIGNALS) <= set(cached.columns):
-            return cached
-        print(f"{cache} lacks signals {sorted(set(SIGNALS) - set(cached.columns))}: made again", flush=True)
+def estimates(data: Path, method: CompletionMethod) -> pd.DataFrame:
+    """Completion's estimate of every validation segment of ``data`` at every noise level, with its signals."""
     _, picks = select(data, "validation")
     rows = []
     for name, indices in picks:
@@ -118,9 +112,7 @@ def estimates(data: Path, method: CompletionMethod, cache: Path) -> pd.DataFrame
                                  **{k: est.signals.get(k, np.nan) for k in SIGNALS}})
         print(f"{name}: {len(rows)} estimates", flush=True)
     out = pd.DataFrame(rows)
-    out = out[np.isfinite(out["estimate"])]             # an empty completed surface gives no estimate
-    out.to_csv(cache, index=False)
-    return out
+    return out[np.isfinite(out["estimate"])]            # an empty completed surface gives no estimate
 
 
 def signals_of(row) -> dict:
@@ -434,17 +426,10 @@ def calibrate(df: pd.DataFrame, level: float, source: dict, keep: str | None = N
     return cal
 
 
-def table(data: list[tuple[str, Path]], method: CompletionMethod, path: Path, again: bool = False) -> pd.DataFrame:
-    """Every calibration dataset's estimates, each row with its ``manifest`` first (cached per dataset; ``again``:
-    estimated again, the caches made anew)."""
-    parts = []
-    for name, folder in data:
-        cache = folder / f"completion-estimates-{sha256_file(path)[:12]}-{steps_version()}-signals6.csv"
-        if again:
-            cache.unlink(missing_ok=True)
-        part = estimates(folder, method, cache)
-        parts.append(part.assign(manifest=name)[["manifest", *part.columns]])
-    return pd.concat(parts, ignore_index=True)
+def table(data: list[tuple[str, Path]], method: CompletionMethod) -> pd.DataFrame:
+    """Every calibration dataset's estimates (:func:`estimates`), each row with its ``manifest`` first."""
+    parts = [estimates(folder, method).assign(manifest=name) for name, folder in data]
+    return pd.concat([p[["manifest", *p.columns[:-1]]] for p in parts], ignore_index=True)
 
 
 def with_sets(df: pd.DataFrame) -> pd.DataFrame:
@@ -452,10 +437,17 @@ def with_sets(df: pd.DataFrame) -> pd.DataFrame:
     are ``train_real``."""
     if not df["manifest"].isin(list(MANIFESTS)).all():
         raise ColonbenchError(f"the table's rows must come from {', '.join(MANIFESTS)}, not "
-                              f"{', '.join(sorted(set(df['manifest']) - set(MANIFESTS)))}")
+                              f"{', '.join(sorted(set(df['manifest'].astype(str)) - set(MANIFESTS)))}")
     out = df.assign(set=df["manifest"].map(MANIFESTS))
     out.loc[(out["manifest"] == "calibration") & (out["colon_id"] >= REAL_IDS), "set"] = "train_real"
     return out
+
+
+def table_source(path: Path) -> dict:
+    """What a model's table of calibration estimates is made of (:func:`caltable.write`): the model file's and the
+    manifests' sha256, the method's steps and the signals."""
+    return {"model_sha256": sha256_file(path), "steps": steps_version(), "signals": list(SIGNALS),
+            "manifests": {f"{m}.yaml": sha256_file(ROOT / f"{m}.yaml") for m in MANIFESTS}}
 
 
 def main() -> None:
@@ -471,18 +463,22 @@ def main() -> None:
     method.intervals, method.spread, method.hole_depth, method.misfit = None, True, True, True   # every signal
     path = model_path(args.model)
     saved = caltable.path_for(path, steps_version())
+    made_of = table_source(path)
     if args.remake or not saved.is_file():        # decision record 0178: calibrated on the table as read back
-        made = table(calibration_data(Path(args.data), args.workers), method, path, again=args.remake)
+        made = table(calibration_data(Path(args.data), args.workers), method)
         if saved.is_file():
-            print(f"estimated again, against {saved.name}: {caltable.compare(caltable.read(saved), made)}")
-        caltable.write(made, saved)
+            try:
+                print(f"estimated again, against {saved.name}: {caltable.compare(caltable.read(saved), made)}")
+            except ColonbenchError as exc:
+                print(f"the table before could not be read ({exc}): not compared")
+        caltable.write(made, saved, made_of)
         print(f"wrote {saved}")
     else:
         print(f"calibrating on {saved} (--remake: the segments estimated again)")
-    df = with_sets(caltable.read(saved, SIGNALS))
-    source = {"model": path.name, "model_sha256": sha256_file(path), "steps": steps_version(),
-              "manifests": {f"{m}.yaml": sha256_file(ROOT / f"{m}.yaml") for m in MANIFESTS},
-              "noise_mm": list(NOISE_MM), "estimates": int(df["set"].isin(CALIBRATED).sum()),
+    df = with_sets(caltable.read(saved, SIGNALS, made_of))
+    source = {"model": path.name, "model_sha256": made_of["model_sha256"], "steps": made_of["steps"],
+              "manifests": made_of["manifests"], "noise_mm": list(NOISE_MM),
+              "estimates": int(df["set"].isin(CALIBRATED).sum()),
               "estimates_table": saved.name, "estimates_sha256": sha256_file(saved)}
     cal = calibrate(df, args.level, source, keep_for(args.model))
     out = calfile.path_for(path)
@@ -491,4 +487,7 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    try:
+        main()
+    except ColonbenchError as exc:
+        raise SystemExit(f"calibrate_intervals: {exc}") from None

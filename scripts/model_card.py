@@ -102,6 +102,8 @@ def intervals_rows(model: Path) -> list[str]:
            f"for {src.get('steps')}, {how}, calibrated by `python scripts/calibrate_intervals.py` on "
            f"{' and '.join(f'`{name}` (sha256 `{sha[:16]}...`)' for name, sha in manifests.items())}, "
            f"{src.get('estimates')} estimates at noise {', '.join(f'{x:g}' for x in src.get('noise_mm', []))} mm"
+           + (f" (the table beside the model, `{src['estimates_table']}`, sha256 `{src['estimates_sha256'][:16]}...`)"
+              if src.get("estimates_table") else "")
            + (f" (chosen {held}; left out: {src.get('not_calibrated_on')})" if held else "")
            + f"; {_flags(cal.review_by, cal.review_width)} flags its estimate for review"
            + (f" (an estimate of known extent, {who}: "
