@@ -6,7 +6,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from colonbench.completion import calfile, intervals, likeness
+from colonbench.completion import calfile, conformal, intervals, likeness
 from colonbench.errors import InputError
 
 SCHEME = "like50+binned-colon-novel"
@@ -161,3 +161,22 @@ def test_the_calibration_script_tells_the_classifier_which_estimates_are_paper_l
     assert [intervals.looks_like(cal.like, 0.5, s) for s in sig] == list(like)
     plain = calibrate_intervals.fit_scheme(part, est, sig, "binned-colon-novel", 0.3, 0.9, w, None)
     assert plain.to_json() == intervals.fit(true, est, sig, "binned-colon-novel", 0.3, weights=w).to_json()
+
+
+
+def test_a_band_edge_lies_between_distinct_values_even_where_the_quantile_falls_in_a_tie():
+    """conformal.weighted_quantile(between=True): where the quantile falls within a run of tied values, the cut lies
+    midway to the next distinct value, so an estimate at the tied value, moved by another machine's last bits, keeps
+    its band (on one machine a cut on the tie put a test estimate 1e-16 above it into an empty band)."""
+    v = np.array([-4.2] * 50 + [-1.6] * 50)
+    w = np.full(100, 0.01)
+    assert conformal.weighted_quantile(v, w, 0.25, between=True) == pytest.approx(-2.9)
+    assert conformal.weighted_quantile(v + np.r_[np.zeros(99), 1e-15], w, 0.25, between=True) == pytest.approx(-2.9)
+    top = conformal.weighted_quantile(v, w, 0.75, between=True)               # no larger value: just above the tie
+    assert -1.6 < top < -1.6 + 1e-8
+    edges = [conformal.weighted_quantile(v, w, q, between=True) for q in (0.25, 0.5, 0.75)]
+    moved = np.array([-4.2 * (1 + 1e-16), -4.2 * (1 - 1e-15), -1.6 * (1 + 1e-15), -1.6 * (1 - 1e-15)])
+    assert edges[:2] == [pytest.approx(-2.9)] * 2                           # the median falls in the lower tie too
+    assert conformal.band_of(edges, moved).tolist() == conformal.band_of(edges, [-4.2, -4.2, -1.6, -1.6]).tolist() \
+        == [0, 0, 2, 2]
+    assert conformal.weighted_quantile([0.5, 1.5, 2.5, 3.5], [1, 1, 1, 1], 0.25, between=True) == 1.0
