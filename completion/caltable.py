@@ -108,9 +108,9 @@ def read(path: Path, signals=(), made_of: dict | None = None) -> pd.DataFrame:
     if missing:
         raise InputError(f"{path}: lacks the columns {', '.join(missing)} (made by an older scripts/"
                          "calibrate_intervals.py? make it again with --remake)")
-    if table.duplicated(list(KEY)).any():
-        raise InputError(f"{path}: {int(table.duplicated(list(KEY)).sum())} rows repeat a (manifest, shard, index, "
-                         "noise_mm) already there")
+    repeated = int(table.duplicated(list(KEY)).sum())
+    if repeated:
+        raise InputError(f"{path}: {repeated} rows repeat a (manifest, shard, index, noise_mm) already there")
     values = table[["true", "estimate"]].apply(pd.to_numeric, errors="coerce").to_numpy(float)
     if not (np.isfinite(values).all() and (values >= 0).all() and (values <= 1).all()):
         raise InputError(f"{path}: every true and estimated coverage must be a fraction in [0, 1]")

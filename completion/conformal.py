@@ -79,13 +79,13 @@ def weighted_quantile(values, weights, q: float = 0.5, between: bool = False) ->
     is larger)."""
     v, w = np.asarray(values, float), np.asarray(weights, float)
     order = np.argsort(v, kind="stable")
-    cum = np.cumsum(w[order]) / w.sum()
+    ranked, cum = v[order], np.cumsum(w[order]) / w.sum()
     k = min(int(np.searchsorted(cum, q - 1e-12)), len(v) - 1)
-    value = float(v[order][k])
+    value = float(ranked[k])
     if not between:
         return value
     margin = TIED * max(1.0, abs(value))
-    larger = v[order][k + 1:][v[order][k + 1:] > value + margin]
+    larger = ranked[k + 1:][ranked[k + 1:] > value + margin]
     return float((value + larger[0]) / 2.0) if len(larger) else value + margin
 
 
