@@ -100,11 +100,17 @@ def publish(run_dir, suite, methods=None, track: str | None = None) -> Path:
     """Copy a finished run of a suite into the shipped results of its track (:func:`folder`): all of it (replacing
     what was there), or only ``methods``, whose rows replace their shipped ones while the other methods' stay.
 
+    Some ``methods`` may come from a run whose data verified within tolerance of the published data (decision record
+    0327): each keeps its own suite record (``methods.<name>.suite`` in ``run.json``: the check, the samples decided
+    otherwise, the content hash of its data), and the run's record stays that of the data the other rows came from.
+    The whole run is published only from the published data themselves (bit-identical).
+
     Raises
     ------
     InputError
-        The run is not of this suite, not made on its published data (bit-identical), not of ``track`` (where
-        given), not finished, or lacks a method asked for.
+        The run is not of this suite, its data did not verify against the suite's published signature (or, for the
+        whole run, are not bit-identical to the published data), it is not of ``track`` (where given), not finished,
+        or lacks a method asked for.
     """
     run_dir = Path(run_dir)
     run = read_run(run_dir)
@@ -113,8 +119,11 @@ def publish(run_dir, suite, methods=None, track: str | None = None) -> Path:
                          f"{tracks.label(track)}")
     track = tracks.of_run(run)
     rec = run.get("suite") or {}
-    if rec.get("id") != suite.id or not rec.get("verified") or rec.get("sha256") != suite.sha256:
-        raise InputError(f"{run_dir}: not a run of {suite.id} on its published data (its suite record: "
+    exact = rec.get("sha256") == suite.sha256
+    if rec.get("id") != suite.id or not rec.get("verified") or not (exact or methods is not None and (
+            rec.get("signature"), rec.get("published_sha256")) == (suite.signature, suite.sha256)):
+        raise InputError(f"{run_dir}: not a run of {suite.id} on its published data (bit-identical"
+                         f"{'' if methods is None else ', or within tolerance of its signature'}; its suite record: "
                          f"{rec or 'none'})")
     if not run.get("complete"):
         raise InputError(f"{run_dir}: not finished")
@@ -123,10 +132,19 @@ def publish(run_dir, suite, methods=None, track: str | None = None) -> Path:
         if missing:
             raise InputError(f"{run_dir}: holds no run of {', '.join(missing)}")
         old = read_run(folder(suite, track)) if (folder(suite, track) / RUN_FILE).is_file() else {**run, "methods": {}}
+        if not exact and (old.get("suite") or {}).get("sha256") != suite.sha256:
+            raise InputError(f"{run_dir}: its data are within tolerance of {suite.id}'s, and there are no shipped "
+                             f"results made on the published data to add its rows to ({folder(suite, track)})")
         # each re-published method keeps the versions and machine it ran with
+        # and the data it ran on, where they are not the run's own (0327)
         fresh = {m: {**run["methods"][m], "versions": run.get("versions"), "environment": run.get("environment")}
                  for m in methods}
-        run = {**old, "methods": {**old["methods"], **fresh}, "suite": run["suite"]}
+        data = old.get("suite") or rec
+        for m in methods:
+            fresh[m].pop("suite", None)
+            if rec.get("sha256") != data.get("sha256"):
+                fresh[m]["suite"] = {k: rec.get(k) for k in ("check", "bit_identical", "tie_samples", "sha256")}
+        run = {**old, "methods": {**old["methods"], **fresh}, "suite": data}
     return write_results(run_dir, run, folder(suite, track), methods)
 
 

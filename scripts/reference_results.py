@@ -4,7 +4,9 @@
                                         [--out runs/reference] [--methods completion]
 
 Each suite's data is generated where missing (and checked against its
-published hash), the built-in methods are evaluated by colonbench benchmark
+published signature; a whole run is published only where the data are
+bit-identical to the published data, the rows of --methods also where they
+are within tolerance of them), the built-in methods are evaluated by colonbench benchmark
 into OUT/runs/<suite>/ (the points track) and OUT@length/runs/<suite>/ (the
 known-length track; resumable: rerun to finish), and each finished run is
 copied into benchmark/shipped_results/<suite>/ or <suite>@length/
