@@ -9,6 +9,7 @@ import numbers
 from pathlib import Path
 
 from colonbench.completion.intervals import Intervals
+from colonbench.completion.modelfile import beside
 from colonbench.errors import InputError
 
 #: Suffix of a model's calibration file.
@@ -22,8 +23,7 @@ SIGNIFICANT = 9
 
 def path_for(model: Path) -> Path:
     """The calibration file of a model file: ``<model stem>.intervals.json`` beside it."""
-    model = Path(model)
-    return model.with_name(model.name.removesuffix(".safetensors") + SUFFIX)
+    return beside(model, SUFFIX)
 
 
 def rounded(value, digits: int = SIGNIFICANT):

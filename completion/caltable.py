@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from colonbench.completion.modelfile import beside
 from colonbench.errors import InputError
 from colonbench.shards.schema import sha256_file
 
@@ -32,9 +33,7 @@ MOVES = (1e-6, 0.01)
 def path_for(model: Path, steps: str) -> Path:
     """The table of a model file (its path) and the method's steps (``steps=10``), beside the model: another model
     at the same path, or other steps, have a table of their own."""
-    model = Path(model)
-    return model.with_name(f"{model.name.removesuffix('.safetensors')}.calibration-estimates-"
-                           f"{sha256_file(model)[:12]}-{steps}.csv")
+    return beside(model, f".calibration-estimates-{sha256_file(model)[:12]}-{steps}.csv")
 
 
 def made_of_path(path: Path) -> Path:

@@ -9,6 +9,13 @@ from pathlib import Path
 DEFAULT_MODEL = "small"
 
 
+def beside(model, suffix: str) -> Path:
+    """A file beside a model file that belongs to it: ``<model stem><suffix>`` (``small.safetensors`` ->
+    ``small<suffix>``)."""
+    model = Path(model)
+    return model.with_name(model.name.removesuffix(".safetensors") + suffix)
+
+
 def shipped_model(name: str = DEFAULT_MODEL) -> Path:
     """Path of a model that ships in the package: ``colonbench/completion/models/<name>.safetensors``."""
     return Path(str(resources.files("colonbench.completion").joinpath(f"models/{name}.safetensors")))
