@@ -63,7 +63,8 @@ def main() -> None:
     check = seq["video_check"]
     print(f"{suite.id}: {suite.samples} samples from {seq['depth_frames']} frames of {seq['faces']} faces, "
           f"{seq['fused_frames']} fused (video check: {check['reach']:.1%} reached, "
-          f"{'passed' if check['passed'] else 'refused'}); {wall:.1f} s wall: layout and hashes {entry['digest_seconds']:.1f} s, {stages}, "
+          f"{'passed' if check['passed'] else 'refused'}); {wall:.1f} s wall: layout and hashes "
+          f"{entry['digest_seconds']:.1f} s, {stages}, "
           f"lock and signature {wall - entry['digest_seconds'] - sum(seq['seconds'].values()):.1f} s")
 
 

@@ -105,7 +105,8 @@ def main(argv=None):
     print("  seconds per segment by stage: " + ", ".join(f"{st} {v / n:.3f}" for st, v in stages.items())
           + f"; estimate {t_estimate / n:.3f}; with reading and scoring {wall / n:.3f} (threads: {args.threads})")
     if setup is not None:
-        print(f"  first two calls, with the method's set-up (the network's, or open3d's import): {setup:.2f} s (once per process, not in the figures above)")
+        print(f"  first two calls, with the method's set-up (the network's, or open3d's import): {setup:.2f} s "
+              "(once per process, not in the figures above)")
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     print(f"  peak memory {peak:.0f} MiB")
     if args.json:

@@ -92,7 +92,8 @@ def bench(args, pool: int) -> None:
         n = args.steps
         peak = (torch.cuda.max_memory_allocated(dev) if dev.type == "cuda"
                 else resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024) / 2**20
-        print(f"{precision:>9} {bs:>5} {1e3 * t_h / n:>12.1f} {1e3 * t_s / n:>9.1f} {bs * n / (t_h + t_s):>10.1f} {peak:>9.0f}")
+        print(f"{precision:>9} {bs:>5} {1e3 * t_h / n:>12.1f} {1e3 * t_s / n:>9.1f} "
+              f"{bs * n / (t_h + t_s):>10.1f} {peak:>9.0f}")
 
 
 if __name__ == "__main__":

@@ -192,13 +192,15 @@ def _trained_rows(args, config, meta) -> list[str]:
             f"share {tc.get('augment_prob')}, axis flips {'on' if tc.get('flips') else 'off'}, seed {tc.get('seed')}"
             + (f", repeat {tc['repeat']}" if tc.get("repeat") else "")
             + f", forward pass in {tc.get('precision', 'fp32')} |",
-            f"| selected | epoch {meta.get('epoch')}, {meta.get('steps')} steps, {meta.get('samples_seen')} samples seen, "
+            f"| selected | epoch {meta.get('epoch')}, {meta.get('steps')} steps, "
+            f"{meta.get('samples_seen')} samples seen, "
             f"validation L2 {meta.get('val_l2'):.5f} |",
             f"| hardware | {args.hardware} ({meta.get('device')}, {meta.get('world_size')} process(es)) |",
             f"| wall time | {meta.get('train_seconds', 0) / 60:.0f} min of training to the selected checkpoint |",
             f"| software | colonbench {meta.get('colonbench')}, torch {meta.get('torch')} |",
             f"| grid | {meta.get('grid_options')} |", "",
-            "## Training log", "", "| epoch | steps | train L2 | validation L2 | lr | minutes |", "|---|---|---|---|---|---|"]
+            "## Training log", "", "| epoch | steps | train L2 | validation L2 | lr | minutes |",
+            "|---|---|---|---|---|---|"]
     out += [f"| {r['epoch']} | {r['steps']} | {r['train_l2']} | {r['val_l2']} | {r['lr']} | "
             f"{float(r['seconds']) / 60:.0f} |" for r in rows]
     return out
@@ -222,7 +224,8 @@ def _figures(args, meta) -> list[str]:
                        f"{e['coverage_mae_points']:.2f} | {e['coverage_median_abs_points']:.2f} | "
                        f"{e['coverage_bias_points']:+.2f} | {m['holes_precision_2mm']:.2f} / "
                        f"{m['holes_recall_2mm']:.2f} | {m['centerline_precision_2mm']:.2f} / "
-                       f"{m['centerline_recall_2mm']:.2f} | {e.get('estimate_per_segment', e['wall_per_segment']):.2f} | "
+                       f"{m['centerline_recall_2mm']:.2f} | "
+                       f"{e.get('estimate_per_segment', e['wall_per_segment']):.2f} | "
                        + (f"{e['constant_guess_mae_points']:.2f} |" if e.get("constant_guess_mae_points") else "- |"))
     name = Path(args.model).stem
     if args.evaluated_as:
@@ -253,7 +256,8 @@ def leaderboard_rows(path, version: str) -> list[str]:
 
     for r in rows:
         out.append(f"| {r['noise_mm']:g} | {r['method']}{' *' if r['reference'] else ''} | "
-                   f"{f(r['coverage_mae'], '.2f')} | {f(r['coverage_median'], '.2f')} | {f(r['coverage_bias'], '+.2f')} | "
+                   f"{f(r['coverage_mae'], '.2f')} | {f(r['coverage_median'], '.2f')} | "
+                   f"{f(r['coverage_bias'], '+.2f')} | "
                    f"{f(r['coverage_q95'], '.1f')} | {f(r['holes_precision_2mm_mean'], '.2f')} / "
                    f"{f(r['holes_recall_2mm_mean'], '.2f')} | {f(r['centerline_precision_2mm_mean'], '.2f')} / "
                    f"{f(r['centerline_recall_2mm_mean'], '.2f')} | {f(r['seconds'], '.2f')} |")
