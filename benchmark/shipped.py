@@ -46,6 +46,8 @@ TOLERANCE = 1e-6
 #: moved, by 8e-5 (completion) and 1e-4 (thresholding); none of demo-v1's 48.
 FLIPPED_ROWS = 0.02
 FLIPPED_STEP = 2e-3
+#: What a method published from data within tolerance keeps of its run's suite record (:func:`publish`).
+OWN_DATA = ("check", "bit_identical", "tie_samples", "redrawn_samples", "diverged_samples", "sha256")
 #: Methods whose coverage no float noise moves measurably (docs/benchmark.md, Results on another machine).
 EXACT = ("constant", "unwrap-pca", "unwrap-gt")
 #: Points a threshold metric (a precision or recall: a share of points within 1 or 2 mm) or a point count may move
@@ -120,30 +122,38 @@ def publish(run_dir, suite, methods=None, track: str | None = None) -> Path:
     track = tracks.of_run(run)
     rec = run.get("suite") or {}
     exact = rec.get("sha256") == suite.sha256
-    if rec.get("id") != suite.id or not rec.get("verified") or not (exact or methods is not None and (
-            rec.get("signature"), rec.get("published_sha256")) == (suite.signature, suite.sha256)):
+    near = (methods is not None and suite.task != "colon" and rec.get("check") == "within tolerance"
+            and not rec.get("bit_identical")
+            and (rec.get("signature"), rec.get("published_sha256")) == (suite.signature, suite.sha256))
+    if rec.get("id") != suite.id or not rec.get("verified") or not (exact or near):
         raise InputError(f"{run_dir}: not a run of {suite.id} on its published data (bit-identical"
-                         f"{'' if methods is None else ', or within tolerance of its signature'}; its suite record: "
-                         f"{rec or 'none'})")
+                         f"{', or within tolerance of its signature' if methods and suite.task != 'colon' else ''}; "
+                         f"its suite record: {rec or 'none'})")
     if not run.get("complete"):
         raise InputError(f"{run_dir}: not finished")
     if methods is not None:
         missing = sorted(set(methods) - set(run["methods"]))
         if missing:
             raise InputError(f"{run_dir}: holds no run of {', '.join(missing)}")
-        old = read_run(folder(suite, track)) if (folder(suite, track) / RUN_FILE).is_file() else {**run, "methods": {}}
-        if not exact and (old.get("suite") or {}).get("sha256") != suite.sha256:
+        there = folder(suite, track)
+        if (there / RUN_FILE).is_file():
+            old = read_run(there)
+            if (old.get("suite") or {}).get("sha256") != suite.sha256:
+                raise InputError(f"{there}: its shipped results were not made on {suite.id}'s published data: "
+                                 "publish a whole run made on them first")
+        elif exact:
+            old = {**run, "methods": {}}
+        else:
             raise InputError(f"{run_dir}: its data are within tolerance of {suite.id}'s, and there are no shipped "
-                             f"results made on the published data to add its rows to ({folder(suite, track)})")
+                             f"results made on the published data to add its rows to ({there})")
         # each re-published method keeps the versions and machine it ran with
         # and the data it ran on, where they are not the run's own (0327)
         fresh = {m: {**run["methods"][m], "versions": run.get("versions"), "environment": run.get("environment")}
                  for m in methods}
         data = old.get("suite") or rec
         for m in methods:
-            fresh[m].pop("suite", None)
             if rec.get("sha256") != data.get("sha256"):
-                fresh[m]["suite"] = {k: rec.get(k) for k in ("check", "bit_identical", "tie_samples", "sha256")}
+                fresh[m]["suite"] = {k: rec[k] for k in OWN_DATA if k in rec}
         run = {**old, "methods": {**old["methods"], **fresh}, "suite": data}
     return write_results(run_dir, run, folder(suite, track), methods)
 
@@ -271,6 +281,14 @@ def reproduction(run_dir, suite, methods, track: str = tracks.DEFAULT) -> dict:
         ours = read_rows(Path(run_dir) / "results" / f"{m}.csv")
         out[m] = differences(ours, ref, counted=m not in EXACT)
     return out
+
+
+def own_data(suite, method: str, track: str = tracks.DEFAULT) -> dict | None:
+    """The suite record of the data a shipped method's rows were made on, where they are not the published data
+    (:func:`publish` from data within tolerance); None where they are, or where the method has no shipped rows."""
+    item = load(suite, track=track)
+    own = ((item[0]["methods"].get(method) or {}).get("suite") if item else None) or None
+    return None if own is None or own.get("bit_identical") else own
 
 
 def shipped_items(suite, exclude=(), track: str = tracks.DEFAULT) -> list:

@@ -107,11 +107,12 @@ class Suite:
 
     def record(self, check) -> dict:
         """What a run stores of the suite it evaluated: id, name, version, signature, the check's outcome (verified,
-        bit-identical or within tolerance, samples decided otherwise at a near-tie) and the hash found beside the
-        published one."""
+        bit-identical or within tolerance, samples decided otherwise at a near-tie, redrawn on the same surface or
+        diverged) and the hash found beside the published one."""
         return {"id": self.id, "name": self.name, "version": self.version, "signature": self.signature,
                 "verified": bool(check.verified), "check": check.status, "bit_identical": bool(check.bit_identical),
-                "tie_samples": int(check.ties), "sha256": check.sha256, "published_sha256": self.sha256}
+                "tie_samples": int(check.ties), "redrawn_samples": int(check.redrawn),
+                "diverged_samples": len(check.at("diverged")), "sha256": check.sha256, "published_sha256": self.sha256}
 
 
 SUITES: tuple[Suite, ...] = (

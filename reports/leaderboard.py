@@ -193,8 +193,7 @@ def suite_state(suite: dict) -> str:
     if "signature" not in suite:   # a run recorded before signatures: verified by its content hash
         return f"content hash `{suite['sha256'][:16]}`, verified against the published hash"
     whose = "the data as built" if suite.get("local") else "the published data"
-    how = f"bit-identical to {whose}" if suite["bit_identical"] else (
-        f"within tolerance of {whose} ({suite['tie_samples']} samples decided otherwise at a near-tie)")
+    how = f"bit-identical to {whose}" if suite["bit_identical"] else f"within tolerance of {whose} ({differing(suite)})"
     built = (f"; built here from a download by importer {suite['importer']['name']} {suite['importer']['version']} "
              f"(source digest `{str((suite.get('source') or {}).get('digest'))[:12]}`)" if suite.get("local") else "")
     return f"verified against its signature `{suite['signature']}`, {how}{built}"
@@ -206,8 +205,15 @@ def own_data(record: dict) -> str | None:
     own = record.get("suite")
     if not isinstance(own, dict) or own.get("bit_identical"):
         return None
-    return (f"{own.get('check', 'unchecked')} of the published data ({own.get('tie_samples', '?')} samples decided "
-            "otherwise at a near-tie)")
+    return f"{own.get('check', 'unchecked')} of the published data ({differing(own)})"
+
+
+def differing(record: dict) -> str:
+    """How many samples of a suite record's data differ from the published data, and how, in words."""
+    parts = [f"{record.get('tie_samples', '?')} samples decided otherwise at a near-tie"]
+    parts += [f"{record[k]} {what}" for k, what in (("redrawn_samples", "redrawn on the same surface"),
+                                                     ("diverged_samples", "diverged")) if record.get(k)]
+    return ", ".join(parts)
 
 
 def marks(record: dict) -> str:

@@ -22,6 +22,7 @@ from colonbench.benchmark.evaluate import evaluate
 from colonbench.benchmark.registry import DEFAULT_METHODS
 from colonbench.benchmark.runfolder import kernels
 from colonbench.errors import InputError
+from colonbench.reports.leaderboard import differing
 
 
 def main(argv=None) -> int:
@@ -58,6 +59,11 @@ def main(argv=None) -> int:
                 bad += 1
                 rows = diff[["shard", "index", "noise_mm"]].drop_duplicates()
                 print(f"  {m}: DIFFERS in {len(rows)} rows ({where}):")
+                own = shipped.own_data(suite, m)
+                if own:
+                    print(f"    (its shipped rows were made on data {own['check']} of the published data, "
+                          f"{differing(own)}: the rows of those samples differ on any machine whose data are not "
+                          "the same as theirs)")
                 print("    " + diff.to_string(index=False).replace("\n", "\n    "))
     except (InputError, ValueError) as e:   # ValueError: the run's rows hold other segments than the shipped
         print(f"error: {e}", file=sys.stderr)

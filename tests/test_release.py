@@ -325,6 +325,11 @@ def test_shipped_results_are_of_the_published_suites_and_todays_methods():
             if name not in versions:
                 versions[name] = load_method(name).version
             assert rec["version"] == versions[name], f"{suite.id}: {name} shipped as {rec['version']}"
+            own = rec.get("suite")      # rows made again on data within tolerance of the published data (0327)
+            assert own is None or (suite.task != "colon" and own["check"] == "within tolerance"
+                                   and own["bit_identical"] is False and own["sha256"] != suite.sha256
+                                   and re.fullmatch(r"cb1-[0-9a-f]{64}", own["sha256"])
+                                   and isinstance(own["tie_samples"], int)), f"{suite.id}: {name}'s data {own}"
         if track != tracks.DEFAULT:
             assert run["methods"]["completion"].get("takes_length"), f"{suite.id}@{track}: completion took no length"
         rows = item[1]

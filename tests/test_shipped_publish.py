@@ -18,11 +18,12 @@ def bench(demo_data, out, methods="constant"):
     return out / "runs" / "demo-v1"
 
 
-def as_elsewhere(run_dir, ties=2, signature=None):
-    """The run's suite record as a machine whose data verified within tolerance writes it (another content hash)."""
+def as_elsewhere(run_dir, ties=2, redrawn=6, **changed):
+    """The run's suite record as a machine whose data verified within tolerance writes it (another content hash),
+    with ``changed`` keys of it set otherwise."""
     run = read_run(run_dir)
     run["suite"] = {**run["suite"], "check": "within tolerance", "bit_identical": False, "tie_samples": ties,
-                    "sha256": "cb1-" + "0" * 64, **({"signature": signature} if signature else {})}
+                    "redrawn_samples": redrawn, "sha256": "cb1-" + "0" * 64, **changed}
     write_json(run_dir / RUN_FILE, run)
     return run_dir
 
@@ -46,7 +47,9 @@ def test_a_method_published_again_from_data_within_tolerance_keeps_its_own_suite
     run = read_run(where)
     assert run["suite"] == published                  # the run's record stays that of the published data
     assert run["methods"]["constant"]["suite"] == {"check": "within tolerance", "bit_identical": False,
-                                                   "tie_samples": 2, "sha256": "cb1-" + "0" * 64}
+                                                   "tie_samples": 2, "redrawn_samples": 6, "diverged_samples": 0,
+                                                   "sha256": "cb1-" + "0" * 64}
+    assert shipped.own_data(suite, "constant") == run["methods"]["constant"]["suite"]
     loaded, rows, _ = shipped.load(suite)
     assert set(rows["method"]) == {"constant"} and len(rows) == 48
     # a leaderboard that merges them says so below its table
@@ -54,10 +57,15 @@ def test_a_method_published_again_from_data_within_tolerance_keeps_its_own_suite
                  str(tmp_path / "mine"), "--quiet", "--no-figures"]) == 0
     text = (tmp_path / "mine" / "suites" / "demo-v1" / "leaderboard.md").read_text()
     assert ("The shipped rows of constant were made on data within tolerance of the published data (2 samples "
-            "decided otherwise at a near-tie).") in text
+            "decided otherwise at a near-tie, 6 redrawn on the same surface).") in text
+    assert "The shipped rows of unwrap-pca" not in text
+    assert main(["leaderboard", str(tmp_path / "mine"), "--out", str(tmp_path / "site"), "--html", "--no-figures"]) == 0
+    page = (tmp_path / "site" / "methods" / "constant.html").read_text()
+    assert "within tolerance of the published data (2 samples decided otherwise at a near-tie, 6 redrawn" in page
+    assert "within tolerance" not in (tmp_path / "site" / "methods" / "unwrap-pca.html").read_text()
     # published again from the published data, the method's own record goes
     shipped.publish(here, suite, methods=["constant"])
-    assert "suite" not in read_run(where)["methods"]["constant"]
+    assert "suite" not in read_run(where)["methods"]["constant"] and shipped.own_data(suite, "constant") is None
 
 
 def test_rows_of_data_that_verified_against_another_signature_are_refused(demo_data, tmp_path, monkeypatch):
@@ -65,9 +73,11 @@ def test_rows_of_data_that_verified_against_another_signature_are_refused(demo_d
     monkeypatch.setattr(shipped, "SHIPPED_DIR", tmp_path / "shipped")
     shipped.publish(bench(demo_data, tmp_path / "here"), suite)
     before = (shipped.folder(suite) / RUN_FILE).read_text()
-    other = as_elsewhere(bench(demo_data, tmp_path / "other"), signature="cbs1-000000000000")
-    with pytest.raises(InputError, match="or within tolerance of its signature"):
-        shipped.publish(other, suite, methods=["constant"])
+    other = bench(demo_data, tmp_path / "other")
+    for changed in ({"signature": "cbs1-000000000000"}, {"published_sha256": "cb1-" + "1" * 64},
+                    {"bit_identical": True}, {"check": "differs"}):
+        with pytest.raises(InputError, match="or within tolerance of its signature"):
+            shipped.publish(as_elsewhere(other, **changed), suite, methods=["constant"])
     unverified = bench(demo_data, tmp_path / "unverified")
     run = read_run(unverified)
     write_json(unverified / RUN_FILE, {**run, "suite": {**run["suite"], "verified": False}})
@@ -75,3 +85,8 @@ def test_rows_of_data_that_verified_against_another_signature_are_refused(demo_d
         shipped.publish(unverified, suite, methods=["constant"])
     assert (shipped.folder(suite) / RUN_FILE).read_text() == before and json.loads(before)["suite"]["sha256"] == \
         suite.sha256
+    # shipped results that are not of the published data take no rows, not even bit-identical ones
+    write_json(shipped.folder(suite) / RUN_FILE, {**json.loads(before), "suite": {**json.loads(before)["suite"],
+                                                                                   "sha256": "cb1-" + "2" * 64}})
+    with pytest.raises(InputError, match="publish a whole run made on them first"):
+        shipped.publish(tmp_path / "here" / "runs" / "demo-v1", suite, methods=["constant"])
