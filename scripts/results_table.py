@@ -53,7 +53,23 @@ def tables() -> str:
              "|---|" + "---:|" * len(chosen)]
     for row in ROWS:
         lines.append(f"| {LABELS.get(row, row)} | " + " | ".join(cell(s.id, row) for s in chosen) + " |")
-    return "\n".join(lines)
+    return "\n".join(lines + elsewhere(chosen))
+
+
+def elsewhere(chosen) -> list[str]:
+    """A line under the table naming the rows made on data within tolerance of the published data (decision record
+    0327), where there are any."""
+    made = {}
+    for s in chosen:
+        for row in ROWS:
+            m, _, track = row.partition("@")
+            if s.task != "colon" and shipped.own_data(s, m, track or tracks.DEFAULT):
+                made.setdefault(LABELS.get(row, row), []).append(s.id)
+    if not made:
+        return []
+    said = "; ".join(f"{m}'s of {', '.join(ids)}" for m, ids in made.items())
+    return ["", f"Rows made on data within tolerance of the published data, not bit-identical to them ({said}): "
+                "[docs/benchmark.md](docs/benchmark.md#suite-versions)."]
 
 
 def interval_table(method: str = "completion") -> str:
