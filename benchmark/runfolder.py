@@ -179,6 +179,9 @@ def open_run(out: Path, settings: dict, methods: dict[str, dict]) -> dict:
         for key, value in settings.items():
             if key == "track":
                 continue
+            if key == "suite" and _suite_grown(run.get(key), value):
+                run[key] = value       # recorded by an earlier version, which counted less of the same check
+                continue
             if json.dumps(run.get(key), sort_keys=True) != json.dumps(value, sort_keys=True, default=json_default):
                 raise RunMismatch(f"{out} is a run with other {key} ({run.get(key)!r}, now {value!r}); "
                                   "evaluate into a new run folder")
@@ -195,6 +198,15 @@ def open_run(out: Path, settings: dict, methods: dict[str, dict]) -> dict:
         run = {"format": RUN_FORMAT, "format_version": RUN_FORMAT_VERSION, **settings, "methods": dict(methods),
                "sessions": []}
     return run
+
+
+def _suite_grown(old, new) -> bool:
+    """Whether a run's suite record ``old`` is ``new`` as an earlier version wrote it: every key it has the same, the
+    keys it lacks only counts a later version adds (``redrawn_samples``, ``diverged_samples``)."""
+    if not isinstance(old, dict) or not isinstance(new, dict) or old == new:
+        return False
+    return set(new) - set(old) <= {"redrawn_samples", "diverged_samples"} and set(old) <= set(new) and all(
+        json.dumps(old[k], sort_keys=True) == json.dumps(new[k], sort_keys=True) for k in old)
 
 
 def check_run_folder(out: Path) -> None:

@@ -90,3 +90,19 @@ def test_rows_of_data_that_verified_against_another_signature_are_refused(demo_d
                                                                                    "sha256": "cb1-" + "2" * 64}})
     with pytest.raises(InputError, match="publish a whole run made on them first"):
         shipped.publish(tmp_path / "here" / "runs" / "demo-v1", suite, methods=["constant"])
+
+
+def test_a_run_whose_suite_record_counted_fewer_kinds_of_difference_resumes(demo_data, tmp_path, capsys):
+    """A run folder of an earlier version (its suite record without ``redrawn_samples``, ``diverged_samples``) takes
+    more methods; one whose record differs in what it has is still refused."""
+    run_dir = bench(demo_data, tmp_path / "b")
+    run = read_run(run_dir)
+    old = {k: v for k, v in run["suite"].items() if k not in ("redrawn_samples", "diverged_samples")}
+    write_json(run_dir / RUN_FILE, {**run, "suite": old})
+    assert bench(demo_data, tmp_path / "b", methods="unwrap-pca") == run_dir
+    assert read_run(run_dir)["suite"] == run["suite"] and set(read_run(run_dir)["methods"]) == {"constant",
+                                                                                                 "unwrap-pca"}
+    write_json(run_dir / RUN_FILE, {**read_run(run_dir), "suite": {**old, "tie_samples": 1}})
+    assert main(["benchmark", "--methods", "thresholding", "--suites", "demo-v1", "--data", str(demo_data), "--out",
+                 str(tmp_path / "b"), "--quiet", "--no-figures"]) == 2
+    assert "is a run with other suite" in capsys.readouterr().err
