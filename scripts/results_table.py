@@ -8,6 +8,7 @@ typed by hand).
 from __future__ import annotations
 
 import math
+import textwrap
 
 import numpy as np
 
@@ -64,12 +65,20 @@ def elsewhere(chosen) -> list[str]:
         for row in ROWS:
             m, _, track = row.partition("@")
             if s.task != "colon" and shipped.own_data(s, m, track or tracks.DEFAULT):
-                made.setdefault(LABELS.get(row, row), []).append(s.id)
+                made.setdefault(m, {}).setdefault(s.id, []).append(track or tracks.DEFAULT)
     if not made:
         return []
-    said = "; ".join(f"{m}'s of {', '.join(ids)}" for m, ids in made.items())
-    return ["", f"Rows made on data within tolerance of the published data, not bit-identical to them ({said}): "
-                "[docs/benchmark.md](docs/benchmark.md#suite-versions)."]
+    def tracks_of(on) -> str:
+        return "both tracks" if len(on) == len(tracks.TRACKS) else f"the {' and '.join(on)} track"
+
+    def rows_of(m, ids) -> str:
+        if len({tuple(on) for on in ids.values()}) == 1:
+            return f"{m}'s rows of {', '.join(ids)}, {tracks_of(next(iter(ids.values())))}"
+        return f"{m}'s rows of " + ", ".join(f"{sid} ({tracks_of(on)})" for sid, on in ids.items())
+
+    said = "; ".join(rows_of(m, ids) for m, ids in made.items())
+    return [""] + textwrap.wrap(f"Made on data within tolerance of the published data "
+                                f"([why](docs/benchmark.md#suite-versions)): {said}.", 120, break_on_hyphens=False)
 
 
 def interval_table(method: str = "completion") -> str:
