@@ -72,7 +72,7 @@ def _flags(by: str, threshold: float) -> str:
     if by == "odds":
         from colonbench.completion.review import chance
 
-        return (f"a chance over {100 * chance(threshold):.0f} % that the estimate is off by more than 15 points (the "
+        return (f"a chance over {100 * chance(threshold):.1f} % that the estimate is off by more than 15 points (the "
                 f"log odds of a logistic fit of its signals over {threshold:.2f})")
     where = {"width": "wider than", "reach": "reaching from its estimate more than",
              "drop": "reaching below its estimate more than"}[by]
