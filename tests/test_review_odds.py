@@ -131,7 +131,7 @@ def test_the_model_card_shows_a_binned_scheme_per_band_and_the_review_odds(tmp_p
     text = "\n".join(model_card.intervals_rows(model))
     group = cal.groups["all"]
     assert len(group["band_low"]) == 4 and f"{group['band_low'][3]:+.2f} s to {group['band_high'][3]:+.2f} s" in text
-    assert "per band of log s (cut at " in text and "a chance over 20 % that the estimate is off" in text
+    assert "per band of log s (cut at " in text and "a chance over 20.1 % that the estimate is off" in text
     row = "| review: odds of off by > 15 points | 240 | flagged above log odds -1.38 | one +1.00, length -2.00 |"
     assert row in text
 
