@@ -65,6 +65,18 @@ def folder(suite, track: str = tracks.DEFAULT) -> Path:
     return SHIPPED_DIR / (suite.id if track == tracks.DEFAULT else f"{suite.id}@{track}")
 
 
+def record(suite, track: str = tracks.DEFAULT) -> dict | None:
+    """The ``run.json`` of a suite's shipped results on a track; None when there are none, or when they were made on
+    other data than the published suite (another hash) or on another track."""
+    where = folder(suite, track)
+    if not (where / RUN_FILE).is_file():
+        return None
+    run = read_run(where)
+    if (run.get("suite") or {}).get("sha256") != suite.sha256 or tracks.of_run(run) != track:
+        return None
+    return run
+
+
 def load(suite, exclude=(), track: str = tracks.DEFAULT) -> tuple | None:
     """The shipped results of a suite on a track as a loaded run, less the methods in ``exclude``; None when there
     are none, or when they were made on other data than the published suite (another hash) or on another track.
@@ -76,12 +88,10 @@ def load(suite, exclude=(), track: str = tracks.DEFAULT) -> tuple | None:
         (:func:`colonbench.reports.leaderboard.merge_runs` and ``merge_colon_runs`` take them).
     """
     where = folder(suite, track)
-    if not (where / RUN_FILE).is_file():
+    run = record(suite, track)
+    if run is None:
         return None
-    run = read_run(where)
-    rec = run.get("suite") or {}
-    if rec.get("sha256") != suite.sha256 or tracks.of_run(run) != track:
-        return None
+    rec = run["suite"]
     if "signature" not in rec:   # made on the published data itself (its hash), before suites had signatures
         run["suite"] = {**rec, "signature": suite.signature, "check": "bit-identical", "bit_identical": True,
                         "tie_samples": 0}
@@ -150,11 +160,10 @@ def publish(run_dir, suite, methods=None, track: str | None = None) -> Path:
         # and the data it ran on, where they are not the run's own (0327)
         fresh = {m: {**run["methods"][m], "versions": run.get("versions"), "environment": run.get("environment")}
                  for m in methods}
-        data = old.get("suite") or rec
-        for m in methods:
-            if rec.get("sha256") != data.get("sha256"):
+        if not exact:
+            for m in methods:
                 fresh[m]["suite"] = {k: rec[k] for k in OWN_DATA if k in rec}
-        run = {**old, "methods": {**old["methods"], **fresh}, "suite": data}
+        run = {**old, "methods": {**old["methods"], **fresh}, "suite": old["suite"]}
     return write_results(run_dir, run, folder(suite, track), methods)
 
 
@@ -286,9 +295,9 @@ def reproduction(run_dir, suite, methods, track: str = tracks.DEFAULT) -> dict:
 def own_data(suite, method: str, track: str = tracks.DEFAULT) -> dict | None:
     """The suite record of the data a shipped method's rows were made on, where they are not the published data
     (:func:`publish` from data within tolerance); None where they are, or where the method has no shipped rows."""
-    item = load(suite, track=track)
-    own = ((item[0]["methods"].get(method) or {}).get("suite") if item else None) or None
-    return None if own is None or own.get("bit_identical") else own
+    run = record(suite, track)
+    own = (run["methods"].get(method) or {}).get("suite") if run else None
+    return None if not own or own.get("bit_identical") else own
 
 
 def shipped_items(suite, exclude=(), track: str = tracks.DEFAULT) -> list:
