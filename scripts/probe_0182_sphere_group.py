@@ -49,7 +49,7 @@ def label_with(spheres):
     def fit_scheme(part, estimated, sig, scheme, review_width, level, weights, colons):
         like = (part["set"] == "V_paper").to_numpy()
         if spheres:
-            like &= (part["hole_model"] == "spheres").to_numpy()
+            like = like & (part["hole_model"] == "spheres").to_numpy()
         return likeness.fit(part["true"].to_numpy(float), estimated, sig, scheme, review_width, level, weights,
                             colons, like)
     return fit_scheme
