@@ -29,6 +29,7 @@ from colonbench.benchmark import tracks
 from colonbench.benchmark.exchange import with_sample_ids
 from colonbench.benchmark.metrics import THRESHOLDS_MM
 from colonbench.benchmark.runfolder import RUN_FILE, read_rows, read_run, write_json
+from colonbench.benchmark.verification import record_problems
 from colonbench.errors import InputError
 
 #: Where the shipped results live in the package.
@@ -133,8 +134,7 @@ def publish(run_dir, suite, methods=None, track: str | None = None) -> Path:
     rec = run.get("suite") or {}
     exact = rec.get("sha256") == suite.sha256
     near = (methods is not None and suite.task != "colon" and rec.get("check") == "within tolerance"
-            and not rec.get("bit_identical")
-            and (rec.get("signature"), rec.get("published_sha256")) == (suite.signature, suite.sha256))
+            and not record_problems(rec, suite))
     if rec.get("id") != suite.id or not rec.get("verified") or not (exact or near):
         raise InputError(f"{run_dir}: not a run of {suite.id} on its published data (bit-identical"
                          f"{', or within tolerance of its signature' if methods and suite.task != 'colon' else ''}; "

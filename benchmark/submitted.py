@@ -172,6 +172,7 @@ def expected_rows(suite_id: str, signature: str, noise_mm: tuple) -> dict:
 def _published_suite(rec: dict, problems: list):
     """The published segment suite a run's suite record names, or None (with the reason in ``problems``)."""
     from colonbench.benchmark import suites
+    from colonbench.benchmark.verification import record_problems
 
     if not rec:
         problems.append("it is not a run of a named suite (run.json has no suite record): make it with colonbench "
@@ -188,18 +189,7 @@ def _published_suite(rec: dict, problems: list):
         problems.append(f"{suite.id} is a whole-colon suite, whose results cannot be submitted yet (segment suites "
                         "only)")
         return None
-    if not rec.get("verified") or rec.get("check") not in ("bit-identical", "within tolerance"):
-        problems.append(f"its data did not verify against {suite.id}'s published signature (check: "
-                        f"{rec.get('check') or 'none'}): evaluate on the published suite, without --allow-unverified")
-    if rec.get("signature") != suite.signature:
-        problems.append(f"its suite record names the signature {rec.get('signature')!r}, {suite.id}'s published "
-                        f"one is {suite.signature}")
-    if rec.get("published_sha256") != suite.sha256:
-        problems.append(f"its suite record names the published content hash {rec.get('published_sha256')!r}, "
-                        f"{suite.id}'s is {suite.sha256}")
-    if (rec.get("check") == "bit-identical" or rec.get("bit_identical")) and rec.get("sha256") != suite.sha256:
-        problems.append(f"its suite record says bit-identical, but its content hash (sha256 {rec.get('sha256')!r}) "
-                        f"is not {suite.id}'s ({suite.sha256})")
+    problems.extend(record_problems(rec, suite))
     return suite
 
 

@@ -203,3 +203,26 @@ def check_suite(published: dict, lock: dict, sha256: str, records: list[dict], s
                              f"noise makes ({tol.tie_share:.0%}): the generator differs; the first: sample {first.sample}, "
                              f"{first.what}")
     return SuiteCheck(published["suite"], sha256, sha256 == published["sha256"], faults, checks, aggregate)
+
+
+def record_problems(record: dict, suite) -> list[str]:
+    """Why a run's suite record (``suite`` in ``run.json``) does not show data verified against ``suite``'s published
+    signature, bit-identical or within tolerance; empty where it does. The one check behind a submission
+    (:mod:`colonbench.benchmark.submitted`) and a within-tolerance publication of shipped rows
+    (:func:`colonbench.benchmark.shipped.publish`, decision record 0327)."""
+    problems = []
+    if not record.get("verified") or record.get("check") not in ("bit-identical", "within tolerance"):
+        problems.append(f"its data did not verify against {suite.id}'s published signature (check: "
+                        f"{record.get('check') or 'none'}): evaluate on the published suite, without "
+                        "--allow-unverified")
+    if record.get("signature") != suite.signature:
+        problems.append(f"its suite record names the signature {record.get('signature')!r}, {suite.id}'s published "
+                        f"one is {suite.signature}")
+    if record.get("published_sha256") != suite.sha256:
+        problems.append(f"its suite record names the published content hash {record.get('published_sha256')!r}, "
+                        f"{suite.id}'s is {suite.sha256}")
+    claims = record.get("check") == "bit-identical" or record.get("bit_identical")
+    if claims and record.get("sha256") != suite.sha256:
+        problems.append(f"its suite record says bit-identical, but its content hash (sha256 {record.get('sha256')!r})"
+                        f" is not {suite.id}'s ({suite.sha256})")
+    return problems
