@@ -199,7 +199,7 @@ def suite_state(suite: dict) -> str:
     return f"verified against its signature `{suite['signature']}`, {how}{built}"
 
 
-def own_data(record: dict) -> str | None:
+def own_data_note(record: dict) -> str | None:
     """Where a method's rows were made on other data than its run's (a shipped method published again on data within
     tolerance of the suite's, decision record 0327: ``methods.<name>.suite`` in run.json), those data in words."""
     own = record.get("suite")
@@ -242,8 +242,8 @@ def markdown(meta: dict, tab: pd.DataFrame, notes=()) -> str:
     if any(source(rec) == "shipped" for rec in meta["methods"].values()):
         lines += ["Rows marked † are the shipped reference results: colonbench's own runs of its built-in methods on "
                   "the published suite, merged in (`source` `shipped` in leaderboard.csv).", ""]
-        elsewhere = [f"The shipped rows of {n} were made on data {own_data(rec)}."
-                     for n, rec in meta["methods"].items() if source(rec) == "shipped" and own_data(rec)]
+        elsewhere = [f"The shipped rows of {n} were made on data {own_data_note(rec)}."
+                     for n, rec in meta["methods"].items() if source(rec) == "shipped" and own_data_note(rec)]
         lines += elsewhere + ([""] if elsewhere else [])
     if any(is_submitted(rec) for rec in meta["methods"].values()):
         lines += ["Rows marked ‡ are submitted results: others' runs of the suite, checked by `colonbench results "

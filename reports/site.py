@@ -44,7 +44,7 @@ from colonbench.benchmark import tracks
 from colonbench.benchmark.runfolder import RUN_FILE, read_run, write_json
 from colonbench.errors import InputError
 from colonbench.reports.chart import mae_chart
-from colonbench.reports.leaderboard import data_line, own_data, suite_state
+from colonbench.reports.leaderboard import data_line, own_data_note, suite_state
 from colonbench.reports.site_tables import (
     breakdown_tables, chart_rows, every_tables, interval_table, main_table, method_cell, pr_table, row_attrs, source)
 from colonbench.reports.webpage import (
@@ -231,7 +231,7 @@ def method_page(name: str, seen: list[dict]) -> str:
                "source": {"shipped": "shipped reference results",
                           "submitted": f"submitted results ({rec.get('run', '')[len('submitted '):]} in the "
                                        "repository's results/)"}.get(source(rec), rec.get("run", "")),
-               **({"data": own_data(rec)} if own_data(rec) else {})}
+               **({"data": own_data_note(rec)} if own_data_note(rec) else {})}
         mae = [({}, [(esc(f"{r['noise_mm']:g}"), repr(r["noise_mm"])),
                      (esc(with_interval(r, "mae")[0]), fmt(r["mae"])[1])]) for _, r in a["mae"].iterrows()]
         body += [f'<h2><a href="../{esc(a["pid"])}/{esc(a["track"])}/index.html">{esc(a["pid"])} · track '
