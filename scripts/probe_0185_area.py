@@ -4,7 +4,7 @@ out. Run from the repository root with the calibration's datasets in data/:
 
     python scripts/probe_0185_area.py make STAGE PART PARTS   (STAGE: screen or rest; the estimates made again)
     python scripts/probe_0185_area.py screen
-    python scripts/probe_0185_area.py held
+    python scripts/probe_0185_area.py held SIGNAL...   (the entered signals)
 """
 import sys
 from pathlib import Path
@@ -89,8 +89,47 @@ def screen():
         print(f"  {n}: AUC {aucs}; median far / not {rows.loc[far, n].median():.3f} / {rows.loc[~far, n].median():.3f}")
 
 
+def lower_right_at_70(rows, score):
+    """The lower share right over the real colons at the highest threshold catching 70 % on each."""
+    far = ((rows["true"] - rows["estimate"]).abs() > ci.BIG).to_numpy()
+    s = score.to_numpy()
+    for t in np.unique(np.round(s, 4))[::-1]:
+        flag = s > t - 1e-12
+        caught, right = [], []
+        for colon in sorted(rows["cell"].unique()):
+            m = (rows["cell"] == colon).to_numpy()
+            caught.append((flag & far & m).sum() / max((far & m).sum(), 1))
+            right.append((flag & far & m).sum() / max((flag & m).sum(), 1))
+        if min(caught) >= 0.70:
+            return t, caught, right
+
+
+def held(entered):
+    cal = with_signals(table())
+    assert len(cal) == len(table()), "every calibrated estimate needs the signals (make rest)"
+    names = intervals.scale_features(ci.KEEP)
+    x0 = ci.odds_features(cal, names)
+    h = ci.by_colon(cal, ci.KEEP, intervals.LEVEL)
+    real = (cal["set"] == "V_real") & ~cal["hole_model"].str.endswith("+end")
+    for label, extra in (("shipped features", ()), ("with " + ", ".join(entered), tuple(entered))):
+        x = np.c_[x0, cal[list(extra)].to_numpy(float)] if extra else x0
+        out, colons = np.empty(len(cal)), cal["colon"].to_numpy()
+        for colon in np.unique(colons):
+            fit_on = colons != colon
+            model = ci.fit_odds(cal[fit_on], list(names) + list(extra), x[fit_on])
+            out[~fit_on] = [intervals.linear_score(model, f) for f in x[~fit_on]]
+        score = pd.Series(out, index=cal.index)
+        width, report = ci.review_width(h, "odds", score)
+        print(f"\n[{label}] all segments at 0163's threshold ({width:.3f}): {ci.said(report)}")
+        t, caught, right = lower_right_at_70(cal[real], score[real])
+        print(f"  no erased end, threshold {t:.3f} catching 70 % on each real colon: caught "
+              f"{[round(100 * c, 1) for c in caught]}, right {[round(100 * r, 1) for r in right]}")
+
+
 if __name__ == "__main__":
     if sys.argv[1] == "make":
         make(sys.argv[2], int(sys.argv[3]), int(sys.argv[4]))
     elif sys.argv[1] == "screen":
         screen()
+    elif sys.argv[1] == "held":
+        held(sys.argv[2:])
