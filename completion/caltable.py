@@ -28,6 +28,9 @@ KEY = ("manifest", "shard", "index", "noise_mm")
 COLUMNS = KEY + ("colon_id", "hole_model", "segment_mm", "true", "estimate")
 #: How far an estimate may move before :func:`compare` counts it (fractions of coverage): a last-bit move, and a point.
 MOVES = (1e-6, 0.01)
+#: How far a row's true coverage may move before :func:`compare` counts its sample as generated otherwise: float noise
+#: moves it by about 1e-15, a near-tie decided the other way or points redrawn by far more.
+TRUTH_MOVE = 1e-9
 
 
 def path_for(model: Path, steps: str) -> Path:
@@ -127,15 +130,18 @@ def compare(old: pd.DataFrame, new: pd.DataFrame) -> dict:
     Returns
     -------
     dict
-        ``rows`` (both), ``only_old``, ``only_new`` (rows in one of them), ``moved`` (estimates moved by more than
-        each of :data:`MOVES`, keyed by the move as written, ``"1e-06"`` and ``"0.01"``), ``largest`` (the largest
-        move, a fraction) and ``rims`` (rows whose count of cut rims differs, where both tables have it).
+        ``rows`` (both), ``only_old``, ``only_new`` (rows in one of them), ``truths`` (rows whose true coverage
+        moved by more than :data:`TRUTH_MOVE`: their samples were generated otherwise, so the data differ from those
+        ``old`` was made of), ``moved`` (estimates moved by more than each of :data:`MOVES`, keyed by the move as
+        written, ``"1e-06"`` and ``"0.01"``), ``largest`` (the largest move, a fraction) and ``rims`` (rows whose
+        count of cut rims differs, where both tables have it).
     """
     both = old.merge(new, on=list(KEY), how="outer", suffixes=("_old", "_new"), indicator=True)
     matched = both[both["_merge"] == "both"]
     move = (matched["estimate_new"] - matched["estimate_old"]).abs()
     out = {"rows": int(len(matched)), "only_old": int((both["_merge"] == "left_only").sum()),
            "only_new": int((both["_merge"] == "right_only").sum()),
+           "truths": int(((matched["true_new"] - matched["true_old"]).abs() > TRUTH_MOVE).sum()),
            "moved": {f"{m:g}": int((move > m).sum()) for m in MOVES},
            "largest": float(move.max()) if len(move) else 0.0}
     if "rims_old" in matched and "rims_new" in matched:

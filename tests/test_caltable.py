@@ -90,9 +90,11 @@ def test_a_table_made_again_is_compared_row_by_row():
     new.loc[2, "estimate"] += 2e-6                       # over 1e-6, under a point
     new.loc[3, "estimate"] -= 0.2                        # a rim flipped, say: over a point
     new.loc[3, "rims"] = 1
+    new.loc[4, "true"] += 1e-15                          # float noise in the truth: the same sample
+    new.loc[2, "true"] += 0.03                           # a sample generated otherwise (a near-tie, say)
     new = pd.concat([new.drop(index=5), new.iloc[[0]].assign(shard="validation/colon-00099-50mm.h5")])
     out = caltable.compare(old, new)
-    assert out == {"rows": 5, "only_old": 1, "only_new": 1, "moved": {"1e-06": 2, "0.01": 1},
+    assert out == {"rows": 5, "only_old": 1, "only_new": 1, "truths": 1, "moved": {"1e-06": 2, "0.01": 1},
                    "largest": pytest.approx(0.2), "rims": 1}
 
 
