@@ -249,6 +249,15 @@ dump("colon-val-real", "Whole-colon validation on the real validation colons gca
      20261130, {"validation": whole_colons(0, 0, 2, ["gca00020", "gca00070"])}, mesh_names=["gca00020", "gca00070"],
      task="colon")
 
+#: More maps of the real validation colons (decision record 0224): colon-val-real.yaml's two maps of each hold too few
+#: far-off segments to choose the map's review on.
+dump("colon-val-real-more", "More whole-colon validation on the real validation colons gca00020 and gca00070, beside "
+     "colon-val-real.yaml (its seed differs): four whole partial reconstructions of each (withdrawal-camera or sphere "
+     "holes, 2 points/mm^2, each with its withdrawal trajectory), with their exact per-face truth. No manifest trains "
+     "on them.",
+     20261201, {"validation": whole_colons(0, 0, 4, ["gca00020", "gca00070"])}, mesh_names=["gca00020", "gca00070"],
+     task="colon")
+
 #: Whole-colon training data of the context model (issue 12): its context samples are cut from these
 #: reconstructions (colonbench pack --context): paper.yaml's train colons and the real colon gca00090, and
 #: colons of the widened generator; gca00080 stays out for colon-val.yaml to judge on.
