@@ -193,7 +193,9 @@ class Intervals:
         ``track=segment-only``, ``...,below=<b>``; ``signals["map_track"]`` says a map segment's track), calibrated on
         maps (``scripts/map_intervals.py``); without groups the map's segments get :attr:`known`. ``review_width``:
         the map's segments' own review threshold (a width, fraction), chosen on the validation maps (decision
-        record 0223); without it they are reviewed as any estimate of known extent.
+        record 0223); without it they are reviewed as any estimate of known extent. ``review_point_rate``: a map
+        segment is also flagged where its points per mm of the map's line differ from the map's typical segment's by
+        more than this in ``|ln|`` (:mod:`colonbench.mapping.map_review`, decision record 0224).
     known : dict
         ``{"low", "high", "n"}`` of segments whose extent is known (``signals["extent"] == "known"``: a length
         given to :func:`known_extent.known_length <colonbench.completion.known_extent.known_length>`, or planes the

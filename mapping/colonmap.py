@@ -21,6 +21,7 @@ import numpy as np
 
 from colonbench.errors import InputError
 from colonbench.mapping import SEGMENT_MM
+from colonbench.mapping.map_review import review_by_point_rate
 from colonbench.mapping.reach import beyond_reach, unreached_error
 from colonbench.mapping.segments import (MIN_HOLE_MM2, Segment, add_unreconstructed, few_points_error,
                                          hole_regions)
@@ -431,6 +432,7 @@ def map_colon(points: np.ndarray, method, segment_mm: float = SEGMENT_MM, positi
             est.signals["map_track"] = "context" if context_mm > 0 else "segment-only"   # a calibration's map part
             seg.coverage_interval, seg.review = mapped_interval(method, est, seg.coverage)
         out.append(seg)
+    review_by_point_rate(out, (getattr(getattr(method, "intervals", None), "map", None) or {}).get("review_point_rate"))
     seconds["estimate"] = time.perf_counter() - t0
     return {"segments": out, "centerline": line, "arclength": arc, "interruptions": joined.interruptions,
             "unreconstructed": [{"from_mm": round(a, 2), "to_mm": round(b, 2)} for a, b in unseen],

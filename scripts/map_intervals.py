@@ -3,8 +3,8 @@ record 0221).
 
     python scripts/map_intervals.py [--data data] [--model small] [--write] [--workers 2]
 
-Maps ``<data>/colon-val`` and ``<data>/colon-val-real`` (the two manifests' validation splits, generated where
-missing) with completion as the whole-colon benchmark maps them (``colonbench evaluate --task colon --split
+Maps ``<data>/colon-val``, ``<data>/colon-val-real`` and ``<data>/colon-val-real-more`` (the manifests' validation
+splits, generated where missing) with completion as the whole-colon benchmark maps them (``colonbench evaluate --task colon --split
 validation``: both tracks, 0 and 0.5 mm noise; each run kept in its dataset folder per model, manifest, steps and
 calibration, and read again by the next call), keeps colon-val's procedural colons (``M_proc``: its maps of the real
 training colons are left out) and the real validation colons' maps (``M_real``: gca00020, gca00070), and measures
@@ -14,9 +14,10 @@ segments get from the model's calibration file, and split-conformal quantiles of
 each real colon, each track, noise levels pooled), the narrowest on ``M_real`` (else the one whose worst cell lies
 closest to 90 %). Prints how the map's own ``review`` flags did per cell: the share of the segments off by more
 than 15 points it flags, and of its flags right, and chooses the map's own review threshold by decision record 0223's
-rule (:func:`review_threshold`). With ``--write``, a chosen map candidate is fitted on all the maps and written
-into the model's calibration file (``map``), with the review threshold where it is adopted, which ``colonbench map``
-then uses.
+rule (:func:`review_threshold`), then the pair of a width and a point rate by decision record 0224's
+(:func:`review_pair`, :func:`pair_adopted`). With ``--write``, a chosen map candidate is fitted on all the maps and
+written into the model's calibration file (``map``), with the review thresholds where they are adopted, which
+``colonbench map`` then uses.
 """
 
 from __future__ import annotations
@@ -33,16 +34,23 @@ from colonbench.benchmark.colon_evaluate import evaluate_colons
 from colonbench.benchmark.runfolder import read_rows
 from colonbench.completion import calfile, conformal, intervals
 from colonbench.completion.method import model_path, steps_version
+from colonbench.mapping.map_review import point_rates
 from colonbench.shards.dataset import generate
 from colonbench.shards.schema import sha256_file
 
 ROOT = Path(__file__).resolve().parents[1] / "data_manifests"
 #: The maps' datasets: manifest name -> the set its maps belong to.
-DATASETS = {"colon-val": "M_proc", "colon-val-real": "M_real"}
+DATASETS = {"colon-val": "M_proc", "colon-val-real": "M_real", "colon-val-real-more": "M_real"}
 SCHEMES = ("known", "track", "track+band")
 #: Decision record 0223 (0325's rule on the maps): the map's review threshold catches at least this share of the
 #: segments off by more than BIG in each real validation colon.
 REVIEW_RECALL, BIG = 0.75, 0.15
+#: Decision record 0224: the pair (a width, a point rate) replaces the width alone where its flags on the real maps are
+#: right this much more often (pooled), on neither real colon less often, and it flags at most PROC_FLAGS of the
+#: procedural maps' segments.
+PAIR_GAIN, PROC_FLAGS = 0.10, 0.05
+#: The columns that tell one map (one reconstruction, track and noise level) from another.
+MAP = ["data", "shard", "index", "context_mm", "noise_mm"]
 
 
 def map_segments(root: Path, name: str, model, cal_id: str, workers: int) -> pd.DataFrame:
@@ -136,9 +144,67 @@ def review_threshold(held: pd.DataFrame) -> float | None:
     return None
 
 
-def review_report(held: pd.DataFrame, threshold: float) -> pd.DataFrame:
-    """:func:`flags` of ``held`` were its segments flagged where their interval is wider than ``threshold``."""
-    return flags(held.assign(review=(held["width"] > threshold).astype(int)))
+def review_report(held: pd.DataFrame, threshold: float, rate: float = np.inf) -> pd.DataFrame:
+    """:func:`flags` of ``held`` were its segments flagged where their interval is wider than ``threshold`` (or, with
+    ``rate``, their ``point_rate`` above it)."""
+    flag = (held["width"] > threshold) | (held["point_rate"] > rate if "point_rate" in held else False)
+    return flags(held.assign(review=flag.astype(int)))
+
+
+def with_point_rates(seg: pd.DataFrame) -> pd.DataFrame:
+    """``seg`` with each segment's ``point_rate`` within its map (:func:`colonbench.mapping.map_review.point_rates`,
+    over the map's segments with a coverage, as ``colonbench map`` computes it)."""
+    rate = pd.Series(0.0, index=seg.index)
+    for _, g in seg.groupby(MAP):
+        rate[g.index] = point_rates(g["points"], g["start_mm"], g["end_mm"])
+    return seg.assign(point_rate=rate)
+
+
+def _just_under(values: np.ndarray) -> np.ndarray:
+    """Thresholds 1e-6 under each distinct value of ``values`` (flagging it and all above), and infinity."""
+    return np.concatenate([np.unique(values) - 1e-6, [np.inf]])
+
+
+def review_pair(held: pd.DataFrame) -> tuple[float, float] | None:
+    """Decision record 0224's pair: of the (width, point rate) thresholds at which flagging a segment whose interval
+    is wider or whose ``point_rate`` is higher catches at least :data:`REVIEW_RECALL` of the far-off segments in each
+    real validation colon, the one that flags fewest of the real maps' segments (ties: the larger width, then the
+    larger rate, so each sits just under a real map segment's value: 1e-6 under it, so that a value moved in its
+    last bits on another machine moves no flag). None where none catches that many."""
+    real = held[held["set"] == "M_real"]
+    width, rate = real["width"].to_numpy(), real["point_rate"].to_numpy()
+    far = ((real["estimate"] - real["true"]).abs() > BIG).to_numpy()
+    cells = [(real["cell"] == c).to_numpy() & far for c in sorted(real["cell"].unique())]
+    best = None
+    for w in _just_under(width)[::-1]:
+        by_width = width > w
+        for t in _just_under(rate)[::-1]:
+            flag = by_width | (rate > t)
+            if all(flag[c].sum() >= REVIEW_RECALL * c.sum() for c in cells):
+                if best is None or int(flag.sum()) < best[0]:
+                    best = (int(flag.sum()), float(w), float(t))
+                break                                  # a lower rate only flags more at this width
+    return None if best is None else best[1:]
+
+
+def pair_adopted(held: pd.DataFrame, threshold: float, pair: tuple[float, float]) -> tuple[bool, str]:
+    """Decision record 0224's conditions on ``pair`` against the width alone (``threshold``): its flags right, pooled
+    over the real colons, at least :data:`PAIR_GAIN` more; on neither real colon fewer; at most :data:`PROC_FLAGS` of
+    the procedural maps' segments flagged. Returns the verdict and the figures it read."""
+    far = (held["estimate"] - held["true"]).abs() > BIG
+    old, new = held["width"] > threshold, (held["width"] > pair[0]) | (held["point_rate"] > pair[1])
+
+    def right(flag, sel):
+        return float((flag & far & sel).sum() / max(int((flag & sel).sum()), 1))
+    real = held["set"] == "M_real"
+    colons = [held["cell"] == c for c in sorted(held.loc[real, "cell"].unique())]
+    gain = right(new, real) - right(old, real)
+    each = [right(new, c) - right(old, c) for c in colons]
+    proc = float(new[~real].mean()) if (~real).any() else 0.0
+    ok = gain >= PAIR_GAIN and all(e >= 0 for e in each) and proc <= PROC_FLAGS
+    return ok, (f"flags right {100 * right(new, real):.1f} % against {100 * right(old, real):.1f} % (pooled), "
+                f"per real colon {', '.join(f'{100 * e:+.1f}' for e in each)} points; procedural flagged "
+                f"{100 * proc:.1f} %")
 
 
 def main() -> None:
@@ -156,7 +222,7 @@ def main() -> None:
     parts = []
     for name, set_ in DATASETS.items():
         seg = map_segments(Path(args.data), name, args.model, cal.source.get("id", "none"), args.workers)
-        parts.append(seg.assign(set=set_))
+        parts.append(seg.assign(set=set_, data=name))
     seg = pd.concat(parts, ignore_index=True)
     seg = seg[(seg["set"] == "M_real") | seg["colon"].str.startswith("colon-")].reset_index(drop=True)
     print(f"{len(seg)} map segments of {seg['colon'].nunique()} colons; MAE per set and track (points):")
@@ -181,18 +247,26 @@ def main() -> None:
     best = min(passing, key=lambda s: summary[s]["real_width"]) if passing else \
         min(SCHEMES, key=lambda s: summary[s]["worst"])
     print(f"\nchosen: {best}")
-    held = helds[best]                                 # the review threshold on the chosen intervals (0223)
+    held = with_point_rates(helds[best])              # the review threshold on the chosen intervals (0223)
     threshold = review_threshold(held)
     adopted = threshold is not None and threshold > cal.review_known
     print("\nthe map's own review threshold (decision record 0223): "
           + (f"{100 * threshold:.1f} points, against the known extent's {100 * cal.review_known:.1f}: "
              f"{'adopted' if adopted else 'not adopted (no larger)'}\n{review_report(held, threshold).to_string()}"
              if threshold is not None else "none catches 75 % in each real colon"))
+    pair = review_pair(held) if adopted else None
+    pair_ok, said = pair_adopted(held, threshold, pair) if pair else (False, "no pair catches 75 % in each")
+    if pair:
+        print(f"\nwith the point rate (decision record 0224): width above {100 * pair[0]:.1f} points or point rate "
+              f"above {pair[1]:.4f} ({np.exp(pair[1]):.2f} times): {said}: "
+              f"{'adopted' if pair_ok else 'not adopted'}\n{review_report(held, *pair).to_string()}")
     if args.write:
         data = json.loads(path.read_text())
         data["map"] = {} if best == "known" else {"scheme": best, "groups": fit(seg, best, cal.level)}
         if adopted:
-            data["map"]["review_width"] = round(threshold, 6)
+            data["map"]["review_width"] = round(pair[0] if pair_ok else threshold, 6)
+        if pair_ok:
+            data["map"]["review_point_rate"] = round(pair[1], 6)
         data["source"].pop("id", None)                 # the calibration's id covers its map part too
         digest = hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()[:8]
         data["source"]["id"] = f"{data['scheme']}-{digest}"

@@ -9,6 +9,7 @@ import pytest
 from colonbench.completion import intervals
 from colonbench.estimate import Estimate
 from colonbench.mapping.colonmap import for_mapping
+from colonbench.mapping.map_review import point_rates, review_by_point_rate
 
 
 def calibration(map_part: dict) -> intervals.Intervals:
@@ -73,3 +74,89 @@ def test_mapping_swaps_only_the_calibration_where_nothing_else_changes():
     method = SimpleNamespace(cut_rims=False, end_level=None, intervals=cal)
     mapped = for_mapping(method, 0.0)
     assert mapped is not method and mapped.intervals.review_known == 0.35 and method.intervals.review_known == 0.2
+
+
+def test_a_segments_point_rate_is_its_density_along_the_line_against_the_maps_median():
+    """Points per mm 10, 10, 20 and 5 (median 10): |ln| 0, 0, ln 2, ln 2."""
+    rates = point_rates([100, 200, 200, 50], [0.0, 10.0, 30.0, 40.0], [10.0, 30.0, 40.0, 50.0])
+    assert rates == pytest.approx([0.0, 0.0, np.log(2), np.log(2)])
+    assert point_rates([], [], []).shape == (0,)
+
+
+def _seg(i, points, coverage=0.8, interval=(0.7, 0.9)):
+    from colonbench.mapping.segments import Segment
+    return Segment(i, 0, 10.0 * i, 10.0 * (i + 1), {}, {}, points, coverage=coverage,
+                   coverage_interval=None if interval is None else list(interval), review=["its own"] * (i == 0))
+
+
+def test_the_map_flags_the_segments_far_from_its_typical_density_and_says_why():
+    """Segments of 100, 100, 100, 200, 40 and 100 points per 10 mm: the 200 (ln 2 = 0.69) and the 40 (0.92) lie
+    beyond 0.6 and are flagged with the figures, after any reason of their own; a segment without a coverage is no
+    part of the median and is not flagged; one without an interval (a method that gives none) is compared but not
+    flagged; no threshold flags nothing."""
+    segs = [_seg(0, 100), _seg(1, 100), _seg(2, 100), _seg(3, 200), _seg(4, 40), _seg(5, 100),
+            _seg(6, 5, coverage=None), _seg(7, 300, interval=None)]
+    review_by_point_rate(segs, None)
+    assert [s.review for s in segs] == [["its own"]] + [[]] * 7
+    review_by_point_rate(segs, 0.6)
+    assert [bool(s.review) for s in segs] == [True, False, False, True, True, False, False, False]
+    assert segs[0].review == ["its own"]
+    assert segs[3].review[0].startswith("20 points per mm of the map's line against the map's typical 10 (2.00 "
+                                        "times more; flagged beyond 1.82 times)")
+    assert "(2.50 times fewer" in segs[4].review[0]
+
+
+def test_mapping_flags_a_segment_denser_than_the_rest_where_the_calibration_asks():
+    """A straight 200 mm tube at 1 point/mm^2 with its middle 40 mm given twice the points: with a map part's
+    ``review_point_rate`` of 0.3 the segment holding them is flagged and the others not; without it, none is."""
+    from shapes import straight
+    from test_map import tube_cloud
+
+    from colonbench.mapping.colonmap import map_colon
+
+    line = straight(200.0)
+    pts, s, _ = tube_cloud(line, density=1.0)
+    middle = (s > 80.0) & (s < 120.0)
+    pts = np.vstack([pts, pts[middle] + 0.05])
+
+    class Method:
+        name, version = "m", "1"
+
+        def __init__(self, map_part):
+            self.intervals = calibration(map_part)
+
+        def estimate(self, points):
+            return {"coverage": 0.8, "coverage_interval": [0.7, 0.9], "review": []}
+
+    flagged = {}
+    for part in ({"review_width": 0.5, "review_point_rate": 0.3}, {"review_width": 0.5}):
+        segs = map_colon(pts, Method(part), segment_mm=60.0, positions=line.points[::-20], progress=False)["segments"]
+        flagged[len(part)] = [bool(x.review) for x in segs]
+        holds = [int(((s >= x.start_mm) & (s < x.end_mm) & middle).sum()) for x in segs]
+    assert len(holds) == 3 and holds[1] == max(holds) and flagged[2] == [False, True, False]
+    assert flagged[1] == [False, False, False]
+
+
+def test_the_pair_is_the_one_that_flags_fewest_while_catching_three_quarters_of_each_real_colons_far_off(
+        map_intervals):
+    """Far-off segments (width, point rate): gca00020's (0.5, 0.1), (0.45, 0.1), (0.1, 1.0), (0.1, 0.9), gca00070's
+    (0.4, 0.1), (0.35, 0.1), (0.1, 0.8), (0.05, 0.05); near ones (0.3, 0.1) x 3 and (0.05, 0.2), (0.3, 0.1) x 2. The
+    width alone must go under 0.1 (12 flags, 7 right); a width under 0.35 or a rate under 0.8 catches 4 and 3 with 7
+    flags, all right, and no fewer flags catch three of four in each. It is adopted unless it flags more than 5 % of
+    the procedural maps' segments."""
+    rows = [("gca00020", "M_real", w, r, 0.9) for w, r in ((0.5, 0.1), (0.45, 0.1), (0.1, 1.0), (0.1, 0.9))]
+    rows += [("gca00020", "M_real", w, r, 0.5) for w, r in ((0.3, 0.1),) * 3 + ((0.05, 0.2),)]
+    rows += [("gca00070", "M_real", w, r, 0.9) for w, r in ((0.4, 0.1), (0.35, 0.1), (0.1, 0.8), (0.05, 0.05))]
+    rows += [("gca00070", "M_real", 0.3, 0.1, 0.5)] * 2 + [("M_proc", "M_proc", 0.01, 0.01, 0.5)] * 20
+    held = pd.DataFrame(rows, columns=["cell", "set", "width", "point_rate", "estimate"]).assign(true=0.5)
+    width = map_intervals.review_threshold(held)
+    assert width == pytest.approx(0.1 - 1e-6)
+    pair = map_intervals.review_pair(held)
+    assert pair == (pytest.approx(0.35 - 1e-6), pytest.approx(0.8 - 1e-6))
+    assert map_intervals.pair_adopted(held, width, pair)[0]
+    report = map_intervals.review_report(held.assign(track_kind="context"), *pair)
+    assert list(report["flagged"]) == [0, 4, 3] and list(report["caught"]) == [0, 4, 3]
+    noisy = held.copy()
+    noisy.loc[noisy.index[-2:], "point_rate"] = 2.0                   # 2 of 20 procedural segments flagged: 10 %
+    ok, said = map_intervals.pair_adopted(noisy, width, pair)
+    assert not ok and "procedural flagged 10.0 %" in said
