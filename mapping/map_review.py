@@ -1,10 +1,11 @@
 """A map's review of its segments against the map's typical one (decision record 0224).
 
 A map has what a lone segment lacks: every other segment of the same colon. A segment whose reconstruction holds far
-more or far fewer points per mm of the map's line than the map's typical segment is one the map's line cut badly or
-one with much of its wall unseen, and there the estimate is most often far off. Where the calibration's map part has
-a ``review_point_rate`` (``scripts/map_intervals.py --write``), such a segment is flagged for review beside the ones
-its interval flags.
+more or far fewer points per mm of the map's line than the map's typical segment is one the map's line cut badly, one
+with much of its wall unseen, or one whose lumen is much wider or narrower than the rest (the signal does not tell
+these apart); on the real validation colons' maps the estimate is far off there most often. Where the calibration's
+map part has a ``review_point_rate`` (``scripts/map_intervals.py --write``), such a segment is flagged for review
+beside the ones its interval flags.
 """
 
 from __future__ import annotations
@@ -15,8 +16,7 @@ import numpy as np
 
 
 def point_rates(points, start_mm, end_mm) -> np.ndarray:
-    """``point_rate`` of each of a map's segments: ``|ln(r / median(r))|`` with ``r`` the segment's points per mm
-    of the map's line.
+    """``point_rate`` of each of a map's segments: ``|ln(r / median(r))|``, ``r`` its points per mm of the line.
 
     Parameters
     ----------
@@ -60,7 +60,8 @@ def review_by_point_rate(segments: list, threshold: float | None) -> None:
         if seg.coverage_interval is None or rate <= threshold:
             continue
         own = seg.points / max(seg.end_mm - seg.start_mm, 1e-6)
+        times = f"{math.exp(rate):.2f} times as many" if own > typical else f"1/{math.exp(rate):.2f} as many"
         seg.review = [*seg.review, f"{own:.0f} points per mm of the map's line against the map's typical "
-                                   f"{typical:.0f} ({math.exp(rate):.2f} times {'more' if own > typical else 'fewer'};"
-                                   f" flagged beyond {math.exp(threshold):.2f} times): a segment unlike its map's "
-                                   "others, cut badly or with much of its wall unseen"]
+                                   f"{typical:.0f} ({times}; flagged beyond {math.exp(threshold):.2f} times either "
+                                   "way): a stretch the map's line cut badly, with much of its wall unseen, or of a "
+                                   "lumen much wider or narrower than the rest"]

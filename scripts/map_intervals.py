@@ -49,13 +49,17 @@ REVIEW_RECALL, BIG = 0.75, 0.15
 #: right this much more often (pooled), on neither real colon less often, and it flags at most PROC_FLAGS of the
 #: procedural maps' segments.
 PAIR_GAIN, PROC_FLAGS = 0.10, 0.05
-#: The columns that tell one map (one reconstruction, track and noise level) from another.
-MAP = ["data", "shard", "index", "context_mm", "noise_mm"]
+#: The columns that tell one map (one reconstruction, track and noise level) from another within a dataset.
+MAP = ["shard", "index", "context_mm", "noise_mm"]
+#: A threshold of 0224's pair sits this far under a validation map segment's value: segments.csv rounds the planes'
+#: arc lengths to 0.01 mm and the intervals to 1e-4, so the value ``colonbench map`` computes lies within it.
+MARGIN = 1e-3
 
 
 def map_segments(root: Path, name: str, model, cal_id: str, workers: int) -> pd.DataFrame:
     """Completion's map segments of ``<root>/<name>`` as the whole-colon benchmark scores them, with a coverage and
-    a truth (the run folder is kept per model, manifest, steps and calibration, and read again)."""
+    a truth, and their ``point_rate`` within their map as ``colonbench map`` computes it, over every segment with a
+    coverage (the run folder is kept per model, manifest, steps and calibration, and read again)."""
     manifest = ROOT / f"{name}.yaml"
     data = Path(root) / name
     generate(manifest, data, workers=workers, splits=["validation"], progress=False)
@@ -64,7 +68,8 @@ def map_segments(root: Path, name: str, model, cal_id: str, workers: int) -> pd.
     if not (run / "results" / "segments.csv").is_file():
         evaluate_colons(data, ["completion"], run, split="validation", model=model, progress=False)
     seg = read_rows(run / "results" / "segments.csv")
-    seg = seg[(seg["method"] == "completion") & np.isfinite(seg["coverage"]) & np.isfinite(seg["true_coverage"])]
+    seg = with_point_rates(seg[(seg["method"] == "completion") & np.isfinite(seg["coverage"])])
+    seg = seg[np.isfinite(seg["true_coverage"])]
     return seg.rename(columns={"true_coverage": "true", "coverage": "estimate"}).reset_index(drop=True)
 
 
@@ -152,8 +157,8 @@ def review_report(held: pd.DataFrame, threshold: float, rate: float = np.inf) ->
 
 
 def with_point_rates(seg: pd.DataFrame) -> pd.DataFrame:
-    """``seg`` with each segment's ``point_rate`` within its map (:func:`colonbench.mapping.map_review.point_rates`,
-    over the map's segments with a coverage, as ``colonbench map`` computes it)."""
+    """``seg`` (one dataset's map segments with a coverage) with each segment's ``point_rate`` within its map
+    (:func:`colonbench.mapping.map_review.point_rates`, as ``colonbench map`` computes it)."""
     rate = pd.Series(0.0, index=seg.index)
     for _, g in seg.groupby(MAP):
         rate[g.index] = point_rates(g["points"], g["start_mm"], g["end_mm"])
@@ -161,16 +166,16 @@ def with_point_rates(seg: pd.DataFrame) -> pd.DataFrame:
 
 
 def _just_under(values: np.ndarray) -> np.ndarray:
-    """Thresholds 1e-6 under each distinct value of ``values`` (flagging it and all above), and infinity."""
-    return np.concatenate([np.unique(values) - 1e-6, [np.inf]])
+    """Thresholds :data:`MARGIN` under each distinct value of ``values`` (flagging it and all above), and infinity."""
+    return np.concatenate([np.unique(values) - MARGIN, [np.inf]])
 
 
 def review_pair(held: pd.DataFrame) -> tuple[float, float] | None:
     """Decision record 0224's pair: of the (width, point rate) thresholds at which flagging a segment whose interval
     is wider or whose ``point_rate`` is higher catches at least :data:`REVIEW_RECALL` of the far-off segments in each
     real validation colon, the one that flags fewest of the real maps' segments (ties: the larger width, then the
-    larger rate, so each sits just under a real map segment's value: 1e-6 under it, so that a value moved in its
-    last bits on another machine moves no flag). None where none catches that many."""
+    larger rate, so each sits just under a real map segment's value: :data:`MARGIN` under it). None where none
+    catches that many."""
     real = held[held["set"] == "M_real"]
     width, rate = real["width"].to_numpy(), real["point_rate"].to_numpy()
     far = ((real["estimate"] - real["true"]).abs() > BIG).to_numpy()
@@ -209,7 +214,7 @@ def pair_adopted(held: pd.DataFrame, threshold: float, pair: tuple[float, float]
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--data", default="data", help="folder holding (or to hold) the two datasets (default: data)")
+    ap.add_argument("--data", default="data", help="folder holding (or to hold) the datasets (default: data)")
     ap.add_argument("--model", default=None, help="model (default: the shipped one)")
     ap.add_argument("--write", action="store_true", help="write the chosen map interval into the calibration file")
     ap.add_argument("--workers", type=int, default=2, help="processes generating the data")
@@ -247,7 +252,7 @@ def main() -> None:
     best = min(passing, key=lambda s: summary[s]["real_width"]) if passing else \
         min(SCHEMES, key=lambda s: summary[s]["worst"])
     print(f"\nchosen: {best}")
-    held = with_point_rates(helds[best])              # the review threshold on the chosen intervals (0223)
+    held = helds[best]                                 # the review threshold on the chosen intervals (0223)
     threshold = review_threshold(held)
     adopted = threshold is not None and threshold > cal.review_known
     print("\nthe map's own review threshold (decision record 0223): "
@@ -264,7 +269,7 @@ def main() -> None:
         data = json.loads(path.read_text())
         data["map"] = {} if best == "known" else {"scheme": best, "groups": fit(seg, best, cal.level)}
         if adopted:
-            data["map"]["review_width"] = round(pair[0] if pair_ok else threshold, 6)
+            data["map"]["review_width"] = round(min(pair[0], 1.0) if pair_ok else threshold, 6)   # 1: never by width
         if pair_ok:
             data["map"]["review_point_rate"] = round(pair[1], 6)
         data["source"].pop("id", None)                 # the calibration's id covers its map part too

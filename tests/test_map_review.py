@@ -1,4 +1,5 @@
-"""The map's own review threshold, chosen on the validation maps (decision record 0223)."""
+"""The map's own review: its threshold chosen on the validation maps (decision record 0223), and its segments against
+the map's typical one (0224)."""
 
 from types import SimpleNamespace
 
@@ -90,20 +91,29 @@ def _seg(i, points, coverage=0.8, interval=(0.7, 0.9)):
 
 
 def test_the_map_flags_the_segments_far_from_its_typical_density_and_says_why():
-    """Segments of 100, 100, 100, 200, 40 and 100 points per 10 mm: the 200 (ln 2 = 0.69) and the 40 (0.92) lie
-    beyond 0.6 and are flagged with the figures, after any reason of their own; a segment without a coverage is no
-    part of the median and is not flagged; one without an interval (a method that gives none) is compared but not
-    flagged; no threshold flags nothing."""
-    segs = [_seg(0, 100), _seg(1, 100), _seg(2, 100), _seg(3, 200), _seg(4, 40), _seg(5, 100),
-            _seg(6, 5, coverage=None), _seg(7, 300, interval=None)]
+    """Segments of 200, 100, 40 and 100 points per 10 mm (20, 10, 4, 10 per mm; median 10): the 20 (ln 2 = 0.69) and
+    the 4 (0.92) lie beyond 0.6 and are flagged with the figures, after any reason of their own. No threshold flags
+    nothing."""
+    segs = [_seg(0, 200), _seg(1, 100), _seg(2, 40), _seg(3, 100)]
     review_by_point_rate(segs, None)
-    assert [s.review for s in segs] == [["its own"]] + [[]] * 7
+    assert [s.review for s in segs] == [["its own"], [], [], []]
     review_by_point_rate(segs, 0.6)
-    assert [bool(s.review) for s in segs] == [True, False, False, True, True, False, False, False]
-    assert segs[0].review == ["its own"]
-    assert segs[3].review[0].startswith("20 points per mm of the map's line against the map's typical 10 (2.00 "
-                                        "times more; flagged beyond 1.82 times)")
-    assert "(2.50 times fewer" in segs[4].review[0]
+    assert [len(s.review) for s in segs] == [2, 0, 1, 0] and segs[0].review[0] == "its own"
+    assert segs[0].review[1].startswith("20 points per mm of the map's line against the map's typical 10 (2.00 "
+                                        "times as many; flagged beyond 1.82 times either way)")
+    assert "(1/2.50 as many" in segs[2].review[0]
+
+
+def test_the_maps_typical_segment_is_the_median_of_those_with_a_coverage_reviewed_where_an_interval_is():
+    """Points per mm 10, 10 and 16 with intervals, 16 and 16 without (a method that gives none), and 1 without a
+    coverage: the median of the five with a coverage is 16, so at 0.4 the two tens (ln 1.6 = 0.47) are flagged and
+    nothing else. Leaving out those without an interval (median 10) would flag the 16 instead; counting the one
+    without a coverage (median 13) would flag none."""
+    segs = [_seg(0, 100), _seg(1, 100), _seg(2, 160), _seg(3, 160, interval=None), _seg(4, 160, interval=None),
+            _seg(5, 10, coverage=None)]
+    review_by_point_rate(segs, 0.4)
+    assert [len(s.review) for s in segs] == [2, 1, 0, 0, 0, 0]
+    assert "(1/1.60 as many" in segs[1].review[0] and "typical 16 " in segs[1].review[0]
 
 
 def test_mapping_flags_a_segment_denser_than_the_rest_where_the_calibration_asks():
@@ -141,8 +151,8 @@ def test_the_pair_is_the_one_that_flags_fewest_while_catching_three_quarters_of_
         map_intervals):
     """Far-off segments (width, point rate): gca00020's (0.5, 0.1), (0.45, 0.1), (0.1, 1.0), (0.1, 0.9), gca00070's
     (0.4, 0.1), (0.35, 0.1), (0.1, 0.8), (0.05, 0.05); near ones (0.3, 0.1) x 3 and (0.05, 0.2), (0.3, 0.1) x 2. The
-    width alone must go under 0.1 (12 flags, 7 right); a width under 0.35 or a rate under 0.8 catches 4 and 3 with 7
-    flags, all right, and no fewer flags catch three of four in each. It is adopted unless it flags more than 5 % of
+    width alone must go under 0.1 (12 flags, 7 right); a width above one under 0.35 or a rate above one under 0.8
+    catches 4 and 3 with 7 flags, all right, and no fewer flags catch three of four in each. It is adopted unless it flags more than 5 % of
     the procedural maps' segments."""
     rows = [("gca00020", "M_real", w, r, 0.9) for w, r in ((0.5, 0.1), (0.45, 0.1), (0.1, 1.0), (0.1, 0.9))]
     rows += [("gca00020", "M_real", w, r, 0.5) for w, r in ((0.3, 0.1),) * 3 + ((0.05, 0.2),)]
@@ -152,10 +162,12 @@ def test_the_pair_is_the_one_that_flags_fewest_while_catching_three_quarters_of_
     width = map_intervals.review_threshold(held)
     assert width == pytest.approx(0.1 - 1e-6)
     pair = map_intervals.review_pair(held)
-    assert pair == (pytest.approx(0.35 - 1e-6), pytest.approx(0.8 - 1e-6))
+    assert pair == (pytest.approx(0.35 - map_intervals.MARGIN), pytest.approx(0.8 - map_intervals.MARGIN))
     assert map_intervals.pair_adopted(held, width, pair)[0]
     report = map_intervals.review_report(held.assign(track_kind="context"), *pair)
     assert list(report["flagged"]) == [0, 4, 3] and list(report["caught"]) == [0, 4, 3]
+    ok, said = map_intervals.pair_adopted(held, pair[0], pair)        # against a width already as right: no gain
+    assert not ok and said.startswith("flags right 100.0 % against 100.0 % (pooled)")
     noisy = held.copy()
     noisy.loc[noisy.index[-2:], "point_rate"] = 2.0                   # 2 of 20 procedural segments flagged: 10 %
     ok, said = map_intervals.pair_adopted(noisy, width, pair)
