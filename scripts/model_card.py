@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import csv
 import json
+import math
 import sys
 from pathlib import Path
 
@@ -108,8 +109,11 @@ def intervals_rows(model: Path) -> list[str]:
            + f"; {_flags(cal.review_by, cal.review_width)} flags its estimate for review"
            + (f" (an estimate of known extent, {who}: "
               f"{_flags(cal.review_by_known or cal.review_by, cal.review_known)}"
-              + (f"; a map's segment: {_flags('width', map_width)}, chosen on the validation maps by "
-                 "`python scripts/map_intervals.py --write`" if map_width else "")
+              + (f"; a map's segment: {_flags('width', map_width)}"
+                 + (f" or where its points per mm of the map's line differ from the map's median segment's by more "
+                    f"than {math.exp(cal.map['review_point_rate']):.2f} times" if cal.map.get("review_point_rate")
+                    else "")
+                 + ", chosen on the validation maps by `python scripts/map_intervals.py --write`" if map_width else "")
               + ")" if cal.review_known else "") + ".", "",
            "| group | calibration estimates | interval around the estimate | scale weights |", "|---|---:|---|---|"]
     rows = [(k, g) for k, g in cal.groups.items() if k != "all" or scaled] + \
