@@ -110,8 +110,8 @@ def intervals_rows(model: Path) -> list[str]:
            + (f" (an estimate of known extent, {who}: "
               f"{_flags(cal.review_by_known or cal.review_by, cal.review_known)}"
               + (f"; a map's segment: {_flags('width', map_width)}"
-                 + (f" or where its points per mm of the map's line differ from the map's median segment's by more "
-                    f"than {math.exp(cal.map['review_point_rate']):.2f} times" if cal.map.get("review_point_rate")
+                 + (f", or points per mm of the map's line more than {math.exp(cal.map['review_point_rate']):.2f} "
+                    "times, or less than the inverse of, the map's median segment's" if cal.map.get("review_point_rate")
                     else "")
                  + ", chosen on the validation maps by `python scripts/map_intervals.py --write`" if map_width else "")
               + ")" if cal.review_known else "") + ".", "",
