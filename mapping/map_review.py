@@ -31,11 +31,18 @@ def point_rates(points, start_mm, end_mm) -> np.ndarray:
         0 for a segment as dense as the map's median one; ``ln 2`` for one twice or half as dense. Empty for no
         segment.
     """
-    rate = np.asarray(points, float) / np.maximum(np.asarray(end_mm, float) - np.asarray(start_mm, float), 1e-6)
-    if not len(rate):
-        return rate
-    median = float(np.median(rate))
-    return np.abs(np.log(np.maximum(rate, 1e-12) / max(median, 1e-12)))
+    rate = _per_mm(points, start_mm, end_mm)
+    return _against(rate, float(np.median(rate))) if len(rate) else rate
+
+
+def _per_mm(points, start_mm, end_mm) -> np.ndarray:
+    """(n,) points per mm of the map's line of each segment."""
+    return np.asarray(points, float) / np.maximum(np.asarray(end_mm, float) - np.asarray(start_mm, float), 1e-6)
+
+
+def _against(rate: np.ndarray, typical: float) -> np.ndarray:
+    """``|ln(rate / typical)|``."""
+    return np.abs(np.log(np.maximum(rate, 1e-12) / max(typical, 1e-12)))
 
 
 def review_by_point_rate(segments: list, threshold: float | None) -> None:
@@ -54,12 +61,11 @@ def review_by_point_rate(segments: list, threshold: float | None) -> None:
     done = [s for s in segments if s.coverage is not None and np.isfinite(s.coverage)]
     if not done:
         return
-    rates = point_rates([s.points for s in done], [s.start_mm for s in done], [s.end_mm for s in done])
-    typical = float(np.median([s.points / max(s.end_mm - s.start_mm, 1e-6) for s in done]))
-    for seg, rate in zip(done, rates):
+    per_mm = _per_mm([s.points for s in done], [s.start_mm for s in done], [s.end_mm for s in done])
+    typical = float(np.median(per_mm))
+    for seg, own, rate in zip(done, per_mm, _against(per_mm, typical)):
         if seg.coverage_interval is None or rate <= threshold:
             continue
-        own = seg.points / max(seg.end_mm - seg.start_mm, 1e-6)
         times = f"{math.exp(rate):.2f} times as many" if own > typical else f"1/{math.exp(rate):.2f} as many"
         seg.review = [*seg.review, f"{own:.0f} points per mm of the map's line against the map's typical "
                                    f"{typical:.0f} ({times}; flagged beyond {math.exp(threshold):.2f} times either "

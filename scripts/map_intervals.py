@@ -227,7 +227,7 @@ def main() -> None:
     parts = []
     for name, set_ in DATASETS.items():
         seg = map_segments(Path(args.data), name, args.model, cal.source.get("id", "none"), args.workers)
-        parts.append(seg.assign(set=set_, data=name))
+        parts.append(seg.assign(set=set_))
     seg = pd.concat(parts, ignore_index=True)
     seg = seg[(seg["set"] == "M_real") | seg["colon"].str.startswith("colon-")].reset_index(drop=True)
     print(f"{len(seg)} map segments of {seg['colon'].nunique()} colons; MAE per set and track (points):")
