@@ -100,10 +100,16 @@ def test_colonbench_average_writes_a_model_that_says_how_it_was_made(smoke_pack,
     x = torch.rand(1, 1, *(grid["size"],) * 3)
     with torch.no_grad():
         assert np.isfinite(net(x).numpy()).all()
-    again = tmp_path / "again.safetensors"  # the same command again: the same weights
+    # The same command again: the same weights and statistics, to the rounding of batch norm's sums over threads (a
+    # full run once saw the last bits differ). Another draw of the samples would move the running statistics by far
+    # more than this bound.
+    again = tmp_path / "again.safetensors"
     assert main([*args[:3], "--out", str(again), *args[5:]]) == 0
     state2 = load_model(again)[0].state_dict()
-    assert all(torch.equal(state[k], state2[k]) for k in state)
+    stats = [k for k in state if k.endswith(("running_mean", "running_var"))]
+    assert stats and all(torch.equal(state[k], state2[k]) for k in state if k not in stats), "the weights differ"
+    off = {k: float((state[k] - state2[k]).abs().max()) for k in stats}
+    assert all(torch.allclose(state[k], state2[k], rtol=1e-5, atol=1e-6) for k in stats), off
 
 
 def test_colonbench_average_refuses_bad_input_with_a_message(smoke_pack, tmp_path, capsys):
