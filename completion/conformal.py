@@ -16,6 +16,8 @@ import numpy as np
 #: Values closer than this share of their size count as tied where a cut is put between values
 #: (:func:`weighted_quantile`): another machine's kernels move a value by about 1e-16 of it.
 TIED = 1e-9
+#: Added to ``|true - estimated|`` before its log is fitted: a floor of the scale (fractions).
+SCALE_FLOOR = 0.005
 
 
 def conformal_quantiles(residuals, level: float) -> tuple[float, float]:
@@ -163,3 +165,16 @@ def quantile_regression(x: np.ndarray, y: np.ndarray, tau: float, weights=None) 
     if res.status != 0:
         raise RuntimeError(f"quantile regression did not solve: {res.message}")
     return np.asarray(res.x[:p], float)
+
+
+def log_scale_fit(x: np.ndarray, magnitude: np.ndarray, weights: np.ndarray | None = None,
+                  tau: float | None = None) -> tuple[list, np.ndarray]:
+    """(Weighted) least-squares weights of ``log(magnitude + SCALE_FLOOR)`` on ``x`` (``tau``: its ``tau``-quantile's
+    linear regression instead, :func:`quantile_regression`), and the scales they give: ``x`` (n, p) features,
+    ``magnitude`` (n,) a residual's size (fractions), ``weights`` (n,) or None."""
+    if tau is not None:
+        w = quantile_regression(x, np.log(magnitude + SCALE_FLOOR), tau, weights)
+    else:
+        root = np.sqrt(weights)[:, None] if weights is not None else 1.0
+        w, *_ = np.linalg.lstsq(x * root, np.log(magnitude + SCALE_FLOOR) * np.ravel(root), rcond=None)
+    return [float(v) for v in w], np.exp(np.clip(x @ w, -20, 5))

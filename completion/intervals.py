@@ -29,7 +29,7 @@ from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
-from colonbench.completion.conformal import band_of, band_quantiles, quantile_regression, shifted_quantiles
+from colonbench.completion.conformal import band_of, band_quantiles, log_scale_fit, shifted_quantiles
 from colonbench.completion.review import REVIEW_SCORES, review_reason, review_score  # noqa: F401
 from colonbench.errors import InputError
 
@@ -69,8 +69,9 @@ SCALE_FEATURES = {
 }
 #: A ``binned`` scheme's bands of the fitted scale: cut at these colon-weighted quantiles of it (decision 0161).
 BAND_QUANTILES = (0.25, 0.5, 0.75)
-#: Added to ``|true - estimated|`` before its log is fitted: a floor of the scale (fractions).
-SCALE_FLOOR = 0.005
+#: A likeness scheme's name: ``like<NN>+<scheme>``, NN the chance (%) over which an estimate is ``like=1``
+#: (:mod:`colonbench.completion.likeness`, decision record 0170).
+LIKE = re.compile(r"^like(0[1-9]|[1-9]\d)\+(.+)$")
 
 
 def features(coverage: float, signals: dict, names) -> np.ndarray:
@@ -107,7 +108,8 @@ def features(coverage: float, signals: dict, names) -> np.ndarray:
 
 def _scaled(scheme: str) -> str | None:
     """The scaled factor of a scheme (``scaled``, ``length+scaled`` or ``like<NN>+scaled``), or None."""
-    last = scheme.split("+", 1)[-1] if scheme.startswith(("length+", "like")) else scheme
+    like = LIKE.match(scheme)
+    last = like.group(2) if like else scheme.split("+", 1)[-1] if scheme.startswith("length+") else scheme
     return last if last in SCALE_FEATURES else None
 
 
@@ -239,7 +241,7 @@ class Intervals:
         if self.review_by == "odds" and self.review_known > 0 and not self.review_by_known:
             raise InputError("a calibration reviewed by odds must name its known extent's score (review_by_known): "
                              "review_known is a width, not log odds")
-        if not isinstance(self.like, dict) or bool(self.like) != self.scheme.startswith("like") or \
+        if not isinstance(self.like, dict) or bool(self.like) != bool(LIKE.match(self.scheme)) or \
                 self.like and not _like_fits(self.like):                                 # decision record 0170
             raise InputError(f"a calibration's scheme {self.scheme!r} and its like (features, ranges as [low, high], "
                              "weights, threshold) clash")
@@ -404,19 +406,6 @@ def _scale(group: dict, coverage: float, signals: dict) -> tuple[float, float]:
             group["high"] * _scale_of(group, coverage, signals, "high"))
 
 
-def _log_fit(x: np.ndarray, magnitude: np.ndarray, weights: np.ndarray | None = None,
-             tau: float | None = None) -> tuple[list, np.ndarray]:
-    """(Weighted) least-squares weights of ``log(magnitude + SCALE_FLOOR)`` on ``x`` (``tau``: its ``tau``-quantile's
-    linear regression instead, :func:`~colonbench.completion.conformal.quantile_regression`), and the scales they
-    give."""
-    if tau is not None:
-        w = quantile_regression(x, np.log(magnitude + SCALE_FLOOR), tau, weights)
-    else:
-        root = np.sqrt(weights)[:, None] if weights is not None else 1.0
-        w, *_ = np.linalg.lstsq(x * root, np.log(magnitude + SCALE_FLOOR) * np.ravel(root), rcond=None)
-    return [float(v) for v in w], np.exp(np.clip(x @ w, -20, 5))
-
-
 def _fit_group(residual: np.ndarray, x: np.ndarray | None, names, level: float, two_sided: bool = False,
                weights: np.ndarray | None = None, colons=None, binned: bool = False, tau: float | None = None) -> dict:
     """A group's quantiles: of the residuals, or (``x``: its features) of the residuals over their fitted scale;
@@ -425,28 +414,36 @@ def _fit_group(residual: np.ndarray, x: np.ndarray | None, names, level: float, 
     fit and the quantiles (:func:`~colonbench.completion.conformal.weighted_quantiles`); ``colons``: each residual's
     colon, for the shift term; ``binned``: the quantiles per band of the scale
     (:func:`~colonbench.completion.conformal.band_quantiles`); ``tau``: each end's scale fitted at that quantile
-    (:func:`_log_fit`)."""
+    (:func:`~colonbench.completion.conformal.log_scale_fit`)."""
     if x is None:
         low, high, _ = shifted_quantiles(residual, level, weights, colons)
         return {"low": low, "high": high, "n": int(len(residual))}
     out = {"n": int(len(residual)), "features": list(names),
            "ranges": [[float(v) for v in r] for r in np.stack([x.min(axis=0), x.max(axis=0)], axis=1)]}
     if binned:
-        out["weights"], s = _log_fit(x, np.abs(residual), weights)
+        out["weights"], s = log_scale_fit(x, np.abs(residual), weights)
         log_s = np.clip(x @ np.asarray(out["weights"]), -20, 5)
         return {**out, **band_quantiles(residual / s, log_s, level, weights, colons, MIN_GROUP, BAND_QUANTILES)}
     if not two_sided:
-        out["weights"], s = _log_fit(x, np.abs(residual), weights)
+        out["weights"], s = log_scale_fit(x, np.abs(residual), weights)
         out["low"], out["high"], shift = shifted_quantiles(residual / s, level, weights, colons)
         return {**out, **shift}
-    out["weights_low"], s_low = _log_fit(x, np.maximum(-residual, 0.0), weights, tau)
-    out["weights_high"], s_high = _log_fit(x, np.maximum(residual, 0.0), weights, tau)
+    out["weights_low"], s_low = log_scale_fit(x, np.maximum(-residual, 0.0), weights, tau)
+    out["weights_high"], s_high = log_scale_fit(x, np.maximum(residual, 0.0), weights, tau)
     low, _, shift_low = shifted_quantiles(residual / s_low, level, weights, colons)
     _, high, shift_high = shifted_quantiles(residual / s_high, level, weights, colons)
     out["low"], out["high"] = low, high
     if shift_low:                        # each end's shift term, in its own scaled units
         out.update(shift_low=shift_low["shift_low"], shift_high=shift_high["shift_high"])
     return out
+
+
+def fit_subgroup(residual, x, names, level: float, scaled: str | None, weights, colons, sel) -> dict:
+    """:func:`_fit_group` of the estimates ``sel`` ((n,) bool) of a whole fit's ``residual``, ``x``, ``weights`` and
+    ``colons`` (each (n, ...) or None), as the scaled factor ``scaled`` fits its groups."""
+    return _fit_group(residual[sel], None if x is None else x[sel], names, level, _two_sided(scaled),
+                      None if weights is None else weights[sel], None if colons is None else colons[sel],
+                      _binned(scaled), _tau(scaled))
 
 
 def shortened_by_length(signals: dict) -> bool:
@@ -479,7 +476,7 @@ def fit(true, estimated, signals: list, scheme: str, review_width: float, level:
     add :attr:`Intervals.known` with :func:`colonbench.completion.known_extent.fit_known`. ``weights`` ((n,)) and
     ``colons`` ((n,)): each segment's weight and colon, for the schemes that take the colon as the unit
     (``...-colon...``)."""
-    if scheme.startswith("like"):
+    if LIKE.match(scheme):
         raise ValueError(f"a likeness scheme ({scheme!r}) is fitted by colonbench.completion.likeness.fit")
     true, estimated = np.asarray(true, float), np.asarray(estimated, float)
     residual = true - estimated
@@ -493,8 +490,6 @@ def fit(true, estimated, signals: list, scheme: str, review_width: float, level:
         for key in np.unique(keys):
             sel = keys == key
             if sel.sum() >= MIN_GROUP and str(key) not in groups:
-                groups[str(key)] = _fit_group(residual[sel], x[sel] if scaled else None, names, level,
-                                              _two_sided(scaled), None if weights is None else weights[sel],
-                                              None if colons is None else colons[sel], _binned(scaled), _tau(scaled))
+                groups[str(key)] = fit_subgroup(residual, x, names, level, scaled, weights, colons, sel)
     return Intervals(scheme, level, groups, review_width, dict(source or {}))
 

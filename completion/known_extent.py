@@ -12,8 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from colonbench.completion.intervals import (SCALE_FEATURES, SHORT_SHARE, Intervals, _binned, _fit_group, _scaled,
-                                             _tau, _two_sided, _unit_weights, features, shortened_by_length)
+from colonbench.completion.intervals import (SCALE_FEATURES, Intervals, _scaled, _unit_weights, features,
+                                             fit_subgroup, shortened_by_length)
 from colonbench.errors import InputError
 
 #: A known length shorter than the segment's span between its planes over this share is refused as not the
@@ -77,9 +77,7 @@ def fit_known(cal: Intervals, true, estimated, signals: list | None = None, weig
     weights, colons = _unit_weights(cal.scheme, weights, colons, len(residual))
 
     def group(sel):
-        return _fit_group(residual[sel], None if x is None else x[sel], names, cal.level, _two_sided(scaled),
-                          None if weights is None else weights[sel], None if colons is None else colons[sel],
-                          _binned(scaled), _tau(scaled))
+        return fit_subgroup(residual, x, names, cal.level, scaled, weights, colons, sel)
 
     cut = shortened(signals) if short else np.zeros(len(residual), bool)
     if short and not (cut.any() and (~cut).any()):

@@ -13,22 +13,18 @@ estimates. :meth:`colonbench.completion.intervals.Intervals.quantiles` reads the
 
 from __future__ import annotations
 
-import re
-
 import numpy as np
 
 from colonbench.completion import intervals
 from colonbench.completion.conformal import effective_size
 from colonbench.completion.review import fit_odds
 
-#: A likeness scheme's name: ``like<NN>+<scheme>``, NN the chance (%) over which an estimate is ``like=1``.
-PATTERN = re.compile(r"^like(0[1-9]|[1-9]\d)\+(.+)$")
 
 
 def split_scheme(scheme: str) -> tuple[float, str] | None:
     """The threshold (a chance, fraction) and the scheme each group is fitted with, of a ``like<NN>+<scheme>``
     scheme; None for any other scheme."""
-    m = PATTERN.match(scheme)
+    m = intervals.LIKE.match(scheme)
     return (int(m.group(1)) / 100.0, m.group(2)) if m else None
 
 
@@ -91,7 +87,5 @@ def fit(true, estimated, signals: list, scheme: str, review_width: float, level:
     for value in (1, 0):
         sel = group == value
         if effective_size(np.ones(sel.sum()) if w is None else w[sel]) >= intervals.MIN_GROUP:
-            cal.groups[f"like={value}"] = intervals._fit_group(
-                residual[sel], x[sel], names, level, intervals._two_sided(scaled), None if w is None else w[sel],
-                None if c is None else c[sel], intervals._binned(scaled), intervals._tau(scaled))
+            cal.groups[f"like={value}"] = intervals.fit_subgroup(residual, x, names, level, scaled, w, c, sel)
     return cal

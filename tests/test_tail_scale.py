@@ -4,7 +4,7 @@ candidate must beat the scheme in use by in scripts/calibrate_intervals.py."""
 import numpy as np
 import pytest
 
-from colonbench.completion import intervals
+from colonbench.completion import conformal, intervals
 from colonbench.completion.conformal import quantile_regression
 
 
@@ -51,7 +51,7 @@ def test_a_tail_fitted_scale_leaves_its_tail_above_it():
         cal = intervals.fit(true, est, sig, scheme, 0.3, weights=weights, colons=np.arange(n) % 8)
         group = cal.groups["all"]
         scale = np.array([intervals._scale_of(group, c, s, "low") for c, s in zip(est, sig)])
-        over = np.log(np.maximum(est - true, 0) + intervals.SCALE_FLOOR) > np.log(scale) + 1e-9
+        over = np.log(np.maximum(est - true, 0) + conformal.SCALE_FLOOR) > np.log(scale) + 1e-9
         above[scheme] = float(np.sum(weights * over))              # the weighted share above the scale
         assert group["weights_low"][group["features"].index("misfit")] > 0
         low, high = cal.interval(0.8, sig[0])
