@@ -1,9 +1,10 @@
-"""The quantile arithmetic of the completion method's intervals (:mod:`colonbench.completion.intervals`).
+"""The quantile arithmetic and the scale fit of the completion method's intervals (:mod:`colonbench.completion.intervals`).
 
 Split-conformal quantiles of residuals (Vovk et al.; Angelopoulos and Bates, 2021), the same with weights (each colon
 the unit: the pooled-CDF quantile of Dunn, Wasserman and Ramdas, 2022, decision record 0325), with a colon-level
 shift term, and per band of a difficulty estimate (Mondrian conformal regression, Bostrom and Johansson, 2020;
-decision record 0161); and the linear quantile regression that fits a scale at its tail (decision record 0166).
+decision record 0161); and the scale's log-linear fit to the residuals' size, by least squares or by the linear
+quantile regression that fits it at its tail (decision record 0166).
 Values are fractions of coverage or residuals over a scale; ``level`` is the nominal coverage.
 """
 
