@@ -1,4 +1,5 @@
-"""The quantile arithmetic and the scale fit of the completion method's intervals (:mod:`colonbench.completion.intervals`).
+"""The quantile arithmetic and the scale fit of the completion method's intervals
+(:mod:`colonbench.completion.intervals`).
 
 Split-conformal quantiles of residuals (Vovk et al.; Angelopoulos and Bates, 2021), the same with weights (each colon
 the unit: the pooled-CDF quantile of Dunn, Wasserman and Ramdas, 2022, decision record 0325), with a colon-level
