@@ -241,6 +241,9 @@ class Intervals:
         if self.review_by == "odds" and self.review_known > 0 and not self.review_by_known:
             raise InputError("a calibration reviewed by odds must name its known extent's score (review_by_known): "
                              "review_known is a width, not log odds")
+        if self.scheme.startswith("like") and not LIKE.match(self.scheme):
+            raise InputError(f"a calibration's likeness scheme is named like<NN>+<scheme> (NN 01-99), "
+                             f"not {self.scheme!r}")
         if not isinstance(self.like, dict) or bool(self.like) != bool(LIKE.match(self.scheme)) or \
                 self.like and not _like_fits(self.like):                                 # decision record 0170
             raise InputError(f"a calibration's scheme {self.scheme!r} and its like (features, ranges as [low, high], "

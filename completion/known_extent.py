@@ -34,9 +34,10 @@ def length_share(span_mm: float, length_mm: float) -> float:
 
 def known_length(est, length_mm: float) -> None:
     """Use a segment's known arc length (mm): where the segment's span between its planes (``signals["span_mm"]``:
-    the method's line between them, run on straight to a plane beyond its end) is less than :data:`SHORT_SHARE`
-    of it, the cloud stops short of an end nobody saw, and the coverage is scaled by the share it spans (the rest
-    of the tube counted unobserved; decision record 0155). Marks the estimate's extent as known."""
+    the method's line between them, run on straight to a plane beyond its end) is less than
+    :data:`~colonbench.completion.intervals.SHORT_SHARE` of it, the cloud stops short of an end nobody saw, and the
+    coverage is scaled by the share it spans (the rest of the tube counted unobserved; decision record 0155). Marks
+    the estimate's extent as known."""
     if not (length_mm > 0 and np.isfinite(length_mm)):
         raise InputError(f"a segment's length must be a positive number of mm, got {length_mm}")
     span = float(est.signals["span_mm"])

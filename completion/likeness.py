@@ -20,7 +20,6 @@ from colonbench.completion.conformal import effective_size
 from colonbench.completion.review import fit_odds
 
 
-
 def split_scheme(scheme: str) -> tuple[float, str] | None:
     """The threshold (a chance, fraction) and the scheme each group is fitted with, of a ``like<NN>+<scheme>``
     scheme; None for any other scheme."""

@@ -68,6 +68,10 @@ def test_the_classifier_routes_each_estimate_and_a_missing_group_falls_back_to_a
         intervals.Intervals("binned-colon-novel", 0.9, groups, 0.5, like=like)           # a classifier, no groups
     with pytest.raises(InputError, match="clash"):
         intervals.Intervals("like50+binned-colon-novel", 0.9, groups, 0.5, like={**like, "threshold": 1.0})
+    for name in ("like00+binned-colon-novel", "like5+binned-colon-novel", "like+binned-colon-novel"):  # misnamed
+        for with_like in ({}, like):
+            with pytest.raises(InputError, match="named like<NN>"):
+                intervals.Intervals(name, 0.9, groups, 0.5, like=with_like)
     # one short, reversed, not a pair, flat, not numbers, not finite; a classifier that is not an object
     for ranges in ([[1.0, 1.0]], [[1.0, 1.0], [1.0, 0.0]], [[1.0, 1.0], [0.0]], [1.0, 1.0], [["a", "b"], ["c", "d"]],
                    [[1.0, 1.0], [0.0, float("nan")]], "ab"):
