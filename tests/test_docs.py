@@ -43,6 +43,25 @@ def test_the_results_tables_are_the_shipped_results():
         "regenerate README.md's results table with: python scripts/results_table.py"
     assert mod.interval_table().strip() in (ROOT / "docs" / "method.md").read_text(), \
         "regenerate docs/method.md's intervals table with: python scripts/results_table.py --intervals"
+    assert mod.accuracy_table().strip() in (ROOT / "docs" / "method.md").read_text(), \
+        "regenerate docs/method.md's accuracy table with: python scripts/results_table.py --accuracy"
+
+
+def test_what_the_docs_python_examples_import_exists():
+    """Every import line of a Python example in README.md and docs/*.md (decision records aside) imports."""
+    import re
+
+    lines = []
+    for doc in [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]:
+        for block in re.findall(r"```python\n(.*?)```", doc.read_text(), re.S):
+            lines += [(doc.name, x.strip()) for x in block.splitlines()
+                      if re.match(r"\s*(from colonbench[\w.]* import [\w, ]+|import colonbench[\w.]*( as \w+)?)\s*$", x)]
+    assert len(lines) >= 10, lines
+    for doc, line in lines:
+        try:
+            exec(line, {})
+        except ImportError as exc:
+            pytest.fail(f"{doc}: {line}: {exc}")
 
 
 def test_the_readme_stays_a_front_door():
