@@ -135,7 +135,11 @@ def interval_table(method: str = "completion") -> str:
 
 
 if __name__ == "__main__":
-    import sys
+    import argparse
 
-    args = sys.argv[1:]
-    print(interval_table() if "--intervals" in args else accuracy_table() if "--accuracy" in args else tables())
+    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
+    which = ap.add_mutually_exclusive_group()
+    which.add_argument("--accuracy", action="store_true", help="docs/method.md's accuracy table")
+    which.add_argument("--intervals", action="store_true", help="docs/method.md's intervals table")
+    args = ap.parse_args()
+    print(interval_table() if args.intervals else accuracy_table() if args.accuracy else tables())
