@@ -37,6 +37,11 @@ def _maes(suite, track: str = tracks.DEFAULT) -> dict:
         from colonbench.benchmark.colon_evaluate import scoreable
 
         segs = scoreable(segs[segs["track"] == suite.headline_track])   # the map's skipped segments left out
+    return _mae_by(segs)
+
+
+def _mae_by(segs) -> dict:
+    """``{(method, noise): MAE in points}`` of result rows, failed segments scored as every table scores them."""
     return {(m, n): 100 * float(np.nanmean(np.abs(scored_errors(g))))
             for (m, n), g in segs.groupby(["method", "noise_mm"])}
 
@@ -92,21 +97,23 @@ def accuracy_table() -> str:
     its centerline's precision / recall at 2 mm, per suite of :data:`ACCURACY` (noiseless / 0.5 mm), and the widened
     suite's MAE without its segments whose end was never seen (a hole model ``...+end``)."""
     lines = ["| suite | completion | gt-heatmap | completion centerline P / R @2 mm (noiseless) |", "|---|---|---|---|"]
+
+    def pair(maes, method) -> str:
+        return f"{maes[(method, 0.0)]:.2f} / {maes[(method, 0.5)]:.2f}"
+
+    mine = {}
     for sid, what in ACCURACY.items():
         segs = shipped.load(suites.get(sid))[1]
-
-        def mae(rows) -> str:
-            return " / ".join(f"{100 * np.nanmean(np.abs(scored_errors(g))):.2f}" for _, g in rows.groupby("noise_mm"))
-
-        mine = segs[segs["method"] == "completion"]
-        clean = mine[mine["noise_mm"] == 0.0]
-        lines.append(f"| `{sid}` ({len(clean)}{what}) | {mae(mine)} | {mae(segs[segs['method'] == 'gt-heatmap'])} | "
+        mine[sid] = segs[segs["method"] == "completion"]
+        clean = mine[sid][mine[sid]["noise_mm"] == 0.0]
+        maes = _mae_by(segs)
+        lines.append(f"| `{sid}` ({len(clean)}{what}) | {pair(maes, 'completion')} | {pair(maes, 'gt-heatmap')} | "
                      f"{clean['centerline_precision_2mm'].mean():.2f} / {clean['centerline_recall_2mm'].mean():.2f} |")
-        if sid == "wide-v1":
-            seen = mine[~mine["hole_model"].str.endswith("+end")]
-            ends = (len(clean) - int((seen["noise_mm"] == 0.0).sum()), mae(seen))
-    return "\n".join(lines + ["", f"Without the widened suite's {ends[0]} segments whose end was never seen, completion's "
-                               f"MAE is {ends[1]}."])
+    end = mine["wide-v1"]["hole_model"].str.endswith("+end")
+    unseen = int((end & (mine["wide-v1"]["noise_mm"] == 0.0)).sum())
+    without = pair(_mae_by(mine["wide-v1"][~end]), "completion")
+    return "\n".join(lines + ["", f"Without the widened suite's {unseen} segments whose end was never seen, "
+                               f"completion's MAE is {without}."])
 
 
 def interval_table(method: str = "completion") -> str:
